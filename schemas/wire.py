@@ -1,0 +1,48 @@
+"""Wire conventions shared by every service: key expressions, encodings and the frame attachment.
+
+Foxglove messages have no frame-sequence field, so every zenoh sample carries a 16-byte
+attachment: frame sequence (uint64) and capture time (int64 nanoseconds), little-endian.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+DEFAULT_CAMERA = "camera"
+
+#: zenoh encodings, one per message type (DESIGN.md "Topics").
+ENCODING_RAW_IMAGE = "application/protobuf;foxglove.RawImage"
+ENCODING_CALIBRATION = "application/protobuf;foxglove.CameraCalibration"
+ENCODING_POINT_CLOUD = "application/protobuf;foxglove.PointCloud"
+ENCODING_TOPOLOGY = "application/protobuf;gngdt.Topology"
+ENCODING_STATUS = "application/protobuf;gngdt.LearnerStatus"
+ENCODING_STREAM_END = "application/protobuf;gngdt.StreamEnd"
+
+_ATTACHMENT = struct.Struct("<Qq")
+
+
+def topic(camera: str, name: str) -> str:
+    """Key expression of one stream of one camera: ``topic("camera", "points")``."""
+    if not camera or "/" in camera or "*" in camera or "$" in camera:
+        raise ValueError(f"camera name must be a single key chunk, got {camera!r}")
+    return f"gngdt/{camera}/{name}"
+
+
+@dataclass(frozen=True)
+class FrameStamp:
+    """Frame sequence number and capture time carried by every sample."""
+
+    sequence: int
+    capture_time_ns: int
+
+    def to_attachment(self) -> bytes:
+        return _ATTACHMENT.pack(self.sequence, self.capture_time_ns)
+
+    @classmethod
+    def from_attachment(cls, data: bytes | None) -> FrameStamp:
+        """Parse an attachment; raises ``ValueError`` when absent or malformed."""
+        if data is None or len(data) != _ATTACHMENT.size:
+            raise ValueError("missing or malformed frame attachment")
+        sequence, capture_time_ns = _ATTACHMENT.unpack(data)
+        return cls(sequence, capture_time_ns)

@@ -1,0 +1,1 @@
+"""gngdt services: capture, learner, logger, router and the `gngdt` command line."""

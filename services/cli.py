@@ -1,0 +1,77 @@
+"""The `gngdt` command line: one subcommand per service or job.
+
+Each subcommand lives in its own module exposing ``add_arguments(parser)`` and ``main(args) -> int``.
+Modules keep heavy imports (zenoh, rerun, numba) inside ``main`` so that ``--help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+#: subcommand -> (module, one-line help). Order is the order shown by ``gngdt --help``.
+SUBCOMMANDS: dict[str, tuple[str, str]] = {
+    "run": ("services.run", "run capture, learner and logger on one recording (loopback)"),
+    "capture": ("services.capture", "replay a recording as a camera on zenoh"),
+    "learn": ("services.learner", "learn GNG-DT topologies from a camera's point clouds"),
+    "log": ("services.logger", "log every gngdt stream to rerun"),
+    "router": ("services.router", "run a zenoh router for standalone services"),
+    "record": ("services.recording.cli", "make recordings: synthetic scenes or real RGB-D frames"),
+}
+
+EPILOG = """examples:
+  gngdt run recordings/tabletop.mcap                 # whole pipeline, writes runs/*.rrd
+  gngdt record synth --scene tabletop --frames 30 --out my.mcap
+  gngdt router & gngdt capture my.mcap --loop & gngdt learn & gngdt log --save out.rrd
+"""
+
+
+def add_common_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options every subcommand accepts."""
+    parser.add_argument(
+        "--log-level",
+        default="INFO",
+        choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+        help="logging verbosity (default: INFO)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="gngdt",
+        description="Online, unsupervised 3D perception: GNG-DT over zenoh.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (module_name, help_text) in SUBCOMMANDS.items():
+        module = importlib.import_module(module_name)
+        sub = subparsers.add_parser(
+            name,
+            help=help_text,
+            description=(module.__doc__ or help_text).strip().splitlines()[0],
+            epilog=getattr(module, "EXAMPLES", None),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        module.add_arguments(sub)
+        add_common_arguments(sub)
+        sub.set_defaults(_module=module)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=getattr(logging, args.log_level),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        return int(args._module.main(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
