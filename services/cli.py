@@ -19,12 +19,14 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "log": ("services.logger", "log every gngdt stream to rerun"),
     "router": ("services.router", "run a zenoh router for standalone services"),
     "record": ("services.recording.cli", "make recordings: synthetic scenes or real RGB-D frames"),
+    "eval": ("services.evaluation.cli", "evaluate: the paper's tables, recordings, logged runs"),
 }
 
 EPILOG = """examples:
   gngdt run recordings/tabletop.mcap                 # whole pipeline, writes runs/*.rrd
   gngdt record synth --scene tabletop --frames 30 --out my.mcap
   gngdt router & gngdt capture my.mcap --loop & gngdt learn & gngdt log --save out.rrd
+  gngdt eval paper --trials 5 --out report/
 """
 
 

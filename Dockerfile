@@ -1,0 +1,26 @@
+# gngdt services image: capture, learner and logger all run from this one image (`gngdt <service>`).
+# Everything is installed at build time; nothing is downloaded when a container runs.
+FROM python:3.11-slim
+
+ENV PYTHONUNBUFFERED=1 \
+    PIP_NO_CACHE_DIR=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    NUMBA_CACHE_DIR=/var/cache/gngdt/numba \
+    XDG_CONFIG_HOME=/var/cache/gngdt/config
+
+WORKDIR /app
+COPY pyproject.toml README.md ./
+COPY gngdt_core ./gngdt_core
+COPY schemas ./schemas
+COPY services ./services
+COPY config ./config
+RUN pip install . \
+    && mkdir -p "$NUMBA_CACHE_DIR" "$XDG_CONFIG_HOME" /recordings /out \
+    # Compile the numba kernels once at build time so a container starts learning at once.
+    && python -c "from gngdt_core import GNGDT, make_data2; p, c, _ = make_data2(n_points=2000, random_state=0); GNGDT(max_nodes=50, random_state=0).partial_fit(p, c, n_steps=2000)" \
+    && chown -R nobody:nogroup /var/cache/gngdt /out
+
+USER nobody
+VOLUME ["/recordings", "/out"]
+ENTRYPOINT ["gngdt"]
+CMD ["--help"]

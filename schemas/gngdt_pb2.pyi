@@ -1,0 +1,133 @@
+import datetime
+
+from google.protobuf import timestamp_pb2 as _timestamp_pb2
+from google.protobuf.internal import containers as _containers
+from google.protobuf import descriptor as _descriptor
+from google.protobuf import message as _message
+from collections.abc import Iterable as _Iterable, Mapping as _Mapping
+from typing import ClassVar as _ClassVar, Optional as _Optional, Union as _Union
+
+DESCRIPTOR: _descriptor.FileDescriptor
+
+class PackedArray(_message.Message):
+    __slots__ = ("dtype", "shape", "data")
+    DTYPE_FIELD_NUMBER: _ClassVar[int]
+    SHAPE_FIELD_NUMBER: _ClassVar[int]
+    DATA_FIELD_NUMBER: _ClassVar[int]
+    dtype: str
+    shape: _containers.RepeatedScalarFieldContainer[int]
+    data: bytes
+    def __init__(self, dtype: _Optional[str] = ..., shape: _Optional[_Iterable[int]] = ..., data: _Optional[bytes] = ...) -> None: ...
+
+class EdgeSet(_message.Message):
+    __slots__ = ("property", "pairs")
+    PROPERTY_FIELD_NUMBER: _ClassVar[int]
+    PAIRS_FIELD_NUMBER: _ClassVar[int]
+    property: str
+    pairs: PackedArray
+    def __init__(self, property: _Optional[str] = ..., pairs: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
+
+class Clustering(_message.Message):
+    __slots__ = ("name", "labels", "cluster_count")
+    NAME_FIELD_NUMBER: _ClassVar[int]
+    LABELS_FIELD_NUMBER: _ClassVar[int]
+    CLUSTER_COUNT_FIELD_NUMBER: _ClassVar[int]
+    name: str
+    labels: PackedArray
+    cluster_count: int
+    def __init__(self, name: _Optional[str] = ..., labels: _Optional[_Union[PackedArray, _Mapping]] = ..., cluster_count: _Optional[int] = ...) -> None: ...
+
+class Topology(_message.Message):
+    __slots__ = ("timestamp", "frame_sequence", "steps", "frame_id", "positions", "colors", "normals", "errors", "edges", "clusterings", "quantization_error")
+    class QuantizationErrorEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: float
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    FRAME_SEQUENCE_FIELD_NUMBER: _ClassVar[int]
+    STEPS_FIELD_NUMBER: _ClassVar[int]
+    FRAME_ID_FIELD_NUMBER: _ClassVar[int]
+    POSITIONS_FIELD_NUMBER: _ClassVar[int]
+    COLORS_FIELD_NUMBER: _ClassVar[int]
+    NORMALS_FIELD_NUMBER: _ClassVar[int]
+    ERRORS_FIELD_NUMBER: _ClassVar[int]
+    EDGES_FIELD_NUMBER: _ClassVar[int]
+    CLUSTERINGS_FIELD_NUMBER: _ClassVar[int]
+    QUANTIZATION_ERROR_FIELD_NUMBER: _ClassVar[int]
+    timestamp: _timestamp_pb2.Timestamp
+    frame_sequence: int
+    steps: int
+    frame_id: str
+    positions: PackedArray
+    colors: PackedArray
+    normals: PackedArray
+    errors: PackedArray
+    edges: _containers.RepeatedCompositeFieldContainer[EdgeSet]
+    clusterings: _containers.RepeatedCompositeFieldContainer[Clustering]
+    quantization_error: _containers.ScalarMap[str, float]
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., steps: _Optional[int] = ..., frame_id: _Optional[str] = ..., positions: _Optional[_Union[PackedArray, _Mapping]] = ..., colors: _Optional[_Union[PackedArray, _Mapping]] = ..., normals: _Optional[_Union[PackedArray, _Mapping]] = ..., errors: _Optional[_Union[PackedArray, _Mapping]] = ..., edges: _Optional[_Iterable[_Union[EdgeSet, _Mapping]]] = ..., clusterings: _Optional[_Iterable[_Union[Clustering, _Mapping]]] = ..., quantization_error: _Optional[_Mapping[str, float]] = ...) -> None: ...
+
+class LearnerStatus(_message.Message):
+    __slots__ = ("timestamp", "frame_sequence", "frame_id", "steps", "steps_per_second", "nodes", "frames_received", "frames_used", "frames_dropped", "malformed_messages", "latency_ms", "latency_p50_ms", "latency_p99_ms", "quantization_error", "cluster_counts")
+    class QuantizationErrorEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: float
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
+    class ClusterCountsEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: int
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[int] = ...) -> None: ...
+    TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    FRAME_SEQUENCE_FIELD_NUMBER: _ClassVar[int]
+    FRAME_ID_FIELD_NUMBER: _ClassVar[int]
+    STEPS_FIELD_NUMBER: _ClassVar[int]
+    STEPS_PER_SECOND_FIELD_NUMBER: _ClassVar[int]
+    NODES_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_RECEIVED_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_USED_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_DROPPED_FIELD_NUMBER: _ClassVar[int]
+    MALFORMED_MESSAGES_FIELD_NUMBER: _ClassVar[int]
+    LATENCY_MS_FIELD_NUMBER: _ClassVar[int]
+    LATENCY_P50_MS_FIELD_NUMBER: _ClassVar[int]
+    LATENCY_P99_MS_FIELD_NUMBER: _ClassVar[int]
+    QUANTIZATION_ERROR_FIELD_NUMBER: _ClassVar[int]
+    CLUSTER_COUNTS_FIELD_NUMBER: _ClassVar[int]
+    timestamp: _timestamp_pb2.Timestamp
+    frame_sequence: int
+    frame_id: str
+    steps: int
+    steps_per_second: float
+    nodes: int
+    frames_received: int
+    frames_used: int
+    frames_dropped: int
+    malformed_messages: int
+    latency_ms: float
+    latency_p50_ms: float
+    latency_p99_ms: float
+    quantization_error: _containers.ScalarMap[str, float]
+    cluster_counts: _containers.ScalarMap[str, int]
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., frame_id: _Optional[str] = ..., steps: _Optional[int] = ..., steps_per_second: _Optional[float] = ..., nodes: _Optional[int] = ..., frames_received: _Optional[int] = ..., frames_used: _Optional[int] = ..., frames_dropped: _Optional[int] = ..., malformed_messages: _Optional[int] = ..., latency_ms: _Optional[float] = ..., latency_p50_ms: _Optional[float] = ..., latency_p99_ms: _Optional[float] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., cluster_counts: _Optional[_Mapping[str, int]] = ...) -> None: ...
+
+class StreamEnd(_message.Message):
+    __slots__ = ("timestamp", "frames_sent", "last_frame_sequence", "recording", "frame_id")
+    TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_SENT_FIELD_NUMBER: _ClassVar[int]
+    LAST_FRAME_SEQUENCE_FIELD_NUMBER: _ClassVar[int]
+    RECORDING_FIELD_NUMBER: _ClassVar[int]
+    FRAME_ID_FIELD_NUMBER: _ClassVar[int]
+    timestamp: _timestamp_pb2.Timestamp
+    frames_sent: int
+    last_frame_sequence: int
+    recording: str
+    frame_id: str
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frames_sent: _Optional[int] = ..., last_frame_sequence: _Optional[int] = ..., recording: _Optional[str] = ..., frame_id: _Optional[str] = ...) -> None: ...

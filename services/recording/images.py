@@ -1,0 +1,313 @@
+"""Import real RGB-D frames from image folders: TUM RGB-D, PCL ImageGrabber TIFFs, Redwood/Open3D.
+
+Layouts (``fmt``):
+
+- ``tum``: ``rgb.txt`` and ``depth.txt`` (``timestamp path`` per line, ``#`` comments), images
+  paired by nearest timestamp within ``TUM_MAX_DIFFERENCE_S`` (TUM's ``associate.py``); unpaired
+  images are skipped. Depth 5000 units per metre; intrinsics default to TUM freiburg1.
+- ``pcl-tiff``: ``frame_<YYYYmmddTHHMMSS.ffffff>_rgb.tiff`` + ``frame_<same>_depth.tiff``, depth in
+  millimetres, timestamps from the names (taken as UTC).
+- ``redwood``: ``color/NNNNNN.{png,jpg}`` + ``depth/NNNNNN.png`` paired by name, depth in
+  millimetres, frames ``1/fps`` apart.
+
+A ``camera.json`` in the folder (``fx, fy, cx, cy, width, height, depth_scale`` and optionally
+``distortion_k1_k2_p1_p2_k3``) overrides the format's defaults. Depth is converted to uint16
+millimetres; colour is (H, W, 3) uint8 RGB.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import re
+from bisect import bisect_left
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+from datetime import UTC, datetime
+from decimal import Decimal, InvalidOperation
+from pathlib import Path
+
+import numpy as np
+
+from services.recording.errors import RecordingError
+from services.recording.frame import CameraIntrinsics, Frame
+
+__all__ = ["FORMATS", "CameraParameters", "iter_image_frames", "load_camera"]
+
+logger = logging.getLogger(__name__)
+
+FORMATS = ("tum", "pcl-tiff", "redwood")
+TUM_MAX_DIFFERENCE_S = 0.02
+MILLIMETRES_PER_METRE = 1000.0
+_PCL_NAME = re.compile(r"^frame_(?P<stamp>\d{8}T\d{6}(?:\.\d+)?)_(?P<kind>rgb|depth)\.tiff?$")
+
+
+@dataclass(frozen=True)
+class CameraParameters:
+    """Pinhole intrinsics (pixels) and depth units per metre; width/height None: from the images."""
+
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    depth_scale: float
+    distortion: tuple[float, ...] = ()
+    width: int | None = None
+    height: int | None = None
+
+    def intrinsics(self, width: int, height: int) -> CameraIntrinsics:
+        return CameraIntrinsics(
+            width=width,
+            height=height,
+            fx=self.fx,
+            fy=self.fy,
+            cx=self.cx,
+            cy=self.cy,
+            distortion=self.distortion,
+        )
+
+
+#: Defaults per format: TUM freiburg1 (the TUM benchmark's published calibration) and the
+#: PrimeSense/Kinect v1 defaults used by PCL's OpenNI grabber and by Open3D's Redwood loaders.
+DEFAULT_CAMERAS: dict[str, CameraParameters] = {
+    "tum": CameraParameters(
+        fx=517.3,
+        fy=516.5,
+        cx=318.6,
+        cy=255.3,
+        depth_scale=5000.0,
+        distortion=(0.2624, -0.9531, -0.0054, 0.0026, 1.1633),
+    ),
+    "pcl-tiff": CameraParameters(fx=525.0, fy=525.0, cx=320.0, cy=240.0, depth_scale=1000.0),
+    "redwood": CameraParameters(fx=525.0, fy=525.0, cx=319.5, cy=239.5, depth_scale=1000.0),
+}
+
+
+def _check_format(fmt: str) -> None:
+    if fmt not in FORMATS:
+        raise ValueError(f"format must be one of {FORMATS}, got {fmt!r}")
+
+
+def load_camera(
+    directory: str | Path, fmt: str, camera_json: str | Path | None = None
+) -> CameraParameters:
+    """Camera parameters: ``camera_json`` if given, else ``DIR/camera.json`` if present, else the
+    format's defaults (keys missing from the JSON keep the defaults)."""
+    _check_format(fmt)
+    defaults = DEFAULT_CAMERAS[fmt]
+    path = Path(camera_json) if camera_json is not None else Path(directory) / "camera.json"
+    if camera_json is None and not path.is_file():
+        return defaults
+    try:
+        values = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise RecordingError(path, None, f"cannot read camera parameters: {error}") from error
+    if not isinstance(values, dict):
+        raise RecordingError(path, None, "camera parameters must be a JSON object")
+    try:
+        overrides = {
+            key: float(values[key])
+            for key in ("fx", "fy", "cx", "cy", "depth_scale")
+            if key in values
+        }
+        overrides.update({key: int(values[key]) for key in ("width", "height") if key in values})
+        if "distortion_k1_k2_p1_p2_k3" in values:
+            overrides["distortion"] = tuple(float(v) for v in values["distortion_k1_k2_p1_p2_k3"])
+    except (TypeError, ValueError) as error:
+        raise RecordingError(path, None, f"invalid camera parameter: {error}") from error
+    camera = replace(defaults, **overrides)
+    if min(camera.fx, camera.fy, camera.depth_scale) <= 0:
+        raise RecordingError(path, None, "fx, fy and depth_scale must be positive")
+    return camera
+
+
+# ------------------------------------------------------------------------------------ pairing
+@dataclass(frozen=True)
+class _ImagePair:
+    timestamp_ns: int
+    color: Path
+    depth: Path
+
+
+def _seconds_to_ns(text: str) -> int:
+    return int(Decimal(text) * 1_000_000_000)
+
+
+def _read_tum_list(path: Path) -> list[tuple[int, Path]]:
+    """(timestamp_ns, image path) of a TUM rgb.txt/depth.txt, in file order."""
+    if not path.is_file():
+        raise RecordingError(path, None, "missing (a TUM folder has rgb.txt and depth.txt)")
+    entries = []
+    for line_number, line in enumerate(path.read_text().splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        parts = line.split()
+        try:
+            if len(parts) < 2:
+                raise InvalidOperation
+            entries.append((_seconds_to_ns(parts[0]), path.parent / parts[1]))
+        except InvalidOperation as error:
+            raise RecordingError(
+                path, None, f"line {line_number}: expected 'timestamp filename', got {line!r}"
+            ) from error
+    return entries
+
+
+def _pairs_tum(directory: Path) -> list[_ImagePair]:
+    colors = sorted(_read_tum_list(directory / "rgb.txt"))
+    depths = sorted(_read_tum_list(directory / "depth.txt"))
+    depth_stamps = [stamp for stamp, _ in depths]
+    max_difference_ns = int(TUM_MAX_DIFFERENCE_S * 1e9)
+    pairs, used = [], set()
+    for stamp, color in colors:
+        position = bisect_left(depth_stamps, stamp)
+        candidates = [i for i in (position - 1, position) if 0 <= i < len(depths)]
+        best = min(candidates, key=lambda i: abs(depth_stamps[i] - stamp), default=None)
+        if best is None or best in used or abs(depth_stamps[best] - stamp) > max_difference_ns:
+            continue
+        used.add(best)
+        pairs.append(_ImagePair(stamp, color, depths[best][1]))
+    skipped = len(colors) - len(pairs)
+    if skipped:
+        logger.info(
+            "%s: %d colour images have no depth within %.0f ms; skipped",
+            directory,
+            skipped,
+            TUM_MAX_DIFFERENCE_S * 1e3,
+        )
+    return pairs
+
+
+def _pairs_pcl_tiff(directory: Path) -> list[_ImagePair]:
+    found: dict[str, dict[str, Path]] = {}
+    for path in directory.iterdir():
+        match = _PCL_NAME.match(path.name)
+        if match:
+            found.setdefault(match["stamp"], {})[match["kind"]] = path
+    pairs = []
+    for stamp, kinds in sorted(found.items()):
+        for kind, partner in (("rgb", "depth"), ("depth", "rgb")):
+            if partner not in kinds:
+                raise RecordingError(kinds[kind], None, f"no matching *_{partner}.tiff")
+        moment = datetime.strptime(stamp, "%Y%m%dT%H%M%S.%f" if "." in stamp else "%Y%m%dT%H%M%S")
+        timestamp_ns = (
+            int(moment.replace(microsecond=0, tzinfo=UTC).timestamp()) * 1_000_000_000
+            + moment.microsecond * 1000
+        )
+        pairs.append(_ImagePair(timestamp_ns, kinds["rgb"], kinds["depth"]))
+    return pairs
+
+
+def _pairs_redwood(directory: Path, fps: float) -> list[_ImagePair]:
+    color_dir, depth_dir = directory / "color", directory / "depth"
+    for folder in (color_dir, depth_dir):
+        if not folder.is_dir():
+            raise RecordingError(folder, None, "missing (redwood layout: color/ and depth/)")
+    colors = {
+        p.stem: p for p in color_dir.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg")
+    }
+    depths = {p.stem: p for p in depth_dir.iterdir() if p.suffix.lower() == ".png"}
+    for name in sorted(colors.keys() ^ depths.keys()):
+        lone = colors.get(name) or depths[name]
+        raise RecordingError(
+            lone, None, f"no matching {'depth' if name in colors else 'colour'} image"
+        )
+    period_ns = 1e9 / fps
+    return [
+        _ImagePair(round(index * period_ns), colors[name], depths[name])
+        for index, name in enumerate(sorted(colors))
+    ]
+
+
+# ------------------------------------------------------------------------------------- loading
+def _load_color(path: Path, index: int) -> np.ndarray:
+    import cv2
+
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise RecordingError(path, index, "cannot read colour image")
+    return image[..., ::-1].copy()
+
+
+def _load_depth_mm(path: Path, index: int, depth_scale: float) -> np.ndarray:
+    import cv2
+
+    depth = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if depth is None:
+        raise RecordingError(path, index, "cannot read depth image")
+    if depth.ndim != 2 or depth.dtype not in (np.uint16, np.float32):
+        raise RecordingError(
+            path,
+            index,
+            f"depth must be single-channel uint16 (or float32), got {depth.dtype} {depth.shape}",
+        )
+    if depth.dtype == np.uint16 and depth_scale == MILLIMETRES_PER_METRE:
+        return depth
+    millimetres = np.nan_to_num(depth.astype(np.float64) * (MILLIMETRES_PER_METRE / depth_scale))
+    return np.clip(np.rint(millimetres), 0, np.iinfo(np.uint16).max).astype(np.uint16)
+
+
+def iter_image_frames(
+    directory: str | Path,
+    fmt: str,
+    intrinsics: CameraIntrinsics | None = None,
+    depth_scale: float | None = None,
+    fps: float = 30.0,
+    *,
+    camera: CameraParameters | None = None,
+) -> Iterator[Frame]:
+    """Yield the frames of an image folder in time order.
+
+    intrinsics: overrides the camera (its size must match the images). depth_scale: depth units
+    per metre (1000 = millimetres, 5000 = TUM). camera: full parameters, instead of
+    :func:`load_camera`'s. fps: frame rate for layouts without timestamps (redwood).
+    Raises RecordingError naming the file for missing, unpaired or unreadable images.
+    """
+    _check_format(fmt)
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise RecordingError(directory, None, "not a directory")
+    if fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps}")
+    camera = camera or load_camera(directory, fmt)
+    if depth_scale is not None:
+        if depth_scale <= 0:
+            raise ValueError(f"depth_scale must be positive, got {depth_scale}")
+        camera = replace(camera, depth_scale=float(depth_scale))
+    if fmt == "tum":
+        pairs = _pairs_tum(directory)
+    elif fmt == "pcl-tiff":
+        pairs = _pairs_pcl_tiff(directory)
+    else:
+        pairs = _pairs_redwood(directory, fps)
+    if not pairs:
+        raise RecordingError(directory, None, f"no {fmt} colour/depth image pairs found")
+    for index, pair in enumerate(pairs):
+        color = _load_color(pair.color, index)
+        depth = _load_depth_mm(pair.depth, index, camera.depth_scale)
+        height, width = color.shape[:2]
+        if depth.shape != (height, width):
+            raise RecordingError(
+                pair.depth,
+                index,
+                f"depth {depth.shape[1]}x{depth.shape[0]} does not match colour {width}x{height}",
+            )
+        frame_intrinsics = intrinsics or camera.intrinsics(width, height)
+        expected = (camera.width or width, camera.height or height)
+        if intrinsics is not None:
+            expected = (intrinsics.width, intrinsics.height)
+        if expected != (width, height):
+            raise RecordingError(
+                pair.color,
+                index,
+                f"camera parameters are for {expected[0]}x{expected[1]}, image is {width}x{height}",
+            )
+        yield Frame(
+            index=index,
+            timestamp_ns=pair.timestamp_ns,
+            color=color,
+            depth=depth,
+            intrinsics=frame_intrinsics,
+            extras={"color_path": str(pair.color), "depth_path": str(pair.depth)},
+        )

@@ -1,0 +1,437 @@
+"""Read RGB-D frames from an MCAP recording: gngdt's foxglove-protobuf layout or a ROS 2 bag.
+
+Channels are recognised by schema, whatever their topic:
+
+- foxglove protobuf: ``foxglove.RawImage`` (colour rgb8/bgr8/mono8, depth 16UC1/mono16/32FC1,
+  labels on a topic ending in ``/labels``), ``foxglove.CompressedImage`` (jpeg/png colour),
+  ``foxglove.CameraCalibration``;
+- ROS 2 (CDR): ``sensor_msgs/msg/Image``, ``sensor_msgs/msg/CompressedImage``,
+  ``sensor_msgs/msg/CameraInfo`` -- what ``ros2 bag record`` gives for Kinect and RealSense drivers.
+
+The first channel seen in each role (colour, depth, calibration, labels) is used; other channels,
+and channels of any other schema, are ignored. ``camera_prefix`` restricts the topics considered.
+
+Frames: a colour image and a depth image are paired when their stamps (the message's own
+timestamp/header stamp, else the MCAP ``log_time``) differ by at most ``max_skew_ns`` (default
+0: the same stamp, as gngdt writes them). The frame takes the colour stamp, the latest
+calibration (frames wait for the first one, up to ``MAX_FRAMES_WITHOUT_CALIBRATION`` of them),
+and labels carrying the colour stamp if they came before the pair. Depth is normalised to uint16
+millimetres (32FC1 metres -> mm, NaN/negative -> 0), colour to RGB uint8.
+
+A damaged file yields every frame before the damage, then raises :class:`RecordingError`.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from services.recording.errors import RecordingError
+from services.recording.frame import CameraIntrinsics, Frame
+
+__all__ = ["RecordingError", "read_frames", "recording_info"]
+
+logger = logging.getLogger(__name__)
+
+#: Unpaired colour or depth images kept while waiting for their partner.
+MAX_PENDING_IMAGES = 32
+MAX_FRAMES_WITHOUT_CALIBRATION = 64
+
+_COLOR_ENCODINGS = frozenset({"rgb8", "bgr8", "8UC3", "rgba8", "bgra8", "mono8", "8UC1"})
+_DEPTH_ENCODINGS = frozenset({"16UC1", "mono16", "32FC1"})
+_FOXGLOVE_SCHEMAS = frozenset(
+    {"foxglove.RawImage", "foxglove.CompressedImage", "foxglove.CameraCalibration"}
+)
+_IMAGE_SCHEMAS = frozenset(
+    {
+        "foxglove.RawImage",
+        "foxglove.CompressedImage",
+        "sensor_msgs/msg/Image",
+        "sensor_msgs/msg/CompressedImage",
+    }
+)
+_ROS_SCHEMAS = frozenset(
+    {"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo"}
+)
+
+
+@dataclass
+class _Image:
+    """A decoded image: colour (H, W, 3) uint8 RGB, depth (H, W) uint16 mm or labels (H, W)."""
+
+    stamp_ns: int
+    pixels: np.ndarray
+
+
+class _DecodeFailure(Exception):
+    """One message could not be decoded (wraps MessageError, OpenCV and CDR errors)."""
+
+
+def normalize_depth(depth: np.ndarray) -> np.ndarray:
+    """(H, W) depth as uint16 millimetres: float input is metres (NaN, inf, <= 0 -> 0)."""
+    if depth.dtype == np.uint16:
+        return depth
+    if depth.dtype.kind == "f":
+        millimetres = np.where(np.isfinite(depth) & (depth > 0), depth * 1000.0, 0.0)
+        return np.clip(np.rint(millimetres), 0, np.iinfo(np.uint16).max).astype(np.uint16)
+    raise _DecodeFailure(f"depth of dtype {depth.dtype} is not supported")
+
+
+def normalize_color(color: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 RGB from RGB or grey (H, W) uint8."""
+    if color.ndim == 2:
+        return np.repeat(color[:, :, None], 3, axis=2)
+    return color
+
+
+def decode_compressed(data: bytes, image_format: str) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of a jpeg/png image."""
+    import cv2
+
+    if "depth" in image_format.lower():
+        raise _DecodeFailure(f"compressed depth ({image_format!r}) is not supported")
+    buffer = np.frombuffer(data, dtype=np.uint8)
+    image = cv2.imdecode(buffer, cv2.IMREAD_COLOR) if buffer.size else None
+    if image is None:
+        raise _DecodeFailure(f"OpenCV cannot decode the {image_format or 'compressed'} image")
+    return image[..., ::-1].copy()
+
+
+class _MessageDecoder:
+    """Turns MCAP messages into roles and numpy images, for foxglove protobuf and ROS 2 CDR."""
+
+    def __init__(self) -> None:
+        from mcap_ros2.decoder import DecoderFactory
+
+        self._ros_factory = DecoderFactory()
+        self._ros_decoders: dict[int, Any] = {}
+
+    def role(self, schema_name: str, topic: str, payload: Any) -> str | None:
+        """``"color"``, ``"depth"``, ``"labels"``, ``"calibration"`` or None (ignored)."""
+        if schema_name in ("foxglove.CameraCalibration", "sensor_msgs/msg/CameraInfo"):
+            return "calibration"
+        if schema_name in ("foxglove.CompressedImage", "sensor_msgs/msg/CompressedImage"):
+            return None if "depth" in payload.format.lower() else "color"
+        if topic.rstrip("/").endswith("/labels"):
+            return "labels"
+        if payload.encoding in _COLOR_ENCODINGS:
+            return "color"
+        if payload.encoding in _DEPTH_ENCODINGS:
+            return "depth"
+        return None
+
+    def parse(self, schema: Any, message: Any) -> Any:
+        """The decoded message object (protobuf message or ROS 2 dynamic message)."""
+        from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+        from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+        from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+        from schemas.packing import MessageError, parse_message
+
+        foxglove_types = {
+            "foxglove.RawImage": RawImage,
+            "foxglove.CompressedImage": CompressedImage,
+            "foxglove.CameraCalibration": CameraCalibration,
+        }
+        try:
+            if schema.name in foxglove_types:
+                return parse_message(foxglove_types[schema.name], message.data)
+            decoder = self._ros_decoders.get(schema.id)
+            if decoder is None:
+                decoder = self._ros_factory.decoder_for("cdr", schema)
+                if decoder is None:
+                    raise _DecodeFailure(f"no CDR decoder for schema {schema.name}")
+                self._ros_decoders[schema.id] = decoder
+            return decoder(message.data)
+        except MessageError as error:
+            raise _DecodeFailure(str(error)) from error
+        except _DecodeFailure:
+            raise
+        except Exception as error:  # CDR parsing raises assorted errors on corrupt bytes
+            raise _DecodeFailure(f"cannot decode {schema.name}: {error}") from error
+
+    @staticmethod
+    def stamp_ns(schema_name: str, payload: Any, log_time_ns: int) -> int:
+        """The message's own stamp in ns, or ``log_time_ns`` when it carries none."""
+        if schema_name in _FOXGLOVE_SCHEMAS:
+            stamp = payload.timestamp.seconds * 1_000_000_000 + payload.timestamp.nanos
+        else:
+            stamp = payload.header.stamp.sec * 1_000_000_000 + payload.header.stamp.nanosec
+        return stamp if stamp else log_time_ns
+
+    @staticmethod
+    def pixels(schema_name: str, payload: Any) -> np.ndarray:
+        """Pixels of an image message (see ``schemas.packing.decode_pixels`` for shapes)."""
+        from schemas.packing import MessageError, decode_pixels
+
+        if schema_name.endswith("CompressedImage"):
+            return decode_compressed(bytes(payload.data), payload.format)
+        try:
+            return decode_pixels(
+                bytes(payload.data),
+                width=payload.width,
+                height=payload.height,
+                step=payload.step,
+                encoding=payload.encoding,
+                big_endian=bool(getattr(payload, "is_bigendian", False)),
+            )
+        except MessageError as error:
+            raise _DecodeFailure(str(error)) from error
+
+    @staticmethod
+    def intrinsics(schema_name: str, payload: Any) -> CameraIntrinsics:
+        from schemas.packing import MessageError, calibration_to_intrinsics, intrinsics_from_k
+
+        try:
+            if schema_name == "foxglove.CameraCalibration":
+                return calibration_to_intrinsics(payload)
+            distortion = tuple(float(value) for value in payload.d)
+            return intrinsics_from_k(
+                payload.width,
+                payload.height,
+                list(payload.k),
+                distortion if any(distortion) else (),
+            )
+        except MessageError as error:
+            raise _DecodeFailure(str(error)) from error
+
+
+def _open_messages(stream: IO[bytes]) -> Iterator[tuple[Any, Any, Any]]:
+    """(schema, channel, message) in log-time order when the file has an index, else file order.
+
+    An intact file is read through its chunk index; a file without a readable summary (e.g.
+    truncated by a crash) is streamed record by record so that everything before the damage is
+    still delivered.
+    """
+    from mcap.reader import NonSeekingReader, SeekingReader
+
+    try:
+        summary = SeekingReader(stream).get_summary()
+    except Exception:  # missing or damaged footer/summary: fall back to streaming
+        summary = None
+    stream.seek(0)
+    if summary is not None and summary.chunk_indexes:
+        return SeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=True)
+    return NonSeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=False)
+
+
+class _FrameAssembler:
+    """Pairs colour and depth, attaches calibration and labels, and checks sizes."""
+
+    def __init__(self, path: Path, intrinsics: CameraIntrinsics | None, max_skew_ns: int) -> None:
+        self.path = path
+        self.calibration = intrinsics
+        self.max_skew_ns = max_skew_ns
+        self.pending: dict[str, deque[_Image]] = {
+            "color": deque(maxlen=MAX_PENDING_IMAGES),
+            "depth": deque(maxlen=MAX_PENDING_IMAGES),
+        }
+        self.labels: deque[_Image] = deque(maxlen=MAX_PENDING_IMAGES)
+        self.awaiting_calibration: list[tuple[_Image, _Image, np.ndarray | None]] = []
+        self.next_index = 0
+
+    def error(self, reason: str) -> RecordingError:
+        return RecordingError(self.path, self.next_index, reason)
+
+    def add_calibration(self, intrinsics: CameraIntrinsics) -> Iterator[Frame]:
+        self.calibration = intrinsics
+        held, self.awaiting_calibration = self.awaiting_calibration, []
+        for color, depth, labels in held:
+            yield self._frame(color, depth, labels)
+
+    def add_labels(self, image: _Image) -> None:
+        self.labels.append(image)
+
+    def add_image(self, role: str, image: _Image) -> Iterator[Frame]:
+        other = self.pending["depth" if role == "color" else "color"]
+        partner = min(other, key=lambda item: abs(item.stamp_ns - image.stamp_ns), default=None)
+        if partner is None or abs(partner.stamp_ns - image.stamp_ns) > self.max_skew_ns:
+            self.pending[role].append(image)
+            return
+        while other[0] is not partner:  # older unpaired images can no longer pair: drop them
+            logger.debug(
+                "%s: dropping unpaired image at %d ns", self.path, other.popleft().stamp_ns
+            )
+        other.popleft()
+        color, depth = (image, partner) if role == "color" else (partner, image)
+        labels = next(
+            (item.pixels for item in self.labels if item.stamp_ns == color.stamp_ns), None
+        )
+        if self.calibration is None:
+            if len(self.awaiting_calibration) >= MAX_FRAMES_WITHOUT_CALIBRATION:
+                raise self.error(
+                    f"no calibration channel (CameraCalibration/CameraInfo) in the first "
+                    f"{MAX_FRAMES_WITHOUT_CALIBRATION} frames"
+                )
+            self.awaiting_calibration.append((color, depth, labels))
+            return
+        yield self._frame(color, depth, labels)
+
+    def finish(self) -> None:
+        if self.awaiting_calibration:
+            raise RecordingError(
+                self.path, 0, "no calibration (foxglove CameraCalibration or ROS CameraInfo) found"
+            )
+
+    def _frame(self, color: _Image, depth: _Image, labels: np.ndarray | None) -> Frame:
+        assert self.calibration is not None
+        color_pixels = normalize_color(color.pixels)
+        height, width = color_pixels.shape[:2]
+        if depth.pixels.shape != (height, width):
+            depth_height, depth_width = depth.pixels.shape[:2]
+            raise self.error(
+                f"depth {depth_width}x{depth_height} does not match colour {width}x{height}"
+            )
+        if labels is not None and labels.shape != (height, width):
+            raise self.error(
+                f"labels {labels.shape[1]}x{labels.shape[0]} do not match colour {width}x{height}"
+            )
+        if (self.calibration.width, self.calibration.height) != (width, height):
+            raise self.error(
+                f"calibration is for {self.calibration.width}x{self.calibration.height}, "
+                f"colour is {width}x{height}"
+            )
+        frame = Frame(
+            index=self.next_index,
+            timestamp_ns=color.stamp_ns,
+            color=color_pixels,
+            depth=normalize_depth(depth.pixels),
+            intrinsics=self.calibration,
+            labels=None if labels is None else labels.astype(np.uint16, copy=False),
+        )
+        self.next_index += 1
+        return frame
+
+
+def _topic_matches(topic: str, camera_prefix: str | None) -> bool:
+    if camera_prefix is None:
+        return True
+    prefix = "/" + camera_prefix.strip("/")
+    return topic == prefix or topic.startswith(prefix + "/")
+
+
+def read_frames(
+    path: str | Path,
+    camera_prefix: str | None = None,
+    *,
+    intrinsics: CameraIntrinsics | None = None,
+    max_skew_ns: int = 0,
+) -> Iterator[Frame]:
+    """Yield the frames of an MCAP recording in log-time order (see the module docstring).
+
+    camera_prefix: only topics under it (``"/camera"``, ``"/kinect"``). intrinsics: used until a
+    calibration message arrives (and when the recording has none). max_skew_ns: largest stamp
+    difference between a paired colour and depth image.
+    Raises RecordingError naming the file and frame for missing calibration, mismatched sizes,
+    undecodable messages and truncated or corrupt files -- after yielding the frames before.
+    """
+    path = Path(path)
+    try:
+        stream = open(path, "rb")
+    except OSError as error:
+        raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
+    with stream:
+        yield from _read_stream(path, stream, camera_prefix, intrinsics, max_skew_ns)
+
+
+def _read_stream(
+    path: Path,
+    stream: IO[bytes],
+    camera_prefix: str | None,
+    intrinsics: CameraIntrinsics | None,
+    max_skew_ns: int,
+) -> Iterator[Frame]:
+    assembler = _FrameAssembler(path, intrinsics, max_skew_ns)
+    decoder = _MessageDecoder()
+    chosen: dict[str, str] = {}  # role -> topic
+    try:
+        messages = _open_messages(stream)
+        for schema, channel, message in messages:
+            if schema is None or schema.name not in _FOXGLOVE_SCHEMAS | _ROS_SCHEMAS:
+                continue
+            if not _topic_matches(channel.topic, camera_prefix):
+                continue
+            try:
+                payload = decoder.parse(schema, message)
+                role = decoder.role(schema.name, channel.topic, payload)
+                if role is None or chosen.setdefault(role, channel.topic) != channel.topic:
+                    continue
+                if role == "calibration":
+                    yield from assembler.add_calibration(decoder.intrinsics(schema.name, payload))
+                    continue
+                image = _Image(
+                    decoder.stamp_ns(schema.name, payload, message.log_time),
+                    decoder.pixels(schema.name, payload),
+                )
+            except _DecodeFailure as failure:
+                raise assembler.error(f"{channel.topic}: {failure}") from failure
+            if role == "labels":
+                assembler.add_labels(image)
+            else:
+                yield from assembler.add_image(role, image)
+    except RecordingError:
+        raise
+    except Exception as error:  # mcap raises EndOfFile, McapError, zstd and CRC errors
+        reason = "truncated file" if type(error).__name__ == "EndOfFile" else "corrupt file"
+        raise assembler.error(f"{reason} ({type(error).__name__}: {error})") from error
+    if "color" not in chosen or "depth" not in chosen:
+        missing = [role for role in ("color", "depth") if role not in chosen]
+        raise RecordingError(path, None, f"no {' or '.join(missing)} image channel found")
+    assembler.finish()
+    if assembler.next_index == 0:
+        raise RecordingError(
+            path,
+            None,
+            f"no colour image was paired with a depth image (stamps differ by more than "
+            f"max_skew_ns={max_skew_ns})",
+        )
+
+
+def recording_info(path: str | Path) -> dict[str, Any]:
+    """Cheap summary from the MCAP index: frames, duration_s, size_bytes, channels, start/end ns.
+
+    ``frames`` is the largest message count of an image channel that is neither depth nor labels;
+    ``channels`` maps topic -> {schema, messages}.
+    Raises RecordingError if the file has no readable summary (e.g. truncated).
+    """
+    from mcap.reader import SeekingReader
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as stream:
+            summary = SeekingReader(stream).get_summary()
+    except OSError as error:
+        raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
+    except Exception as error:
+        raise RecordingError(path, None, f"no readable MCAP summary ({error})") from error
+    if summary is None or summary.statistics is None:
+        raise RecordingError(path, None, "no MCAP summary statistics (truncated file?)")
+    statistics = summary.statistics
+    channels: dict[str, dict[str, Any]] = {}
+    frames = 0
+    for channel_id, channel in summary.channels.items():
+        schema = summary.schemas.get(channel.schema_id)
+        count = statistics.channel_message_counts.get(channel_id, 0)
+        schema_name = schema.name if schema is not None else ""
+        channels[channel.topic] = {"schema": schema_name, "messages": count}
+        is_image = schema_name in _IMAGE_SCHEMAS
+        if is_image and "depth" not in channel.topic and not channel.topic.endswith("/labels"):
+            frames = max(frames, count)
+    start, end = statistics.message_start_time, statistics.message_end_time
+    return {
+        "path": str(path),
+        "frames": frames,
+        "duration_s": (end - start) / 1e9 if statistics.message_count else 0.0,
+        "start_ns": start,
+        "end_ns": end,
+        "size_bytes": os.path.getsize(path),
+        "messages": statistics.message_count,
+        "channels": channels,
+    }
