@@ -1,0 +1,753 @@
+"""Numba kernels of the growing-gas learners: one learning loop for GNG-DT, GNG and GNG-W.
+
+All network state lives in preallocated arrays owned by the Python estimator (`model.py`); the
+kernels only read and write them, so a learning step allocates nothing.
+
+Layout (``cap`` = node capacity = ``max_nodes``, ``K`` = ``MAX_DEGREE``):
+
+- ``pos`` (cap, D) float64, ``col`` (cap, 3) float64, ``nor`` (cap, 3) float64 node properties;
+  a normal of (0, 0, 0) means "undefined" (fewer than two position neighbours, or a degenerate
+  neighbourhood) and never gets a normal edge.
+- ``err`` (cap,) float64 accumulated errors stored *scaled*: true error = ``err * error_scale``
+  (Fišer et al. 2013), so the global decay of Step 9 is one multiplication of ``error_scale``.
+- Adjacency with a fixed maximum degree: ``nbr`` (cap, K) int32 neighbour index, ``age`` (cap, K)
+  int32, ``emask`` (cap, K) uint8 bitmask of the properties the edge has (``POS_BIT`` always set:
+  edges of other properties are a subset of the position edges), ``rev`` (cap, K) int32 the slot
+  of the same edge in the neighbour's row, ``deg`` (cap,) int32. Slots ``[0, deg[i])`` are used.
+  Degree overflow: if ``s1`` or ``s2`` already has ``K`` edges when Step 4 must create their edge,
+  the edge is not created in that step (everything else proceeds); GNG degrees stay far below
+  ``K`` in practice.
+- Spatial hash grid for the winner search: ``ghead`` (T,) int32 first node of each bucket,
+  ``gnext``/``gprev`` (cap,) int32 doubly linked bucket lists, ``gbucket`` (cap,) int64 bucket of
+  each node (-1: not in the grid), ``gcell`` (cap, 3) int64 integer cell of each node.
+- ``istate`` int64: [n_nodes, n_steps, grid_active]; ``fstate`` float64: [error_scale, cell_size,
+  spacing_ema].
+
+Nodes are deleted by swapping the last node into the hole, so indices stay compact.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+POS_BIT = 1
+COL_BIT = 2
+NOR_BIT = 4
+
+MODE_GNGDT = 0
+MODE_GNG = 1
+MODE_GNGW = 2
+
+MAX_DEGREE = 16
+# Below this many nodes a brute-force winner search is cheaper than the grid.
+GRID_MIN_NODES = 48
+# Renormalise stored errors when the global decay factor falls below this.
+ERROR_SCALE_FLOOR = 1e-60
+
+# indices into istate / fstate / fparams / iparams
+I_NODES, I_STEPS, I_GRID = 0, 1, 2
+F_ERROR_SCALE, F_CELL, F_SPACING = 0, 1, 2
+P_ETA1, P_ETA2, P_ALPHA, P_BETA, P_TAU_COL, P_TAU_NOR, P_MU = 0, 1, 2, 3, 4, 5, 6
+P_VX, P_VY, P_VZ, P_W_POS, P_W_COL = 7, 8, 9, 10, 11
+Q_LAMBDA, Q_AGE_MAX, Q_MAX_NODES, Q_MODE, Q_HAS_COL, Q_HAS_NOR, Q_ORIENT = 0, 1, 2, 3, 4, 5, 6
+
+
+# --------------------------------------------------------------------------- adjacency
+
+
+@njit(cache=True)
+def find_slot(nbr, deg, i, j):
+    """Slot of neighbour ``j`` in row ``i``, or -1."""
+    for k in range(deg[i]):
+        if nbr[i, k] == j:
+            return k
+    return -1
+
+
+@njit(cache=True)
+def add_edge(nbr, age, emask, rev, deg, i, j, mask):
+    """Connect ``i`` and ``j`` with age 0 and property bits ``mask``; False on degree overflow."""
+    ki = deg[i]
+    kj = deg[j]
+    if ki >= nbr.shape[1] or kj >= nbr.shape[1]:
+        return False
+    nbr[i, ki] = j
+    nbr[j, kj] = i
+    age[i, ki] = 0
+    age[j, kj] = 0
+    emask[i, ki] = mask
+    emask[j, kj] = mask
+    rev[i, ki] = kj
+    rev[j, kj] = ki
+    deg[i] = ki + 1
+    deg[j] = kj + 1
+    return True
+
+
+@njit(cache=True)
+def _drop_slot(nbr, age, emask, rev, deg, i, k):
+    """Remove slot ``k`` of row ``i`` only (the twin is handled by the caller)."""
+    last = deg[i] - 1
+    if k != last:
+        nbr[i, k] = nbr[i, last]
+        age[i, k] = age[i, last]
+        emask[i, k] = emask[i, last]
+        rev[i, k] = rev[i, last]
+        rev[nbr[i, k], rev[i, k]] = k
+    deg[i] = last
+
+
+@njit(cache=True)
+def remove_edge(nbr, age, emask, rev, deg, i, k):
+    """Delete the edge at slot ``k`` of node ``i`` (all properties), from both endpoints."""
+    j = nbr[i, k]
+    kj = rev[i, k]
+    _drop_slot(nbr, age, emask, rev, deg, i, k)
+    _drop_slot(nbr, age, emask, rev, deg, j, kj)
+
+
+# --------------------------------------------------------------------------- spatial hash grid
+
+
+@njit(cache=True)
+def _bucket(cx, cy, cz, table_mask):
+    return ((cx * 73856093) ^ (cy * 19349663) ^ (cz * 83492791)) & table_mask
+
+
+@njit(cache=True)
+def _cell_of(pos, i, cell_size):
+    cx = math.floor(pos[i, 0] / cell_size)
+    cy = math.floor(pos[i, 1] / cell_size)
+    cz = 0.0
+    if pos.shape[1] > 2:
+        cz = math.floor(pos[i, 2] / cell_size)
+    return np.int64(cx), np.int64(cy), np.int64(cz)
+
+
+@njit(cache=True)
+def grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size):
+    cx, cy, cz = _cell_of(pos, i, cell_size)
+    b = _bucket(cx, cy, cz, ghead.shape[0] - 1)
+    gcell[i, 0] = cx
+    gcell[i, 1] = cy
+    gcell[i, 2] = cz
+    gbucket[i] = b
+    gprev[i] = -1
+    head = ghead[b]
+    gnext[i] = head
+    if head >= 0:
+        gprev[head] = i
+    ghead[b] = i
+
+
+@njit(cache=True)
+def grid_remove(ghead, gnext, gprev, gbucket, i):
+    b = gbucket[i]
+    if b < 0:
+        return
+    if gprev[i] >= 0:
+        gnext[gprev[i]] = gnext[i]
+    else:
+        ghead[b] = gnext[i]
+    if gnext[i] >= 0:
+        gprev[gnext[i]] = gprev[i]
+    gbucket[i] = -1
+
+
+@njit(cache=True)
+def grid_update(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size):
+    """Move node ``i`` to its current cell's bucket if it crossed a cell border."""
+    cx, cy, cz = _cell_of(pos, i, cell_size)
+    if cx == gcell[i, 0] and cy == gcell[i, 1] and cz == gcell[i, 2]:
+        return
+    grid_remove(ghead, gnext, gprev, gbucket, i)
+    grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size)
+
+
+@njit(cache=True)
+def _grid_rename(ghead, gnext, gprev, gbucket, gcell, src, dst):
+    """Node ``src`` becomes node ``dst`` (``dst`` is not in the grid)."""
+    gbucket[dst] = gbucket[src]
+    gbucket[src] = -1
+    if gbucket[dst] < 0:
+        return
+    gnext[dst] = gnext[src]
+    gprev[dst] = gprev[src]
+    gcell[dst, 0] = gcell[src, 0]
+    gcell[dst, 1] = gcell[src, 1]
+    gcell[dst, 2] = gcell[src, 2]
+    if gprev[dst] >= 0:
+        gnext[gprev[dst]] = dst
+    else:
+        ghead[gbucket[dst]] = dst
+    if gnext[dst] >= 0:
+        gprev[gnext[dst]] = dst
+
+
+@njit(cache=True)
+def grid_rebuild(pos, n, ghead, gnext, gprev, gbucket, gcell, cell_size):
+    """Empty the grid and insert nodes ``0..n-1`` with a new ``cell_size``. O(n)."""
+    for i in range(gbucket.shape[0]):
+        b = gbucket[i]
+        if b >= 0:
+            ghead[b] = -1
+            gbucket[i] = -1
+    for i in range(n):
+        grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size)
+
+
+# --------------------------------------------------------------------------- winner search
+
+
+@njit(cache=True)
+def _sq_dist(x, pos, i):
+    """Squared distance between vector ``x`` and row ``i`` of ``pos`` (unrolled for 2 and 3)."""
+    if x.shape[0] == 3:
+        t0 = x[0] - pos[i, 0]
+        t1 = x[1] - pos[i, 1]
+        t2 = x[2] - pos[i, 2]
+        return t0 * t0 + t1 * t1 + t2 * t2
+    if x.shape[0] == 2:
+        t0 = x[0] - pos[i, 0]
+        t1 = x[1] - pos[i, 1]
+        return t0 * t0 + t1 * t1
+    d = 0.0
+    for a in range(x.shape[0]):
+        t = x[a] - pos[i, a]
+        d += t * t
+    return d
+
+
+@njit(cache=True)
+def nearest_two_brute(x, pos, n):
+    """The two nodes nearest to ``x`` by position, and the squared distance of the first."""
+    best1 = np.inf
+    best2 = np.inf
+    s1 = -1
+    s2 = -1
+    for i in range(n):
+        d = _sq_dist(x, pos, i)
+        if d < best1:
+            best2 = best1
+            s2 = s1
+            best1 = d
+            s1 = i
+        elif d < best2:
+            best2 = d
+            s2 = i
+    return s1, s2, best1
+
+
+@njit(cache=True)
+def nearest_two_grid(x, pos, n, ghead, gnext, cell_size):
+    """Exact nearest two by position, searching grid rings outward until no closer node can exist.
+
+    Falls back to brute force when the rings would cover more cells than there are nodes
+    (a query far away from every node).
+    """
+    dim = x.shape[0]
+    table_mask = ghead.shape[0] - 1
+    qx = x[0] / cell_size
+    qy = x[1] / cell_size
+    qz = x[2] / cell_size if dim > 2 else 0.0
+    fx = math.floor(qx)
+    fy = math.floor(qy)
+    fz = math.floor(qz)
+    cx = np.int64(fx)
+    cy = np.int64(fy)
+    cz = np.int64(fz)
+    # distance (in cells) from x to the nearest face of its own cell
+    margin = min(qx - fx, 1.0 - (qx - fx), qy - fy, 1.0 - (qy - fy))
+    if dim > 2:
+        margin = min(margin, qz - fz, 1.0 - (qz - fz))
+    best1 = np.inf
+    best2 = np.inf
+    s1 = -1
+    s2 = -1
+    r = 0
+    while True:
+        zr = r if dim > 2 else 0
+        for dx in range(-r, r + 1):
+            adx = abs(dx)
+            for dy in range(-r, r + 1):
+                ady = abs(dy)
+                for dz in range(-zr, zr + 1):
+                    if adx != r and ady != r and abs(dz) != r:
+                        continue
+                    p = ghead[_bucket(cx + dx, cy + dy, cz + dz, table_mask)]
+                    while p >= 0:
+                        d = _sq_dist(x, pos, p)
+                        if d < best1:
+                            best2 = best1
+                            s2 = s1
+                            best1 = d
+                            s1 = p
+                        elif d < best2 and p != s1:
+                            best2 = d
+                            s2 = p
+                        p = gnext[p]
+        if s2 >= 0:
+            bound = (r + margin) * cell_size
+            if best2 <= bound * bound:
+                return s1, s2, best1
+        r += 1
+        side = 2 * r + 1
+        cells = side * side * (side if dim > 2 else 1)
+        if cells > 2 * n:
+            return nearest_two_brute(x, pos, n)
+
+
+@njit(cache=True)
+def nearest_two_weighted(x, c, pos, col, n, mode, has_col, w_pos, w_col):
+    """GNG / GNG-W winner search (eqs. 13-14) over position and colour; brute force.
+
+    GNG: Euclidean distance over the concatenated vector (pos, col).
+    GNG-W: ``w_pos * ||dpos|| + w_col * ||dcol||``.
+    Returns s1, s2 and the error increment of s1 (GNG: squared distance; GNG-W: eq. 14).
+    """
+    best1 = np.inf
+    best2 = np.inf
+    s1 = -1
+    s2 = -1
+    err1 = 0.0
+    for i in range(n):
+        dp = _sq_dist(x, pos, i)
+        dc = 0.0
+        if has_col:
+            dc = _sq_dist(c, col, i)
+        if mode == MODE_GNG:
+            d = dp + dc
+            e = d
+        else:
+            d = w_pos * math.sqrt(dp) + w_col * math.sqrt(dc)
+            e = w_pos * dp + w_col * dc
+        if d < best1:
+            best2 = best1
+            s2 = s1
+            best1 = d
+            s1 = i
+            err1 = e
+        elif d < best2:
+            best2 = d
+            s2 = i
+    return s1, s2, err1
+
+
+# --------------------------------------------------------------------------- normals (eq. 16)
+
+
+@njit(cache=True)
+def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (closed form).
+
+    Returns (x, y, z, ok); ok is False when the eigenvector is not unique (e.g. an isotropic or
+    rank-one matrix), in which case the vector is zero.
+    """
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    b00 = a00 - q
+    b11 = a11 - q
+    b22 = a22 - q
+    p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
+    if p2 <= 0.0:
+        return 0.0, 0.0, 0.0, False
+    p = math.sqrt(p2 / 6.0)
+    det = (
+        b00 * (b11 * b22 - a12 * a12)
+        - a01 * (a01 * b22 - a12 * a02)
+        + a02 * (a01 * a12 - b11 * a02)
+    ) / (p * p * p)
+    half_det = min(1.0, max(-1.0, det / 2.0))
+    phi = math.acos(half_det) / 3.0
+    smallest = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    # rows of (A - smallest I); the eigenvector is orthogonal to all of them
+    m00 = a00 - smallest
+    m11 = a11 - smallest
+    m22 = a22 - smallest
+    # cross products of row pairs: (r0 x r1), (r0 x r2), (r1 x r2)
+    c0x = a01 * a12 - a02 * m11
+    c0y = a02 * a01 - m00 * a12
+    c0z = m00 * m11 - a01 * a01
+    c1x = a01 * m22 - a02 * a12
+    c1y = a02 * a02 - m00 * m22
+    c1z = m00 * a12 - a01 * a02
+    c2x = m11 * m22 - a12 * a12
+    c2y = a12 * a02 - a01 * m22
+    c2z = a01 * a12 - m11 * a02
+    n0 = c0x * c0x + c0y * c0y + c0z * c0z
+    n1 = c1x * c1x + c1y * c1y + c1z * c1z
+    n2 = c2x * c2x + c2y * c2y + c2z * c2z
+    if n0 >= n1 and n0 >= n2:
+        vx, vy, vz, nn = c0x, c0y, c0z, n0
+    elif n1 >= n2:
+        vx, vy, vz, nn = c1x, c1y, c1z, n1
+    else:
+        vx, vy, vz, nn = c2x, c2y, c2z, n2
+    # relative to the matrix scale squared: below this the two smallest eigenvalues coincide
+    if nn <= 1e-20 * p2 * p2:
+        return 0.0, 0.0, 0.0, False
+    inv = 1.0 / math.sqrt(nn)
+    return vx * inv, vy * inv, vz * inv, True
+
+
+@njit(cache=True)
+def _orient(nor, pos, i, vx, vy, vz):
+    """Flip normal ``i`` so that it points toward the viewpoint."""
+    dot = (
+        nor[i, 0] * (vx - pos[i, 0]) + nor[i, 1] * (vy - pos[i, 1]) + nor[i, 2] * (vz - pos[i, 2])
+    )
+    if dot < 0.0:
+        nor[i, 0] = -nor[i, 0]
+        nor[i, 1] = -nor[i, 1]
+        nor[i, 2] = -nor[i, 2]
+
+
+@njit(cache=True)
+def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
+    """Eq. 16: normal of node ``i`` from its position neighbours, written to ``nor[i]``.
+
+    Weighted centroid ``m = (h_i + sum w_j h_j) / (1 + sum w_j)`` with
+    ``w_j = exp(-||h_i - h_j||^2 / mu^2)``; covariance of the node (weight 1) and its neighbours
+    (weights ``w_j``) about ``m``; normal = eigenvector of the smallest eigenvalue. ``mu <= 0``
+    means the scale-free default: ``mu`` = mean distance from ``i`` to its neighbours.
+    Undefined (zero) with fewer than two neighbours.
+    """
+    k_count = deg[i]
+    if k_count < 2:
+        nor[i, 0] = 0.0
+        nor[i, 1] = 0.0
+        nor[i, 2] = 0.0
+        return
+    px = pos[i, 0]
+    py = pos[i, 1]
+    pz = pos[i, 2]
+    if mu <= 0.0:
+        total = 0.0
+        for k in range(k_count):
+            j = nbr[i, k]
+            dx = pos[j, 0] - px
+            dy = pos[j, 1] - py
+            dz = pos[j, 2] - pz
+            total += math.sqrt(dx * dx + dy * dy + dz * dz)
+        mu = total / k_count
+        if mu <= 0.0:
+            nor[i, 0] = 0.0
+            nor[i, 1] = 0.0
+            nor[i, 2] = 0.0
+            return
+    # one pass in coordinates relative to h_i: weighted moments about h_i, then about the centroid
+    inv_mu2 = 1.0 / (mu * mu)
+    wsum = 1.0
+    sx = 0.0
+    sy = 0.0
+    sz = 0.0
+    c00 = 0.0
+    c01 = 0.0
+    c02 = 0.0
+    c11 = 0.0
+    c12 = 0.0
+    c22 = 0.0
+    for k in range(k_count):
+        j = nbr[i, k]
+        dx = pos[j, 0] - px
+        dy = pos[j, 1] - py
+        dz = pos[j, 2] - pz
+        w = math.exp(-(dx * dx + dy * dy + dz * dz) * inv_mu2)
+        wsum += w
+        sx += w * dx
+        sy += w * dy
+        sz += w * dz
+        c00 += w * dx * dx
+        c01 += w * dx * dy
+        c02 += w * dx * dz
+        c11 += w * dy * dy
+        c12 += w * dy * dz
+        c22 += w * dz * dz
+    mx = sx / wsum
+    my = sy / wsum
+    mz = sz / wsum
+    c00 -= wsum * mx * mx
+    c01 -= wsum * mx * my
+    c02 -= wsum * mx * mz
+    c11 -= wsum * my * my
+    c12 -= wsum * my * mz
+    c22 -= wsum * mz * mz
+    x, y, z, ok = smallest_eigenvector(c00, c01, c02, c11, c12, c22)
+    nor[i, 0] = x
+    nor[i, 1] = y
+    nor[i, 2] = z
+    if ok and orient:
+        _orient(nor, pos, i, vx, vy, vz)
+
+
+@njit(cache=True)
+def _normal_defined(nor, i):
+    return nor[i, 0] != 0.0 or nor[i, 1] != 0.0 or nor[i, 2] != 0.0
+
+
+@njit(cache=True)
+def normals_close(nor, i, j, tau):
+    """Eq. 4/9 for normals, sign-invariant: min(||n_i - n_j||, ||n_i + n_j||) < tau."""
+    if not (_normal_defined(nor, i) and _normal_defined(nor, j)):
+        return False
+    dm = 0.0
+    dp = 0.0
+    for a in range(3):
+        t = nor[i, a] - nor[j, a]
+        dm += t * t
+        t = nor[i, a] + nor[j, a]
+        dp += t * t
+    return min(dm, dp) < tau * tau
+
+
+@njit(cache=True)
+def colours_close(col, i, j, tau):
+    """Eq. 4/9 for colours: ||c_i - c_j|| < tau."""
+    return _sq_dist(col[i], col, j) < tau * tau
+
+
+@njit(cache=True)
+def property_bits(col, nor, i, j, has_col, has_nor, tau_col, tau_nor):
+    """Position bit plus the bits of the other properties whose eq. 4/9 test holds for (i, j)."""
+    mask = POS_BIT
+    if has_col and colours_close(col, i, j, tau_col):
+        mask |= COL_BIT
+    if has_nor and normals_close(nor, i, j, tau_nor):
+        mask |= NOR_BIT
+    return mask
+
+
+# --------------------------------------------------------------------------- node deletion
+
+
+@njit(cache=True)
+def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                ghead, gnext, gprev, gbucket, gcell):
+    """Delete isolated node ``i`` by moving the last node ``n-1`` into its slot. Returns n - 1."""
+    grid_remove(ghead, gnext, gprev, gbucket, i)
+    last = n - 1
+    if i != last:
+        for a in range(pos.shape[1]):
+            pos[i, a] = pos[last, a]
+        for a in range(3):
+            col[i, a] = col[last, a]
+            nor[i, a] = nor[last, a]
+        err[i] = err[last]
+        d = deg[last]
+        for k in range(d):
+            j = nbr[last, k]
+            nbr[i, k] = j
+            age[i, k] = age[last, k]
+            emask[i, k] = emask[last, k]
+            rev[i, k] = rev[last, k]
+            nbr[j, rev[last, k]] = i
+        deg[i] = d
+        _grid_rename(ghead, gnext, gprev, gbucket, gcell, last, i)
+    deg[last] = 0
+    return last
+
+
+# --------------------------------------------------------------------------- the learning loop
+
+
+@njit(cache=True)
+def learn(samples, sample_colors, order,
+          pos, col, nor, err, nbr, age, emask, rev, deg,
+          ghead, gnext, gprev, gbucket, gcell,
+          istate, fstate, fparams, iparams):
+    """Run one learning step (Steps 1-9) per index in ``order`` (rows of ``samples``).
+
+    samples: (N, D) float64 positions; sample_colors: (N, 3) float64 (ignored without colour).
+    """
+    eta1 = fparams[P_ETA1]
+    eta2 = fparams[P_ETA2]
+    alpha = fparams[P_ALPHA]
+    beta = fparams[P_BETA]
+    tau_col = fparams[P_TAU_COL]
+    tau_nor = fparams[P_TAU_NOR]
+    mu = fparams[P_MU]
+    vx = fparams[P_VX]
+    vy = fparams[P_VY]
+    vz = fparams[P_VZ]
+    w_pos = fparams[P_W_POS]
+    w_col = fparams[P_W_COL]
+    lam = iparams[Q_LAMBDA]
+    age_max = iparams[Q_AGE_MAX]
+    max_nodes = iparams[Q_MAX_NODES]
+    mode = iparams[Q_MODE]
+    has_col = iparams[Q_HAS_COL] != 0
+    has_nor = iparams[Q_HAS_NOR] != 0
+    orient = iparams[Q_ORIENT] != 0
+    # in GNG / GNG-W colour is part of the input vector and follows the single topology
+    col_follows_pos = mode != MODE_GNGDT
+
+    n = istate[I_NODES]
+    t = istate[I_STEPS]
+    grid_on = istate[I_GRID] != 0
+    error_scale = fstate[F_ERROR_SCALE]
+    cell_size = fstate[F_CELL]
+    spacing = fstate[F_SPACING]
+    dim = pos.shape[1]
+    candidates = np.empty(nbr.shape[1], dtype=np.int64)
+
+    for idx in order:
+        x = samples[idx]
+        c = sample_colors[idx]
+        t += 1
+        # Step 2 (and the error of Step 3)
+        if mode == MODE_GNGDT:
+            if grid_on:
+                s1, s2, err_add = nearest_two_grid(x, pos, n, ghead, gnext, cell_size)
+            else:
+                s1, s2, err_add = nearest_two_brute(x, pos, n)
+        else:
+            s1, s2, err_add = nearest_two_weighted(x, c, pos, col, n, mode, has_col, w_pos, w_col)
+        # Step 3
+        err[s1] += err_add / error_scale
+        # running node spacing (distance between winners) sizes the grid cells
+        d12 = math.sqrt(_sq_dist(pos[s1], pos, s2))
+        if spacing <= 0.0:
+            spacing = d12
+        else:
+            spacing += 0.01 * (d12 - spacing)
+        # Step 4
+        k12 = find_slot(nbr, deg, s1, s2)
+        if k12 < 0:
+            if add_edge(nbr, age, emask, rev, deg, s1, s2, POS_BIT):
+                k12 = deg[s1] - 1
+        if k12 >= 0:
+            mask = property_bits(col, nor, s1, s2, has_col, has_nor, tau_col, tau_nor)
+            age[s1, k12] = 0
+            emask[s1, k12] = mask
+            k21 = rev[s1, k12]
+            age[s2, k21] = 0
+            emask[s2, k21] = mask
+        # Step 5: the winner moves in every input property ...
+        for a in range(dim):
+            pos[s1, a] += eta1 * (x[a] - pos[s1, a])
+        if has_col:
+            for a in range(3):
+                col[s1, a] += eta1 * (c[a] - col[s1, a])
+        # ... each neighbour in property o only along an edge of o. Step 6: ages.
+        for k in range(deg[s1]):
+            j = nbr[s1, k]
+            for a in range(dim):
+                pos[j, a] += eta2 * (x[a] - pos[j, a])
+            if has_col and (col_follows_pos or (emask[s1, k] & COL_BIT) != 0):
+                for a in range(3):
+                    col[j, a] += eta2 * (c[a] - col[j, a])
+            age[s1, k] += 1
+            age[j, rev[s1, k]] += 1
+            if grid_on:
+                grid_update(pos, ghead, gnext, gprev, gbucket, gcell, j, cell_size)
+        if grid_on:
+            grid_update(pos, ghead, gnext, gprev, gbucket, gcell, s1, cell_size)
+        # Step 7: delete old edges of s1, then nodes left without position edges
+        n_candidates = 0
+        k = 0
+        while k < deg[s1]:
+            if age[s1, k] > age_max:
+                candidates[n_candidates] = nbr[s1, k]
+                n_candidates += 1
+                remove_edge(nbr, age, emask, rev, deg, s1, k)
+            else:
+                k += 1
+        for q in range(n_candidates):
+            j = candidates[q]
+            if deg[j] == 0:
+                last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                                   ghead, gnext, gprev, gbucket, gcell)
+                n -= 1
+                if s1 == last:
+                    s1 = j
+                for q2 in range(q + 1, n_candidates):
+                    if candidates[q2] == last:
+                        candidates[q2] = j
+        if deg[s1] == 0:
+            delete_node(s1, n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                        ghead, gnext, gprev, gbucket, gcell)
+            n -= 1
+        elif has_nor:
+            compute_normal(s1, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
+        # Step 8: insertion every lambda steps, until max_nodes
+        if t % lam == 0:
+            if n < max_nodes:
+                n = _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz)
+                if grid_on:
+                    grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, cell_size)
+            # keep grid cells about one node spacing wide (amortised O(n) per lambda steps)
+            if mode == MODE_GNGDT and n >= GRID_MIN_NODES and spacing > 0.0 and (
+                not grid_on or spacing > 2.0 * cell_size or spacing < 0.5 * cell_size
+            ):
+                cell_size = spacing
+                grid_rebuild(pos, n, ghead, gnext, gprev, gbucket, gcell, cell_size)
+                grid_on = True
+        # Step 9, lazily: true error = stored error * error_scale
+        error_scale *= 1.0 - beta
+        if error_scale < ERROR_SCALE_FLOOR:
+            for i in range(n):
+                err[i] *= error_scale
+            error_scale = 1.0
+
+    istate[I_NODES] = n
+    istate[I_STEPS] = t
+    istate[I_GRID] = 1 if grid_on else 0
+    fstate[F_ERROR_SCALE] = error_scale
+    fstate[F_CELL] = cell_size
+    fstate[F_SPACING] = spacing
+
+
+@njit(cache=True)
+def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz):
+    """Step 8 i-vi: new node halfway between the max-error node and its max-error neighbour."""
+    u = 0
+    for i in range(1, n):
+        if err[i] > err[u]:
+            u = i
+    ku = 0
+    for k in range(1, deg[u]):
+        if err[nbr[u, k]] > err[nbr[u, ku]]:
+            ku = k
+    f = nbr[u, ku]
+    r = n
+    for a in range(pos.shape[1]):
+        pos[r, a] = 0.5 * (pos[u, a] + pos[f, a])
+    for a in range(3):
+        col[r, a] = 0.5 * (col[u, a] + col[f, a])
+    _interpolate_normal(nor, pos, u, f, r, orient, vx, vy, vz)
+    deg[r] = 0
+    remove_edge(nbr, age, emask, rev, deg, u, ku)
+    add_edge(nbr, age, emask, rev, deg, u, r,
+             property_bits(col, nor, u, r, has_col, has_nor, tau_col, tau_nor))
+    add_edge(nbr, age, emask, rev, deg, r, f,
+             property_bits(col, nor, r, f, has_col, has_nor, tau_col, tau_nor))
+    err[u] -= alpha * err[u]
+    err[f] -= alpha * err[f]
+    err[r] = 0.5 * (err[u] + err[f])
+    return n + 1
+
+
+@njit(cache=True)
+def _interpolate_normal(nor, pos, u, f, r, orient, vx, vy, vz):
+    """Normal of a new node: the sign-aligned mean of its parents' normals, renormalised."""
+    sign = 1.0
+    if nor[u, 0] * nor[f, 0] + nor[u, 1] * nor[f, 1] + nor[u, 2] * nor[f, 2] < 0.0:
+        sign = -1.0
+    norm2 = 0.0
+    for a in range(3):
+        nor[r, a] = nor[u, a] + sign * nor[f, a]
+        norm2 += nor[r, a] * nor[r, a]
+    if norm2 > 1e-24:
+        inv = 1.0 / math.sqrt(norm2)
+        for a in range(3):
+            nor[r, a] *= inv
+        if orient:
+            _orient(nor, pos, r, vx, vy, vz)
+    else:
+        for a in range(3):
+            nor[r, a] = 0.0

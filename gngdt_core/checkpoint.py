@@ -1,0 +1,144 @@
+"""Restoring a learner from `get_state()` arrays, with every consistency check in one place."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, TypeVar
+
+import numpy as np
+
+from gngdt_core import _kernels as K
+
+Model = TypeVar("Model")
+
+_FLOAT_ARRAYS = ("pos", "col", "nor", "err")
+_INT_ARRAYS = ("nbr", "age", "emask", "rev", "deg")
+
+
+def _scalar_text(state: dict[str, np.ndarray], key: str) -> str:
+    value = np.asarray(state[key])
+    if value.shape != () or value.dtype.kind != "U":
+        raise ValueError(
+            f"state[{key!r}] must be a 0-d string array, got {value.dtype} {value.shape}"
+        )
+    return str(value[()])
+
+
+def _scalar_int(state: dict[str, np.ndarray], key: str) -> int:
+    value = np.asarray(state[key])
+    if value.shape != () or value.dtype.kind not in "iu":
+        raise ValueError(
+            f"state[{key!r}] must be a 0-d integer array, got {value.dtype} {value.shape}"
+        )
+    return int(value)
+
+
+def _array(state: dict[str, np.ndarray], key: str, shape: tuple[int, ...], kind: str) -> np.ndarray:
+    value = np.asarray(state[key])
+    if value.shape != shape:
+        raise ValueError(f"state[{key!r}] has shape {value.shape}, expected {shape}")
+    if value.dtype.kind not in kind:
+        raise ValueError(f"state[{key!r}] has dtype {value.dtype}, expected kind {kind!r}")
+    return value
+
+
+def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
+    """Build a ``cls`` learner from ``state``; ValueError naming the first inconsistency."""
+    required = ("model", "params", "rng_state", "dim", "has_colors", "n_invalid", "counters",
+                "scalars")
+    missing = [key for key in required if key not in state]
+    if missing:
+        raise ValueError(f"state is missing {missing}")
+    name = _scalar_text(state, "model")
+    if name != cls.__name__:
+        raise ValueError(f"state holds a {name} model, not a {cls.__name__}")
+    try:
+        params: dict[str, Any] = json.loads(_scalar_text(state, "params"))
+        rng_state = json.loads(_scalar_text(state, "rng_state"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"state params/rng_state are not valid JSON: {exc}") from exc
+    unknown = set(params) - set(cls._PARAM_NAMES)
+    if unknown:
+        raise ValueError(f"state params has unknown parameters {sorted(unknown)}")
+    model = cls(**params)
+    try:
+        model._rng.bit_generator.state = rng_state
+    except (TypeError, ValueError, KeyError) as exc:
+        raise ValueError(f"state rng_state is not a {type(model._rng.bit_generator).__name__} "
+                         f"state: {exc}") from exc
+
+    dim = _scalar_int(state, "dim")
+    has_col = _scalar_int(state, "has_colors")
+    n_invalid = _scalar_int(state, "n_invalid")
+    counters = _array(state, "counters", (3,), "iu").astype(np.int64)
+    scalars = _array(state, "scalars", (3,), "f").astype(np.float64)
+    if dim not in (0, 2, 3):
+        raise ValueError(f"state dim must be 0 (unfitted), 2 or 3, got {dim}")
+    if has_col not in (0, 1) or n_invalid < 0:
+        raise ValueError("state has_colors must be 0/1 and n_invalid >= 0")
+    n = int(counters[K.I_NODES])
+    if counters[K.I_STEPS] < 0 or counters[K.I_GRID] not in (0, 1):
+        raise ValueError(f"state counters are invalid: {counters.tolist()}")
+    if not np.isfinite(scalars).all() or scalars[K.F_ERROR_SCALE] <= 0.0:
+        raise ValueError(f"state scalars are invalid: {scalars.tolist()}")
+    model.n_invalid_ = n_invalid
+    if dim == 0:
+        if n != 0:
+            raise ValueError(f"state has {n} nodes but no dimension")
+        return model
+    if not (2 <= n <= model._params["max_nodes"]):
+        raise ValueError(f"state has {n} nodes; expected 2..max_nodes={model._params['max_nodes']}")
+    if counters[K.I_GRID] and scalars[K.F_CELL] <= 0.0:
+        raise ValueError("state has an active grid with a non-positive cell size")
+
+    shapes = {"pos": (n, dim), "col": (n, 3), "nor": (n, 3), "err": (n,), "deg": (n,)}
+    for key in _FLOAT_ARRAYS + _INT_ARRAYS:
+        if key not in state:
+            raise ValueError(f"state is missing {key!r}")
+    arrays = {key: _array(state, key, shapes.get(key, (n, K.MAX_DEGREE)),
+                          "f" if key in _FLOAT_ARRAYS else "iu")
+              for key in _FLOAT_ARRAYS + _INT_ARRAYS}
+    for key in _FLOAT_ARRAYS:
+        if not np.isfinite(arrays[key]).all():
+            raise ValueError(f"state[{key!r}] contains NaN or inf")
+    _check_adjacency(n, arrays)
+
+    model._allocate(dim, bool(has_col))
+    for key, value in arrays.items():
+        model._arrays[key][:n] = value
+    model._istate[:] = counters
+    model._fstate[:] = scalars
+    if counters[K.I_GRID]:
+        a = model._arrays
+        K.grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                       float(scalars[K.F_CELL]))
+    return model
+
+
+def _check_adjacency(n: int, arrays: dict[str, np.ndarray]) -> None:
+    """Every used slot names a valid neighbour whose twin slot points back with equal age/mask."""
+    deg = arrays["deg"].astype(np.int64)
+    if (deg < 1).any() or (deg > K.MAX_DEGREE).any():
+        raise ValueError(f"state['deg'] must be in 1..{K.MAX_DEGREE} for every node")
+    used = np.arange(K.MAX_DEGREE) < deg[:, None]
+    rows = np.broadcast_to(np.arange(n)[:, None], used.shape)[used]
+    slots = np.broadcast_to(np.arange(K.MAX_DEGREE), used.shape)[used]
+    nbr = arrays["nbr"].astype(np.int64)[used]
+    rev = arrays["rev"].astype(np.int64)[used]
+    if (nbr < 0).any() or (nbr >= n).any() or (nbr == rows).any():
+        raise ValueError("state['nbr'] holds an out-of-range or self neighbour")
+    if (rev < 0).any() or (rev >= deg[nbr]).any():
+        raise ValueError("state['rev'] points outside the neighbour's used slots")
+    twin_nbr = arrays["nbr"][nbr, rev]
+    twin_rev = arrays["rev"][nbr, rev]
+    if (twin_nbr != rows).any() or (twin_rev != slots).any():
+        raise ValueError("state adjacency is not symmetric (nbr/rev disagree)")
+    age = arrays["age"]
+    emask = arrays["emask"]
+    if (age[used] < 0).any() or (age[used] != age[nbr, rev]).any():
+        raise ValueError("state['age'] is negative or differs between an edge's two ends")
+    masks = emask[used]
+    if (masks != emask[nbr, rev]).any() or ((masks & K.POS_BIT) == 0).any():
+        raise ValueError("state['emask'] differs between an edge's ends or lacks the position bit")
+    if (masks & ~np.uint8(K.POS_BIT | K.COL_BIT | K.NOR_BIT)).any():
+        raise ValueError("state['emask'] has unknown property bits")

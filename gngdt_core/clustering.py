@@ -1,0 +1,32 @@
+"""Connected components of a node graph (one topology or several combined)."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_array
+from scipy.sparse.csgraph import connected_components
+
+
+def connected_component_labels(n_nodes: int, edges: np.ndarray, min_size: int = 1) -> np.ndarray:
+    """(n_nodes,) int32 component labels 0..k-1, largest component first (ties: lowest node).
+
+    edges: (E, 2) integer node-index pairs. Nodes in components with fewer than ``min_size``
+    nodes get -1.
+    """
+    if isinstance(min_size, bool) or not isinstance(min_size, (int, np.integer)) or min_size < 1:
+        raise ValueError(f"min_size must be an integer >= 1, got {min_size!r}")
+    if n_nodes == 0:
+        return np.zeros(0, dtype=np.int32)
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    graph = coo_array(
+        (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])), shape=(n_nodes, n_nodes)
+    ).tocsr()
+    _, raw = connected_components(graph, directed=False)
+    sizes = np.bincount(raw)
+    first_node = np.full(sizes.size, n_nodes)
+    np.minimum.at(first_node, raw, np.arange(n_nodes))
+    ranking = np.lexsort((first_node, -sizes))  # by size descending, then first node
+    kept = ranking[sizes[ranking] >= min_size]
+    new_label = np.full(sizes.size, -1, dtype=np.int32)
+    new_label[kept] = np.arange(kept.size, dtype=np.int32)
+    return new_label[raw]

@@ -1,0 +1,349 @@
+"""scikit-learn style online estimators: GNG-DT and the paper's baselines GNG and GNG-W.
+
+All three share one numba learning loop (`_kernels.learn`); they differ in the winner distance
+and in which topologies they keep:
+
+- `GNGDT`: winner and error by position only (eqs. 2-3); one topology per property: "pos",
+  "col" (when colours are learned) and "nor" (3-D positions). Normals (eq. 16) are oriented toward
+  ``viewpoint`` (the sensor origin by default; ``None`` leaves the sign as computed) and compared
+  sign-invariantly in eqs. 4 and 9 (``min(||n_i - n_j||, ||n_i + n_j||) < tau_nor``), so the
+  normal topology never depends on the orientation.
+- `GNG`: one topology; Euclidean distance over the concatenated vector (position, colour).
+- `GNGW`: one topology; weighted distance ``w_pos ||dpos|| + w_col ||dcol||`` (eq. 13) and error
+  ``w_pos ||dpos||^2 + w_col ||dcol||^2`` (eq. 14).
+
+Step 0 places the two initial nodes on two random input samples. Growth stops at ``max_nodes``
+(Step 8 is then skipped entirely); adaptation goes on.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any, ClassVar, Self
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gngdt_core import _kernels as K
+from gngdt_core.clustering import connected_component_labels
+from gngdt_core.metrics import quantization_error as _rms_error
+from gngdt_core.parameters import validate_parameters
+from gngdt_core.sampling import as_samples, initial_indices, sample_orders
+
+_PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
+_STATE_VERSION = 1
+
+
+class _GrowingGas:
+    """Shared machinery; see `GNGDT` for the public API."""
+
+    _MODE: ClassVar[int]
+    _PARAM_NAMES: ClassVar[tuple[str, ...]] = (
+        "max_nodes", "lambda_", "eta1", "eta2", "age_max", "alpha", "beta", "random_state",
+    )
+
+    def __init__(self, **params: Any) -> None:
+        self._params = validate_parameters(params)
+        for name, value in self._params.items():
+            setattr(self, name, value)
+        self._reset()
+
+    # ------------------------------------------------------------------ state
+
+    def _reset(self) -> None:
+        self._rng = np.random.default_rng(self._params["random_state"])
+        self._dim = 0
+        self._has_col = False
+        self.n_invalid_ = 0
+        self._arrays: dict[str, np.ndarray] = {}
+        self._istate = np.zeros(3, dtype=np.int64)
+        self._fstate = np.array([1.0, 0.0, 0.0])
+
+    def _allocate(self, dim: int, has_col: bool) -> None:
+        cap = self._params["max_nodes"]
+        table = 1 << max(10, int(2 * cap - 1).bit_length())
+        self._dim = dim
+        self._has_col = has_col
+        self._arrays = {
+            "pos": np.zeros((cap, dim)),
+            "col": np.zeros((cap, 3)),
+            "nor": np.zeros((cap, 3)),
+            "err": np.zeros(cap),
+            "nbr": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
+            "age": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
+            "emask": np.zeros((cap, K.MAX_DEGREE), dtype=np.uint8),
+            "rev": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
+            "deg": np.zeros(cap, dtype=np.int32),
+            "ghead": np.full(table, -1, dtype=np.int32),
+            "gnext": np.full(cap, -1, dtype=np.int32),
+            "gprev": np.full(cap, -1, dtype=np.int32),
+            "gbucket": np.full(cap, -1, dtype=np.int64),
+            "gcell": np.zeros((cap, 3), dtype=np.int64),
+        }
+
+    def _kernel_parameters(self) -> tuple[np.ndarray, np.ndarray]:
+        p = self._params
+        viewpoint = p.get("viewpoint")
+        fparams = np.array([
+            p["eta1"], p["eta2"], p["alpha"], p["beta"],
+            p.get("tau_col", 1.0), p.get("tau_nor", 1.0), p.get("normal_mu") or 0.0,
+            *(viewpoint if viewpoint is not None else (0.0, 0.0, 0.0)),
+            p.get("w_pos", 1.0), p.get("w_col", 1.0),
+        ])
+        has_nor = self._MODE == K.MODE_GNGDT and self._dim == 3
+        iparams = np.array([
+            p["lambda_"], p["age_max"], p["max_nodes"], self._MODE,
+            int(self._has_col), int(has_nor), int(viewpoint is not None),
+        ], dtype=np.int64)
+        return fparams, iparams
+
+    # ------------------------------------------------------------------ learning
+
+    def fit(self, positions: Any, colors: Any = None, n_steps: int | None = None) -> Self:
+        """Forget everything (the RNG is re-seeded from ``random_state``), then learn."""
+        self._reset()
+        return self.partial_fit(positions, colors, n_steps)
+
+    def partial_fit(self, positions: Any, colors: Any = None, n_steps: int | None = None) -> Self:
+        """Learn ``n_steps`` samples (default: one pass) drawn in random order from the batch.
+
+        positions: (N, D) numeric, D = 2 or 3 (same D on every call); colors: (N, 3) numeric, any
+        scale, or None (given on every call or on none). Rows with NaN/inf are dropped and counted
+        in ``n_invalid_``.
+        """
+        samples, sample_colors, n_invalid = as_samples(positions, colors)
+        if n_steps is not None:
+            if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)):
+                raise ValueError(f"n_steps must be an integer or None, got {n_steps!r}")
+            if n_steps < 0:
+                raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+        if self._dim == 0:
+            self._allocate(samples.shape[1], sample_colors is not None)
+        else:
+            self._check_consistent(samples.shape[1], sample_colors is not None)
+        self.n_invalid_ += n_invalid
+        n_samples = samples.shape[0]
+        if n_samples == 0:
+            return self
+        steps = n_samples if n_steps is None else int(n_steps)
+        if self.n_nodes_ == 0:
+            self._initialise(samples, sample_colors)
+        kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
+        fparams, iparams = self._kernel_parameters()
+        a = self._arrays
+        for order in sample_orders(self._rng, n_samples, steps):
+            K.learn(samples, kernel_colors, order,
+                    a["pos"], a["col"], a["nor"], a["err"],
+                    a["nbr"], a["age"], a["emask"], a["rev"], a["deg"],
+                    a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                    self._istate, self._fstate, fparams, iparams)
+        return self
+
+    def _check_consistent(self, dim: int, has_col: bool) -> None:
+        if dim != self._dim:
+            raise ValueError(
+                f"positions have {dim} columns but the model learned {self._dim}-D data"
+            )
+        if has_col != self._has_col:
+            expected = "given" if self._has_col else "None"
+            raise ValueError(f"colors must be {expected}, as in the first batch this model learned")
+
+    def _initialise(self, samples: np.ndarray, sample_colors: np.ndarray | None) -> None:
+        """Step 0: two nodes on random samples, connected in every property with age 0."""
+        first, second = initial_indices(self._rng, samples.shape[0])
+        a = self._arrays
+        for node, sample in enumerate((first, second)):
+            a["pos"][node] = samples[sample]
+            if sample_colors is not None:
+                a["col"][node] = sample_colors[sample]
+        all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
+        K.add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
+        self._istate[K.I_NODES] = 2
+
+    # ------------------------------------------------------------------ fitted state
+
+    @property
+    def n_nodes_(self) -> int:
+        return int(self._istate[K.I_NODES])
+
+    @property
+    def n_steps_(self) -> int:
+        return int(self._istate[K.I_STEPS])
+
+    @property
+    def properties_(self) -> tuple[str, ...]:
+        return ("pos",)
+
+    def _node_array(self, name: str, width: int) -> np.ndarray:
+        if not self._arrays:
+            return np.zeros((0, width))
+        return self._arrays[name][: self.n_nodes_].copy()
+
+    @property
+    def positions_(self) -> np.ndarray:
+        """(n_nodes, D) float64 node positions, in the input's units."""
+        return self._node_array("pos", max(self._dim, 2))
+
+    @property
+    def colors_(self) -> np.ndarray:
+        """(n_nodes, 3) float64 node colours on the input's scale (zeros if none learned)."""
+        return self._node_array("col", 3)
+
+    @property
+    def normals_(self) -> np.ndarray:
+        """(n_nodes, 3) float64 unit normals; (0, 0, 0) where undefined or not learned."""
+        return self._node_array("nor", 3)
+
+    @property
+    def errors_(self) -> np.ndarray:
+        """(n_nodes,) float64 accumulated errors with all decay applied."""
+        if not self._arrays:
+            return np.zeros(0)
+        return self._arrays["err"][: self.n_nodes_] * self._fstate[K.F_ERROR_SCALE]
+
+    def edges(self, prop: str = "pos") -> np.ndarray:
+        """(E, 2) int64 node-index pairs ``i < j`` of the topology of ``prop``."""
+        return self._edges_with(self._property_mask((prop,)))
+
+    def _property_mask(self, props: tuple[str, ...]) -> int:
+        mask = 0
+        for prop in props:
+            if prop not in self.properties_:
+                raise ValueError(f"unknown property {prop!r}; this model has {self.properties_}")
+            mask |= _PROPERTY_BITS[prop]
+        return mask
+
+    def _edges_with(self, mask: int) -> np.ndarray:
+        n = self.n_nodes_
+        if n == 0:
+            return np.zeros((0, 2), dtype=np.int64)
+        a = self._arrays
+        nbr = a["nbr"][:n]
+        used = np.arange(K.MAX_DEGREE) < a["deg"][:n, None]
+        rows = np.broadcast_to(np.arange(n)[:, None], nbr.shape)
+        keep = used & ((a["emask"][:n] & mask) == mask) & (nbr > rows)
+        return np.stack([rows[keep], nbr[keep]], axis=1).astype(np.int64)
+
+    def clusters(self, *props: str, min_size: int = 1) -> np.ndarray:
+        """(n_nodes,) int32 connected-component labels of the named topologies combined.
+
+        An edge is kept where every named property has it (``clusters("col", "nor")``); no name
+        means "pos". Labels 0..k-1 by decreasing cluster size; -1 for clusters below ``min_size``.
+        """
+        mask = self._property_mask(props or ("pos",))
+        return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
+
+    def predict(self, positions: Any) -> np.ndarray:
+        """(N,) int64 index of the winner node (nearest by position) of each row."""
+        if self.n_nodes_ == 0:
+            raise ValueError("the model has no nodes yet: call fit or partial_fit first")
+        query = np.asarray(positions, dtype=np.float64)
+        if query.ndim != 2 or query.shape[1] != self._dim:
+            raise ValueError(f"positions must have shape (N, {self._dim}), got {query.shape}")
+        if not np.isfinite(query).all():
+            raise ValueError("positions contain NaN or inf")
+        _, winners = cKDTree(self.positions_).query(query, k=1)
+        return np.asarray(winners, dtype=np.int64)
+
+    def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
+        """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
+
+        Returns {"pos": r_pos} plus "col" when colours are given and learned. Rows with NaN/inf
+        are ignored.
+        """
+        samples, sample_colors, _ = as_samples(positions, colors)
+        winners = self.predict(samples)
+        result = {"pos": _rms_error(samples, self.positions_, winners)}
+        if sample_colors is not None and self._has_col:
+            result["col"] = _rms_error(sample_colors, self.colors_, winners)
+        return result
+
+    # ------------------------------------------------------------------ checkpoints
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        """Everything needed to continue exactly, as numpy arrays only (np.savez-safe)."""
+        n = self.n_nodes_
+        a = self._arrays
+        state: dict[str, np.ndarray] = {
+            "model": np.array(type(self).__name__),
+            "version": np.array(_STATE_VERSION, dtype=np.int64),
+            "params": np.array(json.dumps(self._params)),
+            "rng_state": np.array(json.dumps(self._rng.bit_generator.state)),
+            "dim": np.array(self._dim, dtype=np.int64),
+            "has_colors": np.array(int(self._has_col), dtype=np.int64),
+            "n_invalid": np.array(self.n_invalid_, dtype=np.int64),
+            "counters": self._istate.copy(),
+            "scalars": self._fstate.copy(),
+        }
+        for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg"):
+            if a:
+                state[name] = a[name][:n].copy()
+        return state
+
+    @classmethod
+    def from_state(cls, state: dict[str, np.ndarray]) -> Self:
+        """Rebuild a model saved by `get_state`; ValueError on anything inconsistent."""
+        from gngdt_core.checkpoint import restore
+
+        return restore(cls, state)
+
+
+class GNGDT(_GrowingGas):
+    """Growing Neural Gas with Different Topologies (Toda et al., Steps 0-10).
+
+    Defaults are the paper's Table 1 plus a node budget. ``normal_mu=None`` (default) uses, per
+    node, the mean distance to its position neighbours as the eq. 16 coefficient, so normals do not
+    depend on the data's scale. ``viewpoint``: normals are flipped to face it (None: no orienting).
+    """
+
+    _MODE = K.MODE_GNGDT
+    _PARAM_NAMES = (
+        *_GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
+    )
+
+    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
+                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
+                 beta: float = 0.0005, tau_col: float = 10.0, tau_nor: float = 0.02,
+                 normal_mu: float | None = None,
+                 viewpoint: tuple[float, float, float] | None = (0.0, 0.0, 0.0),
+                 random_state: int | None = None) -> None:
+        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
+                         age_max=age_max, alpha=alpha, beta=beta, tau_col=tau_col,
+                         tau_nor=tau_nor, normal_mu=normal_mu, viewpoint=viewpoint,
+                         random_state=random_state)
+
+    @property
+    def properties_(self) -> tuple[str, ...]:
+        props = ["pos"]
+        if self._has_col:
+            props.append("col")
+        if self._dim == 3:
+            props.append("nor")
+        return tuple(props)
+
+
+class GNG(_GrowingGas):
+    """Plain GNG on the concatenated (position, colour) vector; one topology ("pos")."""
+
+    _MODE = K.MODE_GNG
+
+    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
+                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
+                 beta: float = 0.0005, random_state: int | None = None) -> None:
+        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
+                         age_max=age_max, alpha=alpha, beta=beta, random_state=random_state)
+
+
+class GNGW(_GrowingGas):
+    """GNG with the weighted distance of eqs. 13-14 (paper defaults w_pos=0.8, w_col=0.2)."""
+
+    _MODE = K.MODE_GNGW
+    _PARAM_NAMES = (*_GrowingGas._PARAM_NAMES, "w_pos", "w_col")
+
+    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
+                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
+                 beta: float = 0.0005, w_pos: float = 0.8, w_col: float = 0.2,
+                 random_state: int | None = None) -> None:
+        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
+                         age_max=age_max, alpha=alpha, beta=beta, w_pos=w_pos, w_col=w_col,
+                         random_state=random_state)

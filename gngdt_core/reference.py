@@ -1,0 +1,205 @@
+"""A readable, slow GNG-DT: NumPy work per step, Steps 0-10 written out as in the paper.
+
+It follows the same rules and tie-breaking as the numba kernel (node deletion by moving the last
+node into the hole, sign-invariant normal edges, normals oriented toward the viewpoint, new
+nodes' normals interpolated), so on the same samples in the same order both produce the same
+network up to floating-point rounding. Used to check the fast kernel and as the naive baseline of
+`benchmarks/bench_core.py`. Not meant for real work.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gngdt_core.model import GNGDT
+from gngdt_core.sampling import as_samples, initial_indices, sample_orders
+
+
+@dataclass
+class Edge:
+    age: int
+    properties: set[str] = field(default_factory=lambda: {"pos"})
+
+
+class ReferenceGNGDT:
+    """Per-step NumPy GNG-DT with the parameters of `GNGDT` (same names and defaults)."""
+
+    def __init__(self, **params: object) -> None:
+        self.params = GNGDT(**params)._params  # the same validation and defaults
+        self.rng = np.random.default_rng(self.params["random_state"])
+        self.positions = np.zeros((0, 0))
+        self.colors = np.zeros((0, 3))
+        self.normals = np.zeros((0, 3))
+        self.errors = np.zeros(0)
+        self.edges: dict[tuple[int, int], Edge] = {}
+        self.n_steps = 0
+        self.has_col = False
+
+    @classmethod
+    def from_model(cls, model: GNGDT) -> ReferenceGNGDT:
+        """A reference learner continuing from a fitted `GNGDT`'s nodes and edges."""
+        ref = cls(**{name: model._params[name] for name in type(model)._PARAM_NAMES})
+        ref.positions = model.positions_
+        ref.colors = model.colors_
+        ref.normals = model.normals_
+        ref.errors = model.errors_
+        ref.has_col = "col" in model.properties_
+        ref.n_steps = model.n_steps_
+        for prop in model.properties_:
+            for i, j in model.edges(prop):
+                ref.edges.setdefault((int(i), int(j)), Edge(0, set())).properties.add(prop)
+        a = model._arrays
+        for i in range(model.n_nodes_):
+            for k in range(a["deg"][i]):
+                j = int(a["nbr"][i, k])
+                if i < j:
+                    ref.edges[(i, j)].age = int(a["age"][i, k])
+        return ref
+
+    # ------------------------------------------------------------------ helpers
+
+    def neighbours(self, i: int) -> list[tuple[int, Edge]]:
+        return [(b if a == i else a, e) for (a, b), e in self.edges.items() if i in (a, b)]
+
+    def _edge_properties(self, i: int, j: int) -> set[str]:
+        """Eqs. 4 and 9: the position edge plus every property whose values are within tau."""
+        props = {"pos"}
+        if self.has_col and np.linalg.norm(self.colors[i] - self.colors[j]) < self.params[
+            "tau_col"
+        ]:
+            props.add("col")
+        if self.positions.shape[1] == 3:
+            ni, nj = self.normals[i], self.normals[j]
+            if ni.any() and nj.any():
+                distance = min(np.linalg.norm(ni - nj), np.linalg.norm(ni + nj))
+                if distance < self.params["tau_nor"]:
+                    props.add("nor")
+        return props
+
+    def _orient(self, i: int) -> None:
+        viewpoint = self.params["viewpoint"]
+        if viewpoint is not None and self.normals[i] @ (viewpoint - self.positions[i]) < 0:
+            self.normals[i] = -self.normals[i]
+
+    def _normal(self, i: int) -> None:
+        """Eq. 16 with eigh; zero when the smallest eigenvector is not unique."""
+        neighbours = [j for j, _ in self.neighbours(i)]
+        self.normals[i] = 0.0
+        if len(neighbours) < 2:
+            return
+        h_i = self.positions[i]
+        h_j = self.positions[neighbours]
+        distances = np.linalg.norm(h_j - h_i, axis=1)
+        mu = self.params["normal_mu"] or distances.mean()
+        weights = np.concatenate([[1.0], np.exp(-(distances**2) / mu**2)])
+        points = np.vstack([h_i, h_j])
+        centre = weights @ points / weights.sum()
+        deviations = points - centre
+        covariance = (weights[:, None] * deviations).T @ deviations
+        eigenvalues, eigenvectors = np.linalg.eigh(covariance)
+        spread = np.sum((eigenvalues - eigenvalues.mean()) ** 2)
+        gap = (eigenvalues[1] - eigenvalues[0]) * (eigenvalues[2] - eigenvalues[0])
+        if spread <= 0 or gap <= 1e-10 * spread:
+            return
+        self.normals[i] = eigenvectors[:, 0]
+        self._orient(i)
+
+    def _delete_node(self, i: int) -> int:
+        """Remove isolated node ``i``; the last node takes index ``i``. Returns the old last."""
+        last = len(self.errors) - 1
+        for array_name in ("positions", "colors", "normals", "errors"):
+            array = getattr(self, array_name)
+            array[i] = array[last]
+            setattr(self, array_name, array[:last])
+        if i != last:
+            renamed = {}
+            for (a, b), edge in self.edges.items():
+                a2, b2 = (i if a == last else a), (i if b == last else b)
+                renamed[(min(a2, b2), max(a2, b2))] = edge
+            self.edges = renamed
+        return last
+
+    # ------------------------------------------------------------------ learning
+
+    def partial_fit(self, positions: np.ndarray, colors: np.ndarray | None = None,
+                    n_steps: int | None = None) -> ReferenceGNGDT:
+        samples, sample_colors, _ = as_samples(positions, colors)
+        steps = samples.shape[0] if n_steps is None else n_steps
+        if len(self.errors) == 0:  # Step 0
+            self.has_col = sample_colors is not None
+            first, second = initial_indices(self.rng, samples.shape[0])
+            self.positions = samples[[first, second]].copy()
+            self.colors = (sample_colors[[first, second]].copy() if self.has_col
+                           else np.zeros((2, 3)))
+            self.normals = np.zeros((2, 3))
+            self.errors = np.zeros(2)
+            self.edges = {(0, 1): Edge(0, {"pos", "col", "nor"})}
+        for order in sample_orders(self.rng, samples.shape[0], steps):
+            for index in order:  # Step 1
+                colour = sample_colors[index] if self.has_col else None
+                self.step(samples[index], colour)
+        return self
+
+    def step(self, x: np.ndarray, colour: np.ndarray | None) -> None:
+        """Steps 2-9 for one input."""
+        p = self.params
+        self.n_steps += 1
+        # Step 2
+        squared = np.sum((self.positions - x) ** 2, axis=1)
+        s1, s2 = (int(k) for k in np.argsort(squared, kind="stable")[:2])
+        # Step 3
+        self.errors[s1] += squared[s1]
+        # Step 4
+        key = (min(s1, s2), max(s1, s2))
+        self.edges[key] = Edge(0, self._edge_properties(s1, s2))
+        # Step 5
+        self.positions[s1] += p["eta1"] * (x - self.positions[s1])
+        if self.has_col:
+            self.colors[s1] += p["eta1"] * (colour - self.colors[s1])
+        for j, edge in self.neighbours(s1):
+            self.positions[j] += p["eta2"] * (x - self.positions[j])
+            if self.has_col and "col" in edge.properties:
+                self.colors[j] += p["eta2"] * (colour - self.colors[j])
+            edge.age += 1  # Step 6
+        # Step 7
+        old = [(j, (min(s1, j), max(s1, j)))
+               for j, e in self.neighbours(s1) if e.age > p["age_max"]]
+        for _, edge_key in old:
+            del self.edges[edge_key]
+        candidates = [j for j, _ in old]
+        for q, j in enumerate(candidates):
+            if not self.neighbours(j):
+                last = self._delete_node(j)
+                s1 = j if s1 == last else s1
+                candidates[q + 1:] = [j if c == last else c for c in candidates[q + 1:]]
+        if not self.neighbours(s1):
+            self._delete_node(s1)
+        elif self.positions.shape[1] == 3:
+            self._normal(s1)
+        # Step 8
+        if self.n_steps % p["lambda_"] == 0 and len(self.errors) < p["max_nodes"]:
+            self._insert()
+        # Step 9
+        self.errors *= 1.0 - p["beta"]
+
+    def _insert(self) -> None:
+        alpha = self.params["alpha"]
+        u = int(np.argmax(self.errors))
+        f = max((j for j, _ in self.neighbours(u)), key=lambda j: self.errors[j])
+        r = len(self.errors)
+        self.positions = np.vstack([self.positions, 0.5 * (self.positions[u] + self.positions[f])])
+        self.colors = np.vstack([self.colors, 0.5 * (self.colors[u] + self.colors[f])])
+        sign = -1.0 if self.normals[u] @ self.normals[f] < 0 else 1.0
+        normal = self.normals[u] + sign * self.normals[f]
+        norm = np.linalg.norm(normal)
+        self.normals = np.vstack([self.normals, normal / norm if norm**2 > 1e-24 else 0 * normal])
+        if norm**2 > 1e-24:
+            self._orient(r)
+        del self.edges[(min(u, f), max(u, f))]
+        self.edges[(u, r)] = Edge(0, self._edge_properties(u, r))
+        self.edges[(f, r)] = Edge(0, self._edge_properties(r, f))
+        self.errors[u] -= alpha * self.errors[u]
+        self.errors[f] -= alpha * self.errors[f]
+        self.errors = np.append(self.errors, 0.5 * (self.errors[u] + self.errors[f]))

@@ -1,0 +1,83 @@
+"""Bad parameters and bad arrays raise ValueError naming the culprit."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gngdt_core import GNG, GNGDT, GNGW
+
+
+@pytest.mark.parametrize(
+    ("cls", "params", "name"),
+    [
+        (GNGDT, {"max_nodes": 1}, "max_nodes"),
+        (GNGDT, {"max_nodes": 10.5}, "max_nodes"),
+        (GNGDT, {"lambda_": 0}, "lambda_"),
+        (GNGDT, {"eta1": -0.1}, "eta1"),
+        (GNGDT, {"eta2": -1e-4}, "eta2"),
+        (GNGDT, {"eta1": 0.01, "eta2": 0.1}, "eta2"),
+        (GNGDT, {"age_max": 0}, "age_max"),
+        (GNGDT, {"alpha": 1.5}, "alpha"),
+        (GNGDT, {"beta": -0.1}, "beta"),
+        (GNGDT, {"beta": 1.0}, "beta"),
+        (GNGDT, {"tau_col": 0.0}, "tau_col"),
+        (GNGDT, {"tau_nor": -1.0}, "tau_nor"),
+        (GNGDT, {"tau_col": float("nan")}, "tau_col"),
+        (GNGDT, {"normal_mu": 0.0}, "normal_mu"),
+        (GNGDT, {"viewpoint": (0.0, 1.0)}, "viewpoint"),
+        (GNGDT, {"random_state": -3}, "random_state"),
+        (GNGW, {"w_pos": -0.5}, "w_pos"),
+        (GNGW, {"w_col": float("inf")}, "w_col"),
+        (GNG, {"eta1": "fast"}, "eta1"),
+    ],
+)
+def test_bad_parameters(cls, params, name):
+    with pytest.raises(ValueError, match=name):
+        cls(**params)
+
+
+RNG = np.random.default_rng(0)
+
+
+@pytest.mark.parametrize(
+    ("positions", "colors", "name"),
+    [
+        (RNG.random(10), None, "positions"),
+        (RNG.random((10, 4)), None, "positions"),
+        (RNG.random((10, 1)), None, "positions"),
+        (np.array([["a", "b", "c"]]), None, "positions"),
+        (RNG.random((10, 3)), RNG.random((9, 3)), "colors"),
+        (RNG.random((10, 3)), RNG.random((10, 4)), "colors"),
+        (RNG.random((10, 3)), RNG.random(10), "colors"),
+    ],
+)
+def test_bad_arrays(positions, colors, name):
+    with pytest.raises(ValueError, match=name):
+        GNGDT(max_nodes=10).partial_fit(positions, colors)
+
+
+def test_later_batches_must_match_the_first():
+    model = GNGDT(max_nodes=10, random_state=0)
+    model.partial_fit(RNG.random((50, 3)), RNG.random((50, 3)))
+    with pytest.raises(ValueError, match="positions"):
+        model.partial_fit(RNG.random((50, 2)), RNG.random((50, 3)))
+    with pytest.raises(ValueError, match="colors"):
+        model.partial_fit(RNG.random((50, 3)))
+    with pytest.raises(ValueError, match="n_steps"):
+        model.partial_fit(RNG.random((50, 3)), RNG.random((50, 3)), n_steps=-1)
+
+
+def test_queries_are_checked():
+    model = GNGDT(max_nodes=10, random_state=0)
+    with pytest.raises(ValueError, match="no nodes"):
+        model.predict(RNG.random((5, 3)))
+    model.partial_fit(RNG.random((50, 3)))
+    with pytest.raises(ValueError, match="positions"):
+        model.predict(RNG.random((5, 2)))
+    with pytest.raises(ValueError, match="NaN"):
+        model.predict(np.full((1, 3), np.nan))
+    with pytest.raises(ValueError, match="unknown property"):
+        model.clusters("col")
+    with pytest.raises(ValueError, match="min_size"):
+        model.clusters("pos", min_size=0)
