@@ -18,8 +18,9 @@ RUN pip install . \
     && mkdir -p "$NUMBA_CACHE_DIR" "$XDG_CONFIG_HOME" /recordings /out \
     # Compile the numba kernels once at build time so a container starts learning at once.
     && python -c "from gngdt_core import GNGDT, make_data2; p, c, _ = make_data2(n_points=2000, random_state=0); GNGDT(max_nodes=50, random_state=0).partial_fit(p, c, n_steps=2000)" \
-    && chown -R nobody:nogroup /var/cache/gngdt /out
+    && chmod -R a+rwX /var/cache/gngdt /out
 
+# Unprivileged by default; compose runs services as the invoking user (GNGDT_UID/GNGDT_GID).
 USER nobody
 VOLUME ["/recordings", "/out"]
 ENTRYPOINT ["gngdt"]
