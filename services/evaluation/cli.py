@@ -1,0 +1,261 @@
+"""Evaluate: the paper's tables reproduced, a recording scored against references, a logged run.
+
+``gngdt eval paper`` runs the paper's simulation experiment (Tables 2-4, Figure 10);
+``gngdt eval recording`` replays a recording offline through each method; ``gngdt eval rrd``
+reads a logged run back from its .rrd file. Each writes a Markdown report, a JSON file with every
+figure and PNG plots into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt eval paper --trials 5 --out report/paper           # the paper's Tables 2-4, Figure 10
+  gngdt eval paper --trials 1 --steps 20000 --max-nodes 60 # a quick look
+  gngdt eval recording recordings/tabletop_small.mcap --out report/tabletop
+  gngdt eval recording recordings/data2.mcap --method gngdt --trials 3
+  gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run
+"""
+
+METHOD_CHOICES = ("gngdt", "gng", "gngw")
+PAPER_METHOD_NAMES = {"gngdt": "GNG-DT", "gng": "GNG", "gngw": "GNG-W"}
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {value}")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {value}")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Register ``paper``, ``recording`` and ``rrd`` sub-subcommands."""
+    from services.evaluation.paper import PaperSettings
+
+    paper_defaults = PaperSettings(workers=1)
+    sub = parser.add_subparsers(dest="eval_command", required=True, metavar="WHAT")
+
+    paper = sub.add_parser("paper", help="the paper's Tables 2-4 and Figure 10 (Section 3.1)")
+    paper.add_argument(
+        "--trials",
+        type=_positive_int,
+        default=paper_defaults.trials,
+        help="trials per cell (default: %(default)s)",
+    )
+    paper.add_argument(
+        "--out",
+        type=Path,
+        default=Path("report/paper"),
+        help="output folder (default: %(default)s)",
+    )
+    paper.add_argument(
+        "--steps",
+        type=_positive_int,
+        default=paper_defaults.steps,
+        help="learning steps per run, the stopping rule (default: %(default)s)",
+    )
+    paper.add_argument(
+        "--max-nodes",
+        type=_positive_int,
+        default=paper_defaults.max_nodes,
+        help="node budget per run (default: %(default)s)",
+    )
+    paper.add_argument(
+        "--data1-points",
+        type=_positive_int,
+        default=paper_defaults.data1_points,
+        help="points in Data1 (default: %(default)s, as in the paper)",
+    )
+    paper.add_argument(
+        "--data2-points",
+        type=_positive_int,
+        default=paper_defaults.data2_points,
+        help="points in Data2 (default: %(default)s, as in the paper)",
+    )
+    paper.add_argument(
+        "--scales",
+        type=_positive_float,
+        nargs="+",
+        default=list(paper_defaults.scales),
+        metavar="SCL",
+        help="scale factors scl (default: 1 10 0.1 0.01)",
+    )
+    paper.add_argument(
+        "--datasets",
+        nargs="+",
+        choices=["Data1", "Data2"],
+        default=["Data1", "Data2"],
+        help="data sets (default: both)",
+    )
+    paper.add_argument(
+        "--method",
+        dest="methods",
+        nargs="+",
+        choices=METHOD_CHOICES,
+        default=list(METHOD_CHOICES),
+        help="methods (default: all three)",
+    )
+    paper.add_argument(
+        "--min-cluster-size",
+        type=_positive_int,
+        default=paper_defaults.min_cluster_size,
+        help="clusters with fewer nodes are not counted (default: %(default)s)",
+    )
+    paper.add_argument(
+        "--workers",
+        type=_positive_int,
+        default=None,
+        help="worker processes (default: one per core)",
+    )
+    paper.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+
+    recording = sub.add_parser("recording", help="replay a recording offline through each method")
+    recording.add_argument("path", type=Path, metavar="PATH", help="MCAP recording")
+    recording.add_argument(
+        "--method",
+        dest="methods",
+        nargs="+",
+        choices=METHOD_CHOICES,
+        default=list(METHOD_CHOICES),
+        help="methods (default: all three)",
+    )
+    recording.add_argument(
+        "--trials", type=_positive_int, default=1, help="seeds per method (default: %(default)s)"
+    )
+    recording.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: report/<recording name>)"
+    )
+    recording.add_argument(
+        "--samples-per-frame",
+        type=_positive_int,
+        default=None,
+        help="learning steps per frame (default: the learner's)",
+    )
+    recording.add_argument(
+        "--max-nodes", type=_positive_int, default=None, help="node budget (default: GNGDT's)"
+    )
+    recording.add_argument(
+        "--max-frames", type=_positive_int, default=None, help="stop after this many frames"
+    )
+    recording.add_argument(
+        "--min-cluster-size",
+        type=_positive_int,
+        default=None,
+        help="clusters with fewer nodes are not counted (default: the learner's)",
+    )
+    recording.add_argument(
+        "--reference-points",
+        type=_positive_int,
+        default=20_000,
+        help="last-frame points used to fit k-means and run DBSCAN (default: %(default)s)",
+    )
+    recording.add_argument(
+        "--dbscan-eps",
+        type=_positive_float,
+        default=None,
+        help="DBSCAN radius in metres (default: 1.5 x median distance to the 10th neighbour)",
+    )
+    recording.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+
+    rrd = sub.add_parser("rrd", help="what a logged run did, read back from its .rrd")
+    rrd.add_argument("path", type=Path, metavar="RUN.rrd", help="rerun recording written by gngdt")
+    rrd.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: report/<run name>)"
+    )
+
+
+def main(args: argparse.Namespace) -> int:
+    """Dispatch to the chosen evaluation; bad input is reported as one line, exit code 2."""
+    handlers = {"paper": _main_paper, "recording": _main_recording, "rrd": _main_rrd}
+    try:
+        return handlers[args.eval_command](args)
+    except (ValueError, OSError) as error:
+        print(f"gngdt eval {args.eval_command}: {error}", file=sys.stderr)
+        return 2
+
+
+def _main_paper(args: argparse.Namespace) -> int:
+    from services.evaluation.paper import PaperSettings, run_paper
+
+    options = {"workers": args.workers} if args.workers else {}
+    settings = PaperSettings(
+        trials=args.trials,
+        steps=args.steps,
+        max_nodes=args.max_nodes,
+        data1_points=args.data1_points,
+        data2_points=args.data2_points,
+        scales=tuple(args.scales),
+        datasets=tuple(args.datasets),
+        methods=_in_paper_order(args.methods),
+        min_cluster_size=args.min_cluster_size,
+        **options,
+    )
+    data = run_paper(settings, args.out, progress=not args.no_progress)
+    print(f"report: {args.out / 'paper.md'} ({data['wall_seconds']:.1f} s)")
+    for claim, check in data["findings"].items():
+        if check["holds"] != check.get("paper", True):
+            verdict = "holds here, not in the paper" if check["holds"] else "does not hold here"
+            print(f"  {verdict}: {claim}")
+    return 0
+
+
+def _in_paper_order(methods: list[str]) -> tuple[str, ...]:
+    """Chosen methods named as in the paper, in its column order (GNG, GNG-W, GNG-DT)."""
+    from services.evaluation.paper import METHODS
+
+    chosen = {PAPER_METHOD_NAMES[m] for m in methods}
+    return tuple(m for m in METHODS if m in chosen)
+
+
+def _main_recording(args: argparse.Namespace) -> int:
+    from services.evaluation.recording import RecordingSettings, evaluate_recording
+
+    overrides = {
+        name: getattr(args, name)
+        for name in (
+            "samples_per_frame",
+            "max_nodes",
+            "min_cluster_size",
+            "max_frames",
+            "dbscan_eps",
+        )
+        if getattr(args, name) is not None
+    }
+    settings = RecordingSettings(
+        methods=_in_paper_order(args.methods),
+        trials=args.trials,
+        reference_points=args.reference_points,
+        **overrides,
+    )
+    out = args.out or Path("report") / args.path.stem
+    data = evaluate_recording(args.path, settings, out, progress=not args.no_progress)
+    print(f"report: {out / 'recording.md'} ({data['wall_seconds']:.1f} s)")
+    for method, entry in data["summary"].items():
+        ratio = entry.get("ratio_to_kmeans_pos")
+        print(
+            f"  {method}: position error {entry['qe_pos']['mean']:.4f} m"
+            + (f" ({ratio:.2f} x k-means)" if ratio else "")
+        )
+    return 0
+
+
+def _main_rrd(args: argparse.Namespace) -> int:
+    from services.evaluation.rrd import evaluate_rrd
+
+    out = args.out or Path("report") / args.path.stem
+    data = evaluate_rrd(args.path, out)
+    print(f"report: {out / 'rrd.md'} ({len(data['metrics'])} metrics over {data['frames']} frames)")
+    return 0

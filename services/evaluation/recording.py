@@ -1,0 +1,511 @@
+"""Score a recording offline: replay it frame by frame through each method, as the learner would.
+
+No zenoh: frames are read from the MCAP file, deprojected with the capture service's
+``Deprojector`` (same valid-pixel rule), and each frame's points are learned with
+``partial_fit(points, colors, n_steps=samples_per_frame)``, exactly the learner's per-frame call.
+After every frame we measure the quantization errors on that frame's points, the node count, the
+clusters per topology and, where the recording has ground-truth labels, the adjusted Rand index of
+each clustering (each point takes its winner node's cluster). On the last frame the references are
+computed on the same points: k-means with as many centres as nodes, a voxel grid downsampled to as
+many points, and DBSCAN of the raw points.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from services.evaluation.paper import (
+    PAPER_PARAMETERS,
+    clusterings_of,
+    combined_edges,
+    make_model,
+)
+from services.evaluation.report import (
+    format_mean_std,
+    format_number,
+    markdown_table,
+    mean_std,
+    write_report,
+)
+
+log = logging.getLogger(__name__)
+
+#: command-line method names -> the paper's names
+METHOD_NAMES = {"gngdt": "GNG-DT", "gng": "GNG", "gngw": "GNG-W"}
+#: ground-truth label of pixels with no surface (never scored)
+NO_LABEL = 0
+
+
+@dataclass(frozen=True)
+class RecordingSettings:
+    """How a recording is replayed and scored."""
+
+    methods: tuple[str, ...] = ("GNG-DT", "GNG", "GNG-W")
+    trials: int = 1
+    #: the live learner's defaults, so a replay learns what ``gngdt run`` would
+    samples_per_frame: int = field(default_factory=lambda: _learner_default("samples_per_frame"))
+    max_nodes: int = field(default_factory=lambda: _gngdt_default("max_nodes"))
+    #: clusters with fewer nodes are not counted (label -1)
+    min_cluster_size: int = field(default_factory=lambda: _learner_default("min_cluster_size"))
+    #: stop after this many frames (None = all)
+    max_frames: int | None = None
+    min_depth_m: float = 0.1
+    max_depth_m: float = 10.0
+    #: random subset of the last frame's points used to fit k-means and run DBSCAN
+    reference_points: int = 20_000
+    dbscan_min_samples: int = 10
+    #: None = 1.5 x the median distance to the min_samples-th neighbour
+    dbscan_eps: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in (
+            "trials",
+            "samples_per_frame",
+            "max_nodes",
+            "min_cluster_size",
+            "reference_points",
+            "dbscan_min_samples",
+        ):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.max_frames is not None and self.max_frames < 1:
+            raise ValueError(f"max_frames must be >= 1, got {self.max_frames}")
+        for method in self.methods:
+            if method not in METHOD_NAMES.values():
+                raise ValueError(f"methods: unknown {method!r}")
+
+
+def _learner_default(name: str) -> Any:
+    from services.learner import LearnerOptions
+
+    return getattr(LearnerOptions(), name)
+
+
+def _gngdt_default(name: str) -> Any:
+    import inspect
+
+    from gngdt_core import GNGDT
+
+    return inspect.signature(GNGDT.__init__).parameters[name].default
+
+
+@dataclass
+class FramePoints:
+    """One frame as the learner sees it.
+
+    positions: (N, 3) float32 metres (camera frame); colors: (N, 3) uint8;
+    labels: (N,) int64 ground-truth segment ids (0 = none) or None for real recordings.
+    """
+
+    index: int
+    positions: np.ndarray
+    colors: np.ndarray
+    labels: np.ndarray | None
+
+
+def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
+    """Frames of the recording deprojected like the capture service does (labels with them)."""
+    from services.pointcloud import Deprojector
+    from services.recording.reader import read_frames
+
+    deproject = Deprojector(settings.min_depth_m, settings.max_depth_m)
+    for count, frame in enumerate(read_frames(path)):
+        if settings.max_frames is not None and count >= settings.max_frames:
+            return
+        positions, colors = deproject(frame.depth, frame.color, frame.intrinsics)
+        labels = None
+        if frame.labels is not None:
+            labels = deproject_labels(deproject, frame.depth, frame.labels, frame.intrinsics)
+        yield FramePoints(frame.index, positions, colors, labels)
+
+
+def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intrinsics: Any):
+    """(N,) int64 per-point labels: the labels image through the deprojector's own pixel mask.
+
+    The deprojector carries colour as (H, W, 3) uint8, so the 16-bit label is split into two
+    bytes, carried through, and joined again — the same mask and pixel order as the points.
+    """
+    labels = np.asarray(labels, dtype=np.uint16)
+    packed = np.zeros((*labels.shape, 3), dtype=np.uint8)
+    packed[..., 0] = labels & 0xFF
+    packed[..., 1] = labels >> 8
+    _, carried = deproject(depth, packed, intrinsics)
+    return carried[:, 0].astype(np.int64) | (carried[:, 1].astype(np.int64) << 8)
+
+
+def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> dict[str, Any]:
+    """One method, one seed, every frame: per-frame metrics and the final model's topology."""
+    from gngdt_core import adjusted_rand_index
+
+    model = make_model(method, settings.max_nodes, random_state=trial)
+    frames: list[dict[str, Any]] = []
+    last: FramePoints | None = None
+    for points in frame_points(path, settings):
+        if len(points.positions) == 0:
+            log.warning("%s: frame %d has no valid depth; skipped", path, points.index)
+            continue
+        started = time.perf_counter()
+        model.partial_fit(points.positions, points.colors, n_steps=settings.samples_per_frame)
+        learn_seconds = time.perf_counter() - started
+        error = model.quantization_error(points.positions, points.colors)
+        record: dict[str, Any] = {
+            "frame": points.index,
+            "points": len(points.positions),
+            "nodes": int(model.n_nodes_),
+            "steps": int(model.n_steps_),
+            "learn_seconds": learn_seconds,
+            "qe_pos": float(error["pos"]),
+            "qe_col": float(error["col"]),
+            "clusters": {},
+        }
+        labelled = None if points.labels is None else points.labels != NO_LABEL
+        if labelled is not None:
+            record["ari"] = {}
+            winners = model.predict(points.positions[labelled])
+        for props in clusterings_of(method, 3):
+            name = "+".join(props)
+            node_labels = np.asarray(model.clusters(*props, min_size=settings.min_cluster_size))
+            record["clusters"][name] = len(np.unique(node_labels[node_labels >= 0]))
+            if labelled is not None and labelled.any():
+                record["ari"][name] = float(
+                    adjusted_rand_index(points.labels[labelled], node_labels[winners])
+                )
+        frames.append(record)
+        last = points
+    if last is None:
+        raise ValueError(f"{path}: no frame with valid depth to learn from")
+    return {"method": method, "trial": trial, "frames": frames, "model": model, "last": last}
+
+
+def references(
+    last: FramePoints, gngdt_model: Any | None, node_counts: set[int], settings: RecordingSettings
+) -> dict[str, Any]:
+    """k-means and voxel grid at each node count, DBSCAN ARI beside GNG-DT's, on the last frame."""
+    from gngdt_core import adjusted_rand_index
+    from services.evaluation.references import dbscan_labels, kmeans_reference, voxel_grid_reference
+
+    positions = last.positions.astype(np.float64)
+    colors = last.colors.astype(np.float64)
+    result: dict[str, Any] = {"frame": last.index, "points": len(positions), "by_nodes": {}}
+    for nodes in sorted(node_counts):
+        kmeans = kmeans_reference(positions, colors, nodes, fit_points=settings.reference_points)
+        voxels = voxel_grid_reference(positions, colors, nodes)
+        result["by_nodes"][nodes] = {
+            "kmeans": {"qe": kmeans.quantization_error, **kmeans.details},
+            "voxel_grid": {"qe": voxels.quantization_error, **voxels.details},
+        }
+    rng = np.random.default_rng(0)
+    subset = np.arange(len(positions))
+    if last.labels is not None:
+        subset = subset[last.labels != NO_LABEL]
+    if len(subset) > settings.reference_points:
+        subset = np.sort(rng.choice(subset, size=settings.reference_points, replace=False))
+    if len(subset) > settings.dbscan_min_samples:
+        started = time.perf_counter()
+        labels, eps = dbscan_labels(
+            positions[subset], eps=settings.dbscan_eps, min_samples=settings.dbscan_min_samples
+        )
+        dbscan: dict[str, Any] = {
+            "eps_m": eps,
+            "min_samples": settings.dbscan_min_samples,
+            "points": len(subset),
+            "clusters": len(np.unique(labels[labels >= 0])),
+            "noise_fraction": float(np.mean(labels < 0)),
+            "seconds": time.perf_counter() - started,
+        }
+        if last.labels is not None:
+            truth = last.labels[subset]
+            dbscan["ari"] = float(adjusted_rand_index(truth, labels))
+            if gngdt_model is not None:
+                winners = gngdt_model.predict(positions[subset])
+                dbscan["gngdt_ari_same_points"] = {
+                    "+".join(props): float(
+                        adjusted_rand_index(
+                            truth,
+                            np.asarray(
+                                gngdt_model.clusters(*props, min_size=settings.min_cluster_size)
+                            )[winners],
+                        )
+                    )
+                    for props in clusterings_of("GNG-DT", 3)
+                }
+        result["dbscan"] = dbscan
+    return result
+
+
+def evaluate_recording(
+    path: str | Path, settings: RecordingSettings, out_dir: str | Path, progress: bool = True
+) -> dict[str, Any]:
+    """Replay ``path`` through every method and trial; write ``recording.md/.json`` + PNGs."""
+    from services.evaluation.progress import ProgressBar
+
+    path, out_dir = Path(path), Path(out_dir)
+    if not path.is_file():
+        raise ValueError(f"recording: {path} does not exist")
+    started = time.perf_counter()
+    runs = []
+    bar = ProgressBar(len(settings.methods) * settings.trials, "replays") if progress else None
+    for method in settings.methods:
+        for trial in range(settings.trials):
+            runs.append(replay(path, method, trial, settings))
+            if bar:
+                bar.advance()
+    if bar:
+        bar.close()
+
+    first_gngdt = next((r for r in runs if r["method"] == "GNG-DT"), None)
+    node_counts = {int(r["model"].n_nodes_) for r in runs if r["trial"] == 0}
+    refs = references(runs[0]["last"], first_gngdt and first_gngdt["model"], node_counts, settings)
+    summary = summarise_runs(runs, refs)
+    plots = _write_plots(runs, refs, summary, path, out_dir, settings.min_cluster_size)
+    data = {
+        "recording": str(path),
+        "settings": asdict(settings),
+        "parameters": PAPER_PARAMETERS,
+        "wall_seconds": time.perf_counter() - started,
+        "labelled": runs[0]["last"].labels is not None,
+        "summary": summary,
+        "references": refs,
+        "runs": [{"method": r["method"], "trial": r["trial"], "frames": r["frames"]} for r in runs],
+        "plots": [p.name for p in plots],
+    }
+    write_report(out_dir, "recording", render_markdown(data, settings, plots), data)
+    return data
+
+
+def summarise_runs(runs: list[dict[str, Any]], refs: dict[str, Any]) -> dict[str, Any]:
+    """Final-frame figures per method (mean ± std over trials) and the ratio to k-means."""
+    summary: dict[str, Any] = {}
+    for method in dict.fromkeys(r["method"] for r in runs):
+        finals = [r["frames"][-1] for r in runs if r["method"] == method]
+        entry: dict[str, Any] = {
+            "frames": len(next(r for r in runs if r["method"] == method)["frames"]),
+            "qe_pos": mean_std(f["qe_pos"] for f in finals),
+            "qe_col": mean_std(f["qe_col"] for f in finals),
+            "nodes": mean_std(f["nodes"] for f in finals),
+            "clusters": {
+                n: mean_std(f["clusters"][n] for f in finals) for n in finals[0]["clusters"]
+            },
+            "learn_seconds_per_frame": mean_std(
+                f["learn_seconds"] for r in runs if r["method"] == method for f in r["frames"]
+            ),
+        }
+        if "ari" in finals[0]:
+            entry["ari"] = {n: mean_std(f["ari"][n] for f in finals) for n in finals[0]["ari"]}
+        nodes = round(entry["nodes"]["mean"])
+        reference = refs["by_nodes"].get(nodes)
+        if reference is not None:
+            entry["ratio_to_kmeans_pos"] = (
+                entry["qe_pos"]["mean"] / reference["kmeans"]["qe"]["pos"]
+            )
+            entry["ratio_to_voxel_grid_pos"] = (
+                entry["qe_pos"]["mean"] / reference["voxel_grid"]["qe"]["pos"]
+            )
+        summary[method] = entry
+    return summary
+
+
+def _mean_curve(runs: list[dict[str, Any]], method: str, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """(frames (T,), mean over trials (T,)) of a per-frame figure."""
+    chosen = [r["frames"] for r in runs if r["method"] == method]
+    frames = np.array([f["frame"] for f in chosen[0]])
+    length = min(len(c) for c in chosen)
+    values = np.array([[f[key] for f in c[:length]] for c in chosen], dtype=np.float64)
+    return frames[:length], values.mean(axis=0)
+
+
+def _write_plots(
+    runs: list[dict[str, Any]],
+    refs: dict[str, Any],
+    summary: dict[str, Any],
+    path: Path,
+    out_dir: Path,
+    min_cluster_size: int,
+) -> list[Path]:
+    from services.evaluation.plots import TopologyPanel, plot_method_curves, plot_topology_grid
+
+    methods = list(summary)
+    curves = {
+        "position error (m)": {m: _mean_curve(runs, m, "qe_pos") for m in methods},
+        "colour error (0-255)": {m: _mean_curve(runs, m, "qe_col") for m in methods},
+        "nodes": {m: _mean_curve(runs, m, "nodes") for m in methods},
+    }
+    lines: dict[str, dict[str, float]] = {"position error (m)": {}, "colour error (0-255)": {}}
+    if "GNG-DT" in summary:
+        nodes = round(summary["GNG-DT"]["nodes"]["mean"])
+        reference = refs["by_nodes"].get(nodes)
+        if reference:
+            for name, label in (("kmeans", "k-means"), ("voxel_grid", "voxel grid")):
+                lines["position error (m)"][f"{label}, {nodes} (last frame)"] = reference[name][
+                    "qe"
+                ]["pos"]
+                lines["colour error (0-255)"][f"{label}, {nodes} (last frame)"] = reference[name][
+                    "qe"
+                ]["col"]
+    plots = [
+        plot_method_curves(
+            curves,
+            out_dir / "recording_curves.png",
+            title=f"{path.name}: per-frame errors and nodes",
+            references=lines,
+        )
+    ]
+    gngdt_runs = [r for r in runs if r["method"] == "GNG-DT"]
+    if gngdt_runs and "ari" in gngdt_runs[0]["frames"][0]:
+        names = list(gngdt_runs[0]["frames"][0]["ari"])
+        ari_curves = {
+            "ARI per clustering (GNG-DT)": {
+                f"C^{n}": (
+                    np.array([f["frame"] for f in gngdt_runs[0]["frames"]]),
+                    np.array([f["ari"].get(n, np.nan) for f in gngdt_runs[0]["frames"]]),
+                )
+                for n in names
+            }
+        }
+        plots.append(
+            plot_method_curves(
+                ari_curves,
+                out_dir / "recording_ari.png",
+                title=f"{path.name}: adjusted Rand index, trial 0",
+            )
+        )
+    panels = []
+    for run in (r for r in runs if r["trial"] == 0):
+        model = run["model"]
+        for props in clusterings_of(run["method"], 3):
+            name = "+".join(props)
+            panels.append(
+                TopologyPanel(
+                    title=f"{run['method']}" + (f" C^{name}" if run["method"] == "GNG-DT" else ""),
+                    positions=np.asarray(model.positions_),
+                    edges=combined_edges(model, props),
+                    camera_frame=True,
+                    labels=np.asarray(model.clusters(*props, min_size=min_cluster_size)),
+                )
+            )
+    if panels:
+        rows = [panels[i : i + 4] for i in range(0, len(panels), 4)]
+        plots.append(
+            plot_topology_grid(
+                rows,
+                out_dir / "recording_topologies.png",
+                title=f"{path.name}: last-frame topologies, by cluster",
+            )
+        )
+    return plots
+
+
+def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: list[Path]) -> str:
+    """The recording report: final figures per method, references, per-frame table, plots."""
+    summary, refs = data["summary"], data["references"]
+    parts = [
+        f"# Recording evaluation — `{Path(data['recording']).name}`",
+        f"Replayed offline frame by frame as the learner does: `partial_fit(points, colors, "
+        f"n_steps={settings.samples_per_frame:,})` per frame, node budget {settings.max_nodes}, "
+        f"{settings.trials} trial(s) per method, paper parameters (Table 1). Errors (eq. 17) are "
+        "measured on each frame's own points after learning it. Clusters count topologies' "
+        f"connected components of at least {settings.min_cluster_size} nodes. "
+        f"Wall time {data['wall_seconds']:.1f} s.",
+        "## Last frame, per method (mean ± std over trials)",
+    ]
+    headers = [
+        "method",
+        "nodes",
+        "position error (m)",
+        "colour error",
+        "÷ k-means (pos)",
+        "÷ voxel grid (pos)",
+        "clusters",
+    ]
+    if data["labelled"]:
+        headers.append("ARI")
+    rows = []
+    for method, entry in summary.items():
+        row = [
+            method,
+            format_mean_std(entry["nodes"], 0),
+            format_mean_std(entry["qe_pos"], 4),
+            format_mean_std(entry["qe_col"], 2),
+            format_number(entry.get("ratio_to_kmeans_pos"), 2),
+            format_number(entry.get("ratio_to_voxel_grid_pos"), 2),
+            ", ".join(f"C^{n}: {s['mean']:.1f}" for n, s in entry["clusters"].items()),
+        ]
+        if data["labelled"]:
+            row.append(", ".join(f"C^{n}: {s['mean']:.3f}" for n, s in entry["ari"].items()))
+        rows.append(row)
+    parts.append(markdown_table(headers, rows))
+    parts.append(f"## References on the last frame's {refs['points']:,} points")
+    reference_rows = []
+    for nodes, ref in refs["by_nodes"].items():
+        reference_rows.append(
+            [
+                f"k-means, {nodes} centres",
+                format_number(ref["kmeans"]["qe"]["pos"], 4),
+                format_number(ref["kmeans"]["qe"]["col"], 2),
+                f"fitted on {int(ref['kmeans']['fit_points']):,} points",
+            ]
+        )
+        reference_rows.append(
+            [
+                f"voxel grid, {int(ref['voxel_grid']['points'])} points",
+                format_number(ref["voxel_grid"]["qe"]["pos"], 4),
+                format_number(ref["voxel_grid"]["qe"]["col"], 2),
+                f"voxel {ref['voxel_grid']['voxel_size'] * 1000:.1f} mm",
+            ]
+        )
+    parts.append(
+        markdown_table(["reference", "position error (m)", "colour error", "note"], reference_rows)
+    )
+    if "dbscan" in refs:
+        dbscan = refs["dbscan"]
+        text = (
+            f"DBSCAN of the raw positions ({dbscan['points']:,} points, eps "
+            f"{dbscan['eps_m'] * 1000:.1f} mm, min_samples {dbscan['min_samples']}): "
+            f"{dbscan['clusters']} clusters, {dbscan['noise_fraction']:.1%} noise"
+        )
+        if "ari" in dbscan:
+            text += f", ARI {dbscan['ari']:.3f} (noise counted as one cluster)"
+            if "gngdt_ari_same_points" in dbscan:
+                text += "; GNG-DT on the same points: " + ", ".join(
+                    f"C^{n} {v:.3f}" for n, v in dbscan["gngdt_ari_same_points"].items()
+                )
+        parts.append(text + ".")
+    parts.append("## Per frame (trial 0)")
+    for run in data["runs"]:
+        if run["trial"] != 0:
+            continue
+        names = list(run["frames"][0]["clusters"])
+        headers = [
+            "frame",
+            "points",
+            "nodes",
+            "pos err (m)",
+            "col err",
+            *(f"clusters C^{n}" for n in names),
+        ]
+        if data["labelled"]:
+            headers += [f"ARI C^{n}" for n in names]
+        rows = []
+        for f in run["frames"]:
+            row = [
+                f["frame"],
+                f["points"],
+                f["nodes"],
+                format_number(f["qe_pos"], 4),
+                format_number(f["qe_col"], 2),
+                *(f["clusters"][n] for n in names),
+            ]
+            if data["labelled"]:
+                row += [format_number(f["ari"].get(n)) for n in names]
+            rows.append(row)
+        parts.append(f"### {run['method']}\n\n" + markdown_table(headers, rows))
+    parts.append("## Plots")
+    parts.extend(f"![{p.stem}]({p.name})" for p in plots)
+    return "\n\n".join(parts)

@@ -1,0 +1,148 @@
+"""``gngdt eval recording`` on a tiny synthetic recording (real MCAP written by our writer)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.cli import main as gngdt_main
+from services.evaluation.recording import RecordingSettings, deproject_labels, frame_points
+from services.pointcloud import Deprojector
+from services.recording.frame import CameraIntrinsics
+from services.recording.reader import read_frames
+
+FRAMES = 3
+
+
+@pytest.fixture(scope="module")
+def tiny_recording(tmp_path_factory) -> Path:
+    """3 frames of the tabletop scene at 160x120 with ground-truth labels."""
+    from services.recording.synth import render_scene
+    from services.recording.writer import RecordingWriter
+
+    path = tmp_path_factory.mktemp("recordings") / "tabletop_tiny.mcap"
+    with RecordingWriter(path) as writer:
+        for frame in render_scene("tabletop", FRAMES, width=160, height=120, seed=3):
+            writer.write_frame(frame)
+    return path
+
+
+def test_labels_follow_the_deprojected_points() -> None:
+    intrinsics = CameraIntrinsics(width=4, height=2, fx=2.0, fy=2.0, cx=2.0, cy=1.0)
+    depth = np.array([[0, 1000, 2000, 0], [500, 0, 30_000, 1500]], dtype=np.uint16)
+    labels = np.array([[1, 300, 2, 3], [65_000, 4, 5, 7]], dtype=np.uint16)
+    deproject = Deprojector(0.1, 10.0)
+    positions, _ = deproject(depth, np.zeros((2, 4, 3), np.uint8), intrinsics)
+    point_labels = deproject_labels(deproject, depth, labels, intrinsics)
+    # valid: 1000 mm, 2000 mm, 500 mm, 1500 mm (30 m is out of range), row-major order
+    np.testing.assert_array_equal(point_labels, [300, 2, 65_000, 7])
+    np.testing.assert_allclose(positions[:, 2], [1.0, 2.0, 0.5, 1.5])
+
+
+def test_replay_sees_the_points_the_capture_would(tiny_recording) -> None:
+    frames = list(frame_points(tiny_recording, RecordingSettings(max_nodes=50)))
+    assert len(frames) == FRAMES
+    for points, frame in zip(frames, read_frames(tiny_recording), strict=True):
+        valid = (frame.depth >= 100) & (frame.depth <= 10_000)
+        assert len(points.positions) == int(valid.sum())
+        np.testing.assert_array_equal(points.labels, frame.labels[valid])
+        np.testing.assert_array_equal(points.colors, frame.color[valid])
+
+
+@pytest.mark.timeout(300)
+def test_eval_recording_report(tiny_recording, tmp_path) -> None:
+    out = tmp_path / "report"
+    argv = [
+        "eval",
+        "recording",
+        str(tiny_recording),
+        "--out",
+        str(out),
+        "--method",
+        "gngdt",
+        "gng",
+        "--samples-per-frame",
+        "3000",
+        "--max-nodes",
+        "60",
+        "--reference-points",
+        "4000",
+        "--no-progress",
+    ]
+    assert gngdt_main(argv) == 0
+    data = json.loads((out / "recording.json").read_text())
+    assert data["labelled"] is True
+    assert [r["method"] for r in data["runs"]] == ["GNG", "GNG-DT"]
+    gngdt = next(r for r in data["runs"] if r["method"] == "GNG-DT")
+    assert len(gngdt["frames"]) == FRAMES
+    last = gngdt["frames"][-1]
+    assert last["steps"] == FRAMES * 3000
+    assert 2 < last["nodes"] <= 60
+    assert set(last["clusters"]) == {"pos", "col", "nor", "col+nor"}
+    assert set(last["ari"]) == {"pos", "col", "nor", "col+nor"}
+    assert all(-1.0 <= v <= 1.0 for v in last["ari"].values())
+    # far better than one node at the centroid of the frame's points
+    positions = list(frame_points(tiny_recording, RecordingSettings()))[-1].positions
+    single_node_error = np.sqrt(np.mean(np.sum((positions - positions.mean(0)) ** 2, axis=1)))
+    assert 0 < last["qe_pos"] < 0.5 * single_node_error
+    summary = data["summary"]["GNG-DT"]
+    references = data["references"]["by_nodes"][str(last["nodes"])]
+    # k-means with the same number of centres: a learned topology cannot beat it by much
+    assert summary["ratio_to_kmeans_pos"] > 0.8
+    assert references["voxel_grid"]["points"] == pytest.approx(last["nodes"], rel=0.2)
+    dbscan = data["references"]["dbscan"]
+    assert -1.0 <= dbscan["ari"] <= 1.0 and dbscan["points"] <= 4000
+    markdown = (out / "recording.md").read_text()
+    for heading in ("## Last frame, per method", "## References on the last frame", "## Per frame"):
+        assert heading in markdown
+    for plot in data["plots"]:
+        assert (out / plot).stat().st_size > 1000
+
+
+def test_eval_recording_on_missing_file_is_a_clear_error(tmp_path, capsys) -> None:
+    missing = tmp_path / "nope.mcap"
+    assert gngdt_main(["eval", "recording", str(missing), "--out", str(tmp_path / "o")]) == 2
+    assert "nope.mcap" in capsys.readouterr().err
+
+
+@pytest.mark.timeout(300)
+def test_eval_recording_without_labels(tmp_path) -> None:
+    """Real-frame recordings have no ground truth: no ARI, everything else reported."""
+    from dataclasses import replace
+
+    from services.recording.synth import render_scene
+    from services.recording.writer import RecordingWriter
+
+    path = tmp_path / "unlabelled.mcap"
+    with RecordingWriter(path) as writer:
+        for frame in render_scene("tabletop", 2, width=160, height=120, seed=5):
+            writer.write_frame(replace(frame, labels=None))
+    out = tmp_path / "report"
+    argv = [
+        "eval",
+        "recording",
+        str(path),
+        "--out",
+        str(out),
+        "--method",
+        "gngdt",
+        "--samples-per-frame",
+        "2000",
+        "--max-nodes",
+        "30",
+        "--reference-points",
+        "3000",
+        "--no-progress",
+    ]
+    assert gngdt_main(argv) == 0
+    data = json.loads((out / "recording.json").read_text())
+    assert data["labelled"] is False
+    frames = data["runs"][0]["frames"]
+    assert len(frames) == 2 and all("ari" not in f for f in frames)
+    assert "ari" not in data["summary"]["GNG-DT"]
+    assert "ari" not in data["references"]["dbscan"]
+    assert data["references"]["dbscan"]["clusters"] >= 1
+    assert "ARI" not in (out / "recording.md").read_text().split("## References")[0]
