@@ -1,6 +1,7 @@
 """The `gngdt` command line: one subcommand per service or job.
 
-Each subcommand lives in its own module exposing ``add_arguments(parser)`` and ``main(args) -> int``.
+Each subcommand lives in its own module exposing ``add_arguments(parser)`` and
+``main(args) -> int``.
 Modules keep heavy imports (zenoh, rerun, numba) inside ``main`` so that ``--help`` stays fast.
 """
 

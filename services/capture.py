@@ -1,0 +1,265 @@
+"""Replay a recording as a camera on zenoh: colour, depth, calibration and point cloud per frame.
+
+Each frame is stamped with a monotonically increasing sequence number and the wall-clock time
+at which it is replayed (its "capture time" as a live camera would give it), so latency downstream
+is measured against the moment the frame entered the pipeline. After the last frame an
+end-of-stream message (``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from schemas.wire import (
+    DEFAULT_CAMERA,
+    ENCODING_CALIBRATION,
+    ENCODING_POINT_CLOUD,
+    ENCODING_RAW_IMAGE,
+    ENCODING_STREAM_END,
+    FrameStamp,
+    topic,
+)
+from services.pointcloud import Deprojector, cap_points, voxel_downsample
+from services.zenoh_session import (
+    ZenohSetupError,
+    add_zenoh_arguments,
+    open_session,
+    wait_for_subscribers,
+)
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from services.recording.frame import CameraIntrinsics, Frame
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt capture recordings/tabletop.mcap               # at the recorded rate, then end-of-stream
+  gngdt capture recordings/tabletop.mcap --fast --voxel 0.01 --max-points 50000
+  gngdt capture recordings/tabletop.mcap --loop --cam left --zenoh-connect tcp/10.0.0.2:7447
+"""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", type=Path, metavar="RECORDING", help="MCAP recording")
+    speed = parser.add_mutually_exclusive_group()
+    speed.add_argument(
+        "--rate", type=float, default=1.0, help="replay speed factor (default 1.0 = recorded rate)"
+    )
+    speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
+    parser.add_argument("--loop", action="store_true", help="replay forever (no end-of-stream)")
+    parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
+    parser.add_argument("--min-depth", type=float, default=0.1, help="metres (default 0.1)")
+    parser.add_argument("--max-depth", type=float, default=10.0, help="metres (default 10)")
+    parser.add_argument(
+        "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres"
+    )
+    parser.add_argument("--max-points", type=int, help="random subset of at most this many points")
+    parser.add_argument(
+        "--wait-subscribers",
+        type=float,
+        default=10.0,
+        metavar="SECONDS",
+        help="wait this long for a points subscriber before the first frame (default 10)",
+    )
+    parser.add_argument("--seed", type=int, default=0, help="seed of the point-cap sampling")
+    add_zenoh_arguments(parser)
+
+
+@dataclass
+class CloudOptions:
+    """How a depth frame becomes the published point cloud."""
+
+    min_depth_m: float = 0.1
+    max_depth_m: float = 10.0
+    voxel_size_m: float | None = None
+    max_points: int | None = None
+
+
+class FrameToCloud:
+    """Deprojection, optional voxel downsampling and point cap, with cached rays."""
+
+    def __init__(self, options: CloudOptions, seed: int = 0) -> None:
+        if options.voxel_size_m is not None and options.voxel_size_m <= 0:
+            raise ValueError(f"--voxel must be positive, got {options.voxel_size_m}")
+        if options.max_points is not None and options.max_points <= 0:
+            raise ValueError(f"--max-points must be positive, got {options.max_points}")
+        self.options = options
+        self._deproject = Deprojector(options.min_depth_m, options.max_depth_m)
+        self._rng = np.random.default_rng(seed)
+
+    def __call__(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
+        """positions (N, 3) float32 metres and colors (N, 3) uint8 of one frame."""
+        positions, colors = self._deproject(frame.depth, frame.color, frame.intrinsics)
+        if self.options.voxel_size_m is not None:
+            positions, colors = voxel_downsample(positions, colors, self.options.voxel_size_m)
+        if self.options.max_points is not None:
+            positions, colors = cap_points(positions, colors, self.options.max_points, self._rng)
+        assert colors is not None
+        return positions, colors
+
+
+class CapturePublisher:
+    """The capture's publishers, declared once; every put carries the frame's attachment."""
+
+    def __init__(self, session: zenoh.Session, camera: str) -> None:
+        import zenoh
+
+        block = zenoh.CongestionControl.BLOCK
+
+        def declare(name: str, encoding: str) -> zenoh.Publisher:
+            # BLOCK everywhere: consumers never block in their callbacks (latest-wins slots),
+            # so this only waits for the network, and nothing is silently lost on loopback.
+            return session.declare_publisher(
+                topic(camera, name), encoding=encoding, congestion_control=block
+            )
+
+        self.camera = camera
+        self.color = declare("color", ENCODING_RAW_IMAGE)
+        self.depth = declare("depth", ENCODING_RAW_IMAGE)
+        self.calibration = declare("calibration", ENCODING_CALIBRATION)
+        self.points = declare("points", ENCODING_POINT_CLOUD)
+        self.eos = declare("eos", ENCODING_STREAM_END)
+        self._last_intrinsics: CameraIntrinsics | None = None
+
+    def publish_frame(
+        self, frame: Frame, stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray
+    ) -> None:
+        from schemas.packing import cloud_to_msg, image_to_raw, intrinsics_to_calibration
+
+        attachment = stamp.to_attachment()
+        time_ns = stamp.capture_time_ns
+        if frame.intrinsics != self._last_intrinsics:
+            calibration = intrinsics_to_calibration(
+                frame.intrinsics, timestamp_ns=time_ns, frame_id=self.camera
+            )
+            self.calibration.put(calibration.SerializeToString(), attachment=attachment)
+            self._last_intrinsics = frame.intrinsics
+        color = image_to_raw(frame.color, timestamp_ns=time_ns, frame_id=self.camera)
+        self.color.put(color.SerializeToString(), attachment=attachment)
+        depth = image_to_raw(frame.depth, timestamp_ns=time_ns, frame_id=self.camera)
+        self.depth.put(depth.SerializeToString(), attachment=attachment)
+        cloud = cloud_to_msg(positions, colors, timestamp_ns=time_ns, frame_id=self.camera)
+        self.points.put(cloud.SerializeToString(), attachment=attachment)
+
+    def publish_end(self, frames_sent: int, last_sequence: int, recording: str) -> None:
+        from schemas.packing import encode_stream_end
+
+        now = time.time_ns()
+        message = encode_stream_end(
+            timestamp_ns=now,
+            frames_sent=frames_sent,
+            last_frame_sequence=last_sequence,
+            recording=recording,
+            frame_id=self.camera,
+        )
+        self.eos.put(
+            message.SerializeToString(), attachment=FrameStamp(last_sequence, now).to_attachment()
+        )
+
+
+def replay_frames(path: Path, loop: bool, stop: threading.Event) -> Iterator[Frame]:
+    """Frames of the recording (forever with ``loop``); a damaged file ends a pass, logged."""
+    from services.recording.reader import RecordingError, read_frames
+
+    while not stop.is_set():
+        yielded = 0
+        try:
+            for frame in read_frames(path):
+                yielded += 1
+                yield frame
+        except RecordingError as error:
+            log.error("%s (continuing after %d good frames of this pass)", error, yielded)
+        if not loop or yielded == 0:
+            return
+
+
+class ReplayClock:
+    """Sleeps so that frames leave at their recorded spacing divided by ``rate``."""
+
+    def __init__(self, rate: float | None) -> None:
+        if rate is not None and rate <= 0:
+            raise ValueError(f"--rate must be positive, got {rate}")
+        self.rate = rate
+        self._first_recorded_ns: int | None = None
+        self._start = 0.0
+        self._previous_ns: int | None = None
+
+    def wait_for(self, recorded_ns: int, stop: threading.Event) -> None:
+        if self.rate is None:
+            return
+        if self._first_recorded_ns is None or (
+            self._previous_ns is not None and recorded_ns < self._previous_ns
+        ):  # first frame, or a loop restarted the recording
+            self._first_recorded_ns = recorded_ns
+            self._start = time.monotonic()
+        self._previous_ns = recorded_ns
+        due = self._start + (recorded_ns - self._first_recorded_ns) * 1e-9 / self.rate
+        delay = due - time.monotonic()
+        if delay > 0:
+            stop.wait(delay)
+
+
+def main(args: argparse.Namespace) -> int:
+    if not args.recording.is_file():
+        log.error("recording %s: no such file", args.recording)
+        return 2
+    try:
+        to_cloud = FrameToCloud(
+            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points), args.seed
+        )
+        clock = ReplayClock(None if args.fast else args.rate)
+    except ValueError as error:
+        log.error("%s", error)
+        return 2
+
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+
+    try:
+        session = open_session(args)
+    except ZenohSetupError as error:
+        log.error("%s", error)
+        return 1
+    try:
+        publisher = CapturePublisher(session, args.cam)
+        token = session.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive")
+        if not wait_for_subscribers(publisher.points, args.wait_subscribers):
+            log.warning("no subscriber on %s after %.1f s; publishing anyway",
+                        topic(args.cam, "points"), args.wait_subscribers)
+        sequence = -1
+        frames_sent = 0
+        for frame in replay_frames(args.recording, args.loop, stop):
+            clock.wait_for(frame.timestamp_ns, stop)
+            if stop.is_set():
+                break
+            sequence += 1
+            stamp = FrameStamp(sequence, time.time_ns())
+            try:
+                positions, colors = to_cloud(frame)
+            except ValueError as error:
+                log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
+                continue
+            publisher.publish_frame(frame, stamp, positions, colors)
+            frames_sent += 1
+            log.debug("frame %d: %d points", sequence, len(positions))
+        if not stop.is_set() or not args.loop:
+            publisher.publish_end(frames_sent, max(sequence, 0), args.recording.name)
+            log.info("sent %d frames of %s, end of stream", frames_sent, args.recording)
+        time.sleep(0.2)  # let BLOCK puts drain to the router before the session closes
+        token.undeclare()
+    finally:
+        session.close()
+    return 0

@@ -1,0 +1,470 @@
+"""Learn GNG-DT topologies from a camera's point clouds and publish them with their clusterings.
+
+Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
+size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
+memory stays bounded. After each learned frame the learner publishes the topology (edges per
+property and the clusterings ``pos``, ``col``, ``nor``, ``col+nor``) and a status message; a
+queryable on the topology key answers a late joiner with the latest topology. The model is
+checkpointed periodically and on SIGINT/SIGTERM, and resumed from the checkpoint on start.
+"""
+
+from __future__ import annotations
+
+import argparse
+import inspect
+import logging
+import signal
+import threading
+import time
+import tomllib
+from collections import deque
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from schemas.wire import (
+    DEFAULT_CAMERA,
+    ENCODING_STATUS,
+    ENCODING_TOPOLOGY,
+    FrameStamp,
+    topic,
+)
+from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
+
+if TYPE_CHECKING:
+    import zenoh
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt learn                                          # camera "camera", paper defaults
+  gngdt learn --params config/learner.toml --checkpoint runs/learner.npz
+  gngdt learn --cam left --samples-per-frame 20000 --max-nodes 2000
+"""
+
+#: topologies published as edge sets, and clusterings (properties combined with "+")
+EDGE_PROPERTIES = ("pos", "col", "nor")
+CLUSTERINGS = ("pos", "col", "nor", "col+nor")
+
+
+@dataclass
+class LearnerOptions:
+    """Learner settings that are not GNG-DT constructor arguments (TOML keys of the same name)."""
+
+    samples_per_frame: int = 10_000
+    #: nodes in a connected component smaller than this get label -1 and are not counted
+    min_cluster_size: int = 5
+    checkpoint_every_frames: int = 30
+    checkpoint_every_seconds: float = 30.0
+    #: points of the frame sampled to compute the quantization error (eq. 17)
+    quantization_sample: int = 2_000
+    seed: int | None = 0
+
+    def validate(self) -> None:
+        for name in ("samples_per_frame", "min_cluster_size", "checkpoint_every_frames",
+                     "quantization_sample"):
+            value = getattr(self, name)
+            if value <= 0:
+                raise ValueError(f"learner option {name} must be positive, got {value}")
+        if self.checkpoint_every_seconds <= 0:
+            raise ValueError("learner option checkpoint_every_seconds must be positive")
+
+
+@dataclass
+class LearnerConfig:
+    """GNG-DT constructor arguments plus learner options."""
+
+    model: dict[str, Any] = field(default_factory=dict)
+    options: LearnerOptions = field(default_factory=LearnerOptions)
+
+
+def model_parameter_names() -> set[str]:
+    """Names of the ``GNGDT`` constructor arguments."""
+    from gngdt_core import GNGDT
+
+    return {name for name in inspect.signature(GNGDT.__init__).parameters if name != "self"}
+
+
+def load_params(path: Path | None) -> LearnerConfig:
+    """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt], [learner]).
+
+    ``lambda`` is accepted for ``lambda_``. Unknown keys raise ``ValueError`` naming key and file.
+    """
+    config = LearnerConfig()
+    if path is None:
+        return config
+    try:
+        with open(path, "rb") as file:
+            document = tomllib.load(file)
+    except OSError as error:
+        raise ValueError(f"--params {path}: {error.strerror}") from error
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"--params {path}: invalid TOML: {error}") from error
+    flat: dict[str, Any] = {}
+    for key, value in document.items():
+        if isinstance(value, dict) and key in ("gngdt", "learner"):
+            flat.update(value)
+        else:
+            flat[key] = value
+    model_names = model_parameter_names()
+    option_names = {item.name for item in fields(LearnerOptions)}
+    for key, value in flat.items():
+        name = "lambda_" if key == "lambda" else key
+        if name in model_names:
+            config.model[name] = value
+        elif name in option_names:
+            setattr(config.options, name, value)
+        else:
+            known = ", ".join(sorted(model_names | option_names))
+            raise ValueError(f"--params {path}: unknown key {key!r} (known: {known})")
+    return config
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
+    parser.add_argument("--params", type=Path, metavar="FILE.toml",
+                        help="GNG-DT parameters and learner options (see config/learner.toml)")
+    parser.add_argument("--checkpoint", type=Path, metavar="PATH",
+                        help="checkpoint file (.npz): resumed from if present, saved periodically "
+                        "and on shutdown")
+    parser.add_argument("--samples-per-frame", type=int,
+                        help="learning steps per frame (default 10000)")
+    parser.add_argument("--max-nodes", type=int, help="node budget (default 1000)")
+    parser.add_argument("--min-cluster-size", type=int,
+                        help="smallest component counted as a cluster (default 5)")
+    parser.add_argument("--checkpoint-every", type=int, metavar="FRAMES",
+                        help="checkpoint every this many learned frames (default 30)")
+    parser.add_argument("--seed", type=int, help="random seed of the model (default 0)")
+    parser.add_argument("--exit-on-eos", action="store_true",
+                        help="exit after learning the last frame of a stream (used by `gngdt run`)")
+    add_zenoh_arguments(parser)
+
+
+def config_from_args(args: argparse.Namespace) -> LearnerConfig:
+    """The params file overridden by explicit command-line options."""
+    config = load_params(args.params)
+    overrides = {
+        "samples_per_frame": args.samples_per_frame,
+        "min_cluster_size": args.min_cluster_size,
+        "checkpoint_every_frames": args.checkpoint_every,
+        "seed": args.seed,
+    }
+    for name, value in overrides.items():
+        if value is not None:
+            setattr(config.options, name, value)
+    if args.max_nodes is not None:
+        config.model["max_nodes"] = args.max_nodes
+    config.options.validate()
+    return config
+
+
+class LatencyWindow:
+    """The last ``size`` frame-to-topology latencies (ms), for p50/p99."""
+
+    def __init__(self, size: int = 1000) -> None:
+        self._values: deque[float] = deque(maxlen=size)
+
+    def add(self, latency_ms: float) -> None:
+        self._values.append(latency_ms)
+
+    def percentile(self, q: float) -> float:
+        return float(np.percentile(np.fromiter(self._values, float), q)) if self._values else 0.0
+
+
+@dataclass
+class Counters:
+    """What the learner has seen, published in every status (and kept in checkpoints)."""
+
+    frames_received: int = 0
+    frames_used: int = 0
+    frames_dropped: int = 0
+    malformed_messages: int = 0
+    learning_seconds: float = 0.0
+    last_sequence: int = -1
+
+    def note_sequence(self, sequence: int) -> None:
+        """Count the frames skipped since the last one; a lower sequence is a new stream."""
+        if self.last_sequence >= 0 and sequence > self.last_sequence + 1:
+            self.frames_dropped += sequence - self.last_sequence - 1
+        self.last_sequence = sequence
+
+
+class Learner:
+    """One GNG-DT model fed frame by frame; builds the topology and status messages."""
+
+    def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
+                 counters: Counters | None = None) -> None:
+        from gngdt_core import GNGDT
+
+        self.camera = camera
+        self.options = config.options
+        if model is None:
+            model_args = {"random_state": config.options.seed, **config.model}
+            model = GNGDT(**model_args)
+        self.model = model
+        self.counters = counters or Counters()
+        self.latencies = LatencyWindow()
+        self._rng = np.random.default_rng(config.options.seed)
+
+    def learn(self, positions: np.ndarray, colors: np.ndarray | None) -> None:
+        """Run ``samples_per_frame`` learning steps on one cloud: (N, 3) f32 m, (N, 3) u8."""
+        started = time.perf_counter()
+        self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame)
+        self.counters.learning_seconds += time.perf_counter() - started
+        self.counters.frames_used += 1
+
+    def quantization_error(self, positions: np.ndarray, colors: np.ndarray | None) -> dict:
+        count = min(len(positions), self.options.quantization_sample)
+        if count == 0 or colors is None:
+            return {}
+        chosen = self._rng.choice(len(positions), size=count, replace=False)
+        errors = self.model.quantization_error(positions[chosen], colors[chosen])
+        return {name: float(value) for name, value in errors.items()}
+
+    def topology(self, stamp: FrameStamp, quantization_error: dict[str, float]) -> Any:
+        """The current ``gngdt.Topology`` (protobuf message)."""
+        from schemas.packing import encode_topology
+
+        model = self.model
+        min_size = self.options.min_cluster_size
+        return encode_topology(
+            positions=model.positions_,
+            colors=model.colors_,
+            normals=model.normals_,
+            errors=model.errors_,
+            edges={prop: model.edges(prop) for prop in EDGE_PROPERTIES},
+            clusterings={
+                name: model.clusters(*name.split("+"), min_size=min_size) for name in CLUSTERINGS
+            },
+            steps=int(model.n_steps_),
+            frame_sequence=stamp.sequence,
+            timestamp_ns=stamp.capture_time_ns,
+            frame_id=self.camera,
+            quantization_error=quantization_error,
+        )
+
+    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any) -> Any:
+        """The ``gngdt.LearnerStatus`` after publishing ``topology``."""
+        from schemas.packing import encode_status
+
+        counters = self.counters
+        seconds = counters.learning_seconds
+        return encode_status(
+            timestamp_ns=stamp.capture_time_ns,
+            frame_sequence=stamp.sequence,
+            frame_id=self.camera,
+            steps=int(self.model.n_steps_),
+            steps_per_second=(counters.frames_used * self.options.samples_per_frame / seconds
+                              if seconds > 0 else 0.0),
+            nodes=int(self.model.n_nodes_),
+            frames_received=counters.frames_received,
+            frames_used=counters.frames_used,
+            frames_dropped=counters.frames_dropped,
+            malformed_messages=counters.malformed_messages,
+            latency_ms=latency_ms,
+            latency_p50_ms=self.latencies.percentile(50),
+            latency_p99_ms=self.latencies.percentile(99),
+            quantization_error=dict(topology.quantization_error),
+            cluster_counts={c.name: c.cluster_count for c in topology.clusterings},
+        )
+
+    def save(self, path: Path) -> None:
+        from services.checkpoint import save_checkpoint
+
+        counters = {item.name: getattr(self.counters, item.name) for item in fields(Counters)}
+        save_checkpoint(path, self.model.get_state(), {"camera": self.camera, "counters": counters})
+        log.info("checkpoint %s: %d nodes, %d steps", path, self.model.n_nodes_,
+                 self.model.n_steps_)
+
+    @classmethod
+    def resume(cls, path: Path, camera: str, config: LearnerConfig) -> Learner:
+        """A learner restored from ``path`` (raises ``CheckpointError`` when it is corrupt)."""
+        from gngdt_core import GNGDT
+        from services.checkpoint import CheckpointError, load_checkpoint
+
+        state, metadata = load_checkpoint(path)
+        try:
+            model = GNGDT.from_state(state)
+        except (KeyError, ValueError, TypeError) as error:
+            raise CheckpointError(f"checkpoint {path}: not a GNG-DT state ({error})") from error
+        saved = metadata.get("counters", {})
+        counters = Counters(**{k: v for k, v in saved.items() if k in Counters.__annotations__})
+        counters.last_sequence = -1  # a new capture restarts its sequence numbers
+        log.info("resumed from %s: %d nodes, %d steps", path, model.n_nodes_, model.n_steps_)
+        return cls(camera, config, model=model, counters=counters)
+
+
+def finite_points(
+    positions: np.ndarray, colors: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Drop points with a NaN/inf coordinate (a foreign publisher may send them)."""
+    if np.isfinite(positions.reshape(-1)).all():  # the common case, ~10x cheaper than per row
+        return positions, colors
+    finite = np.isfinite(positions).all(axis=1)
+    return positions[finite], None if colors is None else colors[finite]
+
+
+def warm_up(config: LearnerConfig) -> None:
+    """Run every model operation once on random points, so that numba compiles (or loads its
+    cache) before the first frame instead of adding seconds to its latency."""
+    from gngdt_core import GNGDT
+
+    rng = np.random.default_rng(0)
+    positions = rng.random((500, 3), dtype=np.float32)
+    colors = rng.integers(0, 256, (500, 3), dtype=np.uint8)
+    model = GNGDT(**{**config.model, "random_state": 0})
+    model.partial_fit(positions, colors, n_steps=2_000)
+    for name in CLUSTERINGS:
+        model.clusters(*name.split("+"), min_size=config.options.min_cluster_size)
+    model.quantization_error(positions, colors)
+
+
+class EndOfStream:
+    """Remembers the last end-of-stream announced on the camera (set from zenoh's thread)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.last_sequence: int | None = None
+        self.received_at = 0.0
+
+    def set(self, last_sequence: int) -> None:
+        with self._lock:
+            self.last_sequence = last_sequence
+            self.received_at = time.monotonic()
+
+    def finished(self, learned_sequence: int, drain_seconds: float = 5.0) -> bool:
+        """True once the last frame was learned, or ``drain_seconds`` after eos without it."""
+        with self._lock:
+            if self.last_sequence is None:
+                return False
+            return (learned_sequence >= self.last_sequence
+                    or time.monotonic() - self.received_at > drain_seconds)
+
+
+class LatestTopology:
+    """The latest encoded topology and its attachment, served to late joiners."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._payload: bytes | None = None
+        self._attachment: bytes | None = None
+
+    def set(self, payload: bytes, attachment: bytes) -> None:
+        with self._lock:
+            self._payload, self._attachment = payload, attachment
+
+    def reply(self, query: zenoh.Query) -> None:
+        with self._lock:
+            payload, attachment = self._payload, self._attachment
+        if payload is not None:
+            query.reply(query.key_expr, payload, encoding=ENCODING_TOPOLOGY, attachment=attachment)
+
+
+def main(args: argparse.Namespace) -> int:
+    import zenoh
+
+    from schemas.packing import MessageError, decode_stream_end, msg_to_cloud
+    from services.checkpoint import CheckpointError
+
+    try:
+        config = config_from_args(args)
+        topic(args.cam, "points")
+        if args.checkpoint is not None and args.checkpoint.exists():
+            learner = Learner.resume(args.checkpoint, args.cam, config)
+        else:
+            learner = Learner(args.cam, config)
+        warm_up(config)
+    except (ValueError, CheckpointError) as error:
+        log.error("%s", error)
+        return 2
+
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+
+    counters = learner.counters
+    end = EndOfStream()
+    latest = LatestTopology()
+
+    def on_eos(sample: zenoh.Sample) -> None:
+        try:
+            end.set(decode_stream_end(sample.payload.to_bytes()).last_frame_sequence)
+        except MessageError as error:
+            counters.malformed_messages += 1
+            log.warning("malformed end-of-stream skipped: %s", error)
+
+    try:
+        session = open_session(args)
+    except ZenohSetupError as error:
+        log.error("%s", error)
+        return 1
+    block = zenoh.CongestionControl.BLOCK
+    points = session.declare_subscriber(topic(args.cam, "points"), zenoh.handlers.RingChannel(1))
+    eos_subscriber = session.declare_subscriber(topic(args.cam, "eos"), on_eos)
+    topology_publisher = session.declare_publisher(
+        topic(args.cam, "topology"), encoding=ENCODING_TOPOLOGY, congestion_control=block)
+    status_publisher = session.declare_publisher(
+        topic(args.cam, "learner/status"), encoding=ENCODING_STATUS, congestion_control=block)
+    queryable = session.declare_queryable(topic(args.cam, "topology"), latest.reply)
+    token = session.liveliness().declare_token(f"gngdt/{args.cam}/learner/alive")
+    log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
+             config.options.samples_per_frame)
+
+    frames_since_checkpoint = 0
+    last_checkpoint = time.monotonic()
+    learned_sequence = -1
+    try:
+        while not stop.is_set():
+            sample = points.try_recv()
+            if sample is None:
+                if args.exit_on_eos and end.finished(learned_sequence):
+                    break
+                time.sleep(0.002)
+                continue
+            counters.frames_received += 1
+            try:
+                stamp = FrameStamp.from_attachment(
+                    sample.attachment.to_bytes() if sample.attachment is not None else None)
+                positions, colors = finite_points(*msg_to_cloud(sample.payload.to_bytes()))
+                if len(positions) == 0:
+                    raise MessageError("no finite points in the cloud")
+                counters.note_sequence(stamp.sequence)
+                received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+                learner.learn(positions, colors)  # ValueError: e.g. colours missing mid-stream
+            except ValueError as error:  # MessageError is a ValueError
+                counters.malformed_messages += 1
+                log.warning("points message skipped: %s", error)
+                continue
+            topology = learner.topology(stamp, learner.quantization_error(positions, colors))
+            payload = topology.SerializeToString()
+            attachment = stamp.to_attachment()
+            latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+            topology_publisher.put(payload, attachment=attachment)
+            latest.set(payload, attachment)
+            learner.latencies.add(latency_ms)
+            status = learner.status(stamp, latency_ms, topology)
+            status_publisher.put(status.SerializeToString(), attachment=attachment)
+            learned_sequence = stamp.sequence
+            log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
+                      stamp.sequence, len(positions), received_ms, latency_ms)
+            frames_since_checkpoint += 1
+            if args.checkpoint is not None and (
+                frames_since_checkpoint >= config.options.checkpoint_every_frames
+                or time.monotonic() - last_checkpoint >= config.options.checkpoint_every_seconds
+            ):
+                learner.save(args.checkpoint)
+                frames_since_checkpoint, last_checkpoint = 0, time.monotonic()
+    finally:
+        if args.checkpoint is not None and counters.frames_used > 0:
+            learner.save(args.checkpoint)
+        token.undeclare()
+        for entity in (queryable, eos_subscriber, points):
+            entity.undeclare()
+        time.sleep(0.1)  # let the last BLOCK puts reach the router
+        session.close()
+    log.info("learned %d frames (%d dropped, %d malformed), %d nodes, %d steps",
+             counters.frames_used, counters.frames_dropped, counters.malformed_messages,
+             learner.model.n_nodes_, learner.model.n_steps_)
+    return 0

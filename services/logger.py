@@ -1,0 +1,431 @@
+"""Log every gngdt stream (``gngdt/**``) to rerun: images, cloud, topologies, clusters, metrics.
+
+Entities (DESIGN.md "Rerun") for the default camera ``camera``: ``world/camera`` (Pinhole),
+``world/camera/image/rgb``, ``world/camera/image/depth``, ``world/points`` (at most
+``--max-cloud-points``), ``world/gng/nodes`` (learned colours), ``world/gng/edges/<prop>``,
+``world/gng/clusters/<clustering>`` (nodes coloured by cluster) and ``metrics/<name>``. Any other
+camera ``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/``. Timelines:
+``frame`` (sequence) and ``capture_time``.
+
+The logger stops on its own once every camera it heard of has ended its stream (eos) and the
+topology of its last frame has arrived, or ``--eos-drain`` seconds after that eos.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from schemas.wire import DEFAULT_CAMERA, FrameStamp
+from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import zenoh
+
+    from schemas.packing import LearnerStatusInfo, TopologySnapshot
+    from services.recording.frame import CameraIntrinsics
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt log                                   # saves runs/log-<time>.rrd
+  gngdt log --save out.rrd
+  gngdt log --connect --url rerun+http://127.0.0.1:9876/proxy   # a running viewer
+  gngdt log --stdout | rerun -
+"""
+
+TOPOLOGY_VIEWS = ("pos", "col", "nor", "col+nor")
+#: streams where only the newest sample matters when the logger falls behind
+LATEST_ONLY_STREAMS = ("color", "depth", "points")
+RUNS_DIR = Path("runs")
+LIVELINESS_KEY = "gngdt/logger/alive"
+
+
+def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
+    """rerun's own viewer options, as ``rr.script_add_args`` adds them (a test checks they match).
+
+    Declared here because importing rerun costs ~0.6 s, too much for ``gngdt --help``.
+    """
+    parser.add_argument("--headless", action="store_true", help="Don't show GUI")
+    parser.add_argument("--connect", dest="connect", action="store_true",
+                        help="Connect to an external viewer")
+    parser.add_argument("--serve", dest="serve", action="store_true",
+                        help="Host a GRPC & web server and open a web viewer connecting to it.")
+    parser.add_argument("--url", type=str, default=None, help="Connect to this Rerun URL")
+    parser.add_argument("--save", type=str, default=None,
+                        help="Save data to a .rrd file at this path")
+    parser.add_argument("--stdout", dest="stdout", action="store_true",
+                        help="Log data to standard output, to be piped into a Rerun Viewer")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_viewer_arguments(parser)
+    parser.add_argument("--max-cloud-points", type=int, default=50_000,
+                        help="decimate the logged point cloud to at most this many points")
+    parser.add_argument("--eos-drain", type=float, default=10.0, metavar="SECONDS",
+                        help="after an end-of-stream, wait at most this long for the last "
+                        "topology (default 10)")
+    parser.add_argument("--keep-running", action="store_true",
+                        help="do not stop at end-of-stream (only on SIGINT/SIGTERM)")
+    add_zenoh_arguments(parser)
+
+
+def default_rrd_path(name: str) -> Path:
+    """``runs/<name>-<local time>.rrd``."""
+    return RUNS_DIR / f"{name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}.rrd"
+
+
+@dataclass(frozen=True)
+class EntityPaths:
+    """Entity paths of one camera: DESIGN's paths for the default camera, else under ``<cam>``."""
+
+    camera: str
+
+    @property
+    def world(self) -> str:
+        return "world" if self.camera == DEFAULT_CAMERA else f"world/{self.camera}"
+
+    @property
+    def pinhole(self) -> str:
+        return f"{self.world}/camera"
+
+    @property
+    def rgb(self) -> str:
+        return f"{self.pinhole}/image/rgb"
+
+    @property
+    def depth(self) -> str:
+        return f"{self.pinhole}/image/depth"
+
+    @property
+    def points(self) -> str:
+        return f"{self.world}/points"
+
+    @property
+    def nodes(self) -> str:
+        return f"{self.world}/gng/nodes"
+
+    def edges(self, prop: str) -> str:
+        return f"{self.world}/gng/edges/{prop}"
+
+    def clusters(self, clustering: str) -> str:
+        return f"{self.world}/gng/clusters/{clustering}"
+
+    def metric(self, name: str) -> str:
+        if self.camera == DEFAULT_CAMERA:
+            return f"metrics/{name}"
+        return f"metrics/{self.camera}/{name}"
+
+
+def cluster_colors(labels: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 colour per cluster label (N,) int32; -1 (too small a cluster) is grey."""
+    hue = (labels.astype(np.float64) * 0.618033988749895) % 1.0
+    sector = hue * 6.0
+    channel = np.clip(np.abs((sector[:, None] - np.array([3.0, 1.0, 5.0])) % 6.0 - 3.0) - 1.0, 0, 1)
+    colors = (64 + 191 * channel).astype(np.uint8)  # saturated, never black
+    colors[labels < 0] = 128
+    return colors
+
+
+def blueprint(cameras: list[str]) -> Any:
+    """One 3D view per topology (pos, col, nor, col+nor) beside the images, metrics below."""
+    import rerun.blueprint as rrb
+
+    columns = []
+    for camera in cameras:
+        paths = EntityPaths(camera)
+        suffix = "" if camera == DEFAULT_CAMERA else f" ({camera})"
+        topology_views = [
+            rrb.Spatial3DView(
+                name=f"{clustering}{suffix}",
+                origin=paths.world,
+                contents=[paths.clusters(clustering)]
+                + [paths.edges(prop) for prop in clustering.split("+")],
+            )
+            for clustering in TOPOLOGY_VIEWS
+        ]
+        learned = rrb.Spatial3DView(
+            name=f"nodes and cloud{suffix}",
+            origin=paths.world,
+            contents=[paths.points, paths.nodes, paths.edges("pos")],
+        )
+        images = rrb.Vertical(
+            rrb.Spatial2DView(name=f"rgb{suffix}", origin=paths.pinhole,
+                              contents=[paths.rgb]),
+            rrb.Spatial2DView(name=f"depth{suffix}", origin=paths.pinhole,
+                              contents=[paths.depth]),
+        )
+        columns.append(rrb.Horizontal(images, rrb.Grid(*topology_views, learned),
+                                      column_shares=[1, 3]))
+    metrics = rrb.TimeSeriesView(name="metrics", origin="metrics")
+    return rrb.Blueprint(rrb.Vertical(*columns, metrics, row_shares=[3] * len(columns) + [1]),
+                         collapse_panels=True)
+
+
+class RerunLog:
+    """Writes decoded gngdt messages into one ``rr.RecordingStream``."""
+
+    def __init__(self, recording: rr.RecordingStream, max_cloud_points: int = 50_000) -> None:
+        import rerun as rr
+
+        if max_cloud_points <= 0:
+            raise ValueError(f"--max-cloud-points must be positive, got {max_cloud_points}")
+        self.rec = recording
+        self.max_cloud_points = max_cloud_points
+        self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
+
+    def set_time(self, stamp: FrameStamp) -> None:
+        self.rec.set_time("frame", sequence=stamp.sequence)
+        self.rec.set_time("capture_time", timestamp=np.datetime64(stamp.capture_time_ns, "ns"))
+
+    def calibration(self, paths: EntityPaths, intrinsics: CameraIntrinsics) -> None:
+        import rerun as rr
+
+        self.rec.log(paths.pinhole, rr.Pinhole(
+            focal_length=[intrinsics.fx, intrinsics.fy],
+            principal_point=[intrinsics.cx, intrinsics.cy],
+            resolution=[intrinsics.width, intrinsics.height],
+            camera_xyz=rr.ViewCoordinates.RDF,
+        ))
+
+    def color(self, paths: EntityPaths, image: np.ndarray) -> None:
+        import rerun as rr
+
+        self.rec.log(paths.rgb, rr.Image(image))
+
+    def depth(self, paths: EntityPaths, depth_mm: np.ndarray) -> None:
+        import rerun as rr
+
+        self.rec.log(paths.depth, rr.DepthImage(depth_mm, meter=1000.0))
+
+    def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None) -> None:
+        import rerun as rr
+
+        stride = max(1, -(-len(positions) // self.max_cloud_points))
+        self.rec.log(paths.points, rr.Points3D(
+            positions[::stride], colors=None if colors is None else colors[::stride],
+            radii=0.002))
+
+    def topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
+        import rerun as rr
+
+        positions = snapshot.positions
+        self.rec.log(paths.nodes, rr.Points3D(positions, colors=snapshot.colors, radii=0.006))
+        for prop, pairs in snapshot.edges.items():
+            segments = positions[pairs.astype(np.int64)] if len(pairs) else np.zeros((0, 2, 3))
+            self.rec.log(paths.edges(prop), rr.LineStrips3D(segments, radii=0.0015))
+        for clustering, labels in snapshot.clusterings.items():
+            self.rec.log(paths.clusters(clustering),
+                         rr.Points3D(positions, colors=cluster_colors(labels), radii=0.008))
+            self.scalar(paths, f"clusters/{clustering}", snapshot.cluster_counts[clustering])
+        for prop, value in snapshot.quantization_error.items():
+            self.scalar(paths, f"quantization_error/{prop}", value)
+        self.scalar(paths, "nodes", snapshot.node_count)
+
+    def status(self, paths: EntityPaths, status: LearnerStatusInfo) -> None:
+        self.scalar(paths, "steps_per_second", status.steps_per_second)
+        self.scalar(paths, "latency_ms", status.latency_ms)
+        self.scalar(paths, "frames_dropped", status.frames_dropped)
+
+    def scalar(self, paths: EntityPaths, name: str, value: float) -> None:
+        import rerun as rr
+
+        self.rec.log(paths.metric(name), rr.Scalars(float(value)))
+
+
+class Inbox:
+    """Samples handed over from zenoh's threads; the callbacks never block.
+
+    Images and clouds keep only the newest sample per key (older ones are counted as dropped);
+    the other streams (calibration, topology, status, eos) queue in arrival order, bounded.
+    """
+
+    def __init__(self, max_queued: int = 1024) -> None:
+        self._lock = threading.Lock()
+        self._latest: dict[str, tuple[bytes, bytes | None]] = {}
+        self._queued: deque[tuple[str, bytes, bytes | None]] = deque()
+        self._max_queued = max_queued
+        self.dropped = 0
+        self.arrived = threading.Event()
+
+    def put(self, sample: zenoh.Sample) -> None:
+        key = str(sample.key_expr)
+        payload = sample.payload.to_bytes()
+        attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
+        with self._lock:
+            if key.rsplit("/", 1)[-1] in LATEST_ONLY_STREAMS:
+                self.dropped += key in self._latest
+                self._latest[key] = (payload, attachment)
+            else:
+                if len(self._queued) >= self._max_queued:
+                    self._queued.popleft()
+                    self.dropped += 1
+                self._queued.append((key, payload, attachment))
+        self.arrived.set()
+
+    def take(self) -> list[tuple[str, bytes, bytes | None]]:
+        """Everything waiting: queued messages first (calibration before images), then latest."""
+        with self._lock:
+            taken = list(self._queued)
+            taken += [(key, *value) for key, value in self._latest.items()]
+            self._queued.clear()
+            self._latest.clear()
+            self.arrived.clear()
+        return taken
+
+
+@dataclass
+class CameraProgress:
+    """What the logger knows about one camera's stream, to decide when it is over."""
+
+    last_topology_sequence: int = -1
+    eos_last_sequence: int | None = None
+    eos_at: float = 0.0
+
+    def finished(self, drain_seconds: float) -> bool:
+        if self.eos_last_sequence is None:
+            return False
+        return (self.last_topology_sequence >= self.eos_last_sequence
+                or time.monotonic() - self.eos_at > drain_seconds)
+
+
+class Dispatcher:
+    """Decodes one sample by stream name and logs it; malformed messages are counted, skipped."""
+
+    def __init__(self, rerun_log: RerunLog, on_new_camera: Any = None) -> None:
+        self.rerun_log = rerun_log
+        self.cameras: dict[str, CameraProgress] = {}
+        self.malformed = 0
+        self.last_status: dict[str, LearnerStatusInfo] = {}
+        self._on_new_camera = on_new_camera
+
+    def handle(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+        from schemas import packing
+
+        parts = key.split("/")
+        if len(parts) < 3 or parts[0] != "gngdt":
+            return
+        camera, stream = parts[1], "/".join(parts[2:])
+        paths = EntityPaths(camera)
+        handlers = {
+            "calibration": lambda: self.rerun_log.calibration(
+                paths, packing.calibration_to_intrinsics(payload)),
+            "color": lambda: self.rerun_log.color(paths, packing.raw_to_image(payload)),
+            "depth": lambda: self.rerun_log.depth(paths, packing.raw_to_image(payload)),
+            "points": lambda: self.rerun_log.points(paths, *packing.msg_to_cloud(payload)),
+            "topology": lambda: self._topology(camera, paths, packing.decode_topology(payload)),
+            "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
+            "eos": lambda: self._eos(camera, packing.decode_stream_end(payload)),
+        }
+        handler = handlers.get(stream)
+        if handler is None:
+            return
+        try:
+            stamp = FrameStamp.from_attachment(attachment)
+            if camera not in self.cameras:
+                self.cameras[camera] = CameraProgress()
+                if self._on_new_camera is not None:
+                    self._on_new_camera(list(self.cameras))
+            self.rerun_log.set_time(stamp)
+            handler()
+        except ValueError as error:  # MessageError is a ValueError
+            self.malformed += 1
+            log.warning("%s: malformed message skipped: %s", key, error)
+
+    def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
+        self.rerun_log.topology(paths, snapshot)
+        progress = self.cameras[camera]
+        progress.last_topology_sequence = max(progress.last_topology_sequence,
+                                              snapshot.frame_sequence)
+
+    def _status(self, camera: str, paths: EntityPaths, status: LearnerStatusInfo) -> None:
+        self.rerun_log.status(paths, status)
+        self.last_status[camera] = status
+
+    def _eos(self, camera: str, end: Any) -> None:
+        progress = self.cameras[camera]
+        progress.eos_last_sequence = end.last_frame_sequence
+        progress.eos_at = time.monotonic()
+        log.info("%s: end of stream after %d frames", camera, end.frames_sent)
+
+    def all_finished(self, drain_seconds: float) -> bool:
+        return bool(self.cameras) and all(
+            progress.finished(drain_seconds) for progress in self.cameras.values())
+
+
+def open_recording(args: argparse.Namespace, default_name: str = "log") -> tuple[Any, str]:
+    """The rerun stream, its sink chosen by rerun's own options, and where it goes."""
+    import rerun as rr
+
+    rec = rr.RecordingStream("gngdt")
+    rr.set_log_time_enabled(False, recording=rec)  # reproducible files: capture time is logged
+    initial = blueprint([DEFAULT_CAMERA])
+    if args.stdout:
+        rec.stdout(default_blueprint=initial)
+        return rec, "stdout"
+    if args.serve:
+        url = rec.serve_grpc(default_blueprint=initial)
+        rr.serve_web_viewer(open_browser=False, connect_to=url)
+        return rec, f"serving {url}"
+    if args.connect:
+        rec.connect_grpc(args.url, default_blueprint=initial)
+        return rec, f"connected to {args.url or 'the default viewer'}"
+    path = Path(args.save) if args.save else default_rrd_path(default_name)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec.save(str(path), default_blueprint=initial)
+    return rec, str(path)
+
+
+def main(args: argparse.Namespace) -> int:
+    try:
+        rec, destination = open_recording(args)
+        rerun_log = RerunLog(rec, args.max_cloud_points)
+    except (ValueError, OSError) as error:
+        log.error("%s", error)
+        return 2
+    if not args.stdout:
+        print(f"logging to {destination}", flush=True)
+
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+
+    inbox = Inbox()
+    dispatcher = Dispatcher(rerun_log,
+                            on_new_camera=lambda cams: rec.send_blueprint(blueprint(cams)))
+    try:
+        session = open_session(args)
+    except ZenohSetupError as error:
+        log.error("%s", error)
+        rec.disconnect()
+        return 1
+    subscriber = session.declare_subscriber("gngdt/**", inbox.put)
+    token = session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}")
+    try:
+        while not stop.is_set():
+            inbox.arrived.wait(0.05)
+            for key, payload, attachment in inbox.take():
+                dispatcher.handle(key, payload, attachment)
+            if not args.keep_running and dispatcher.all_finished(args.eos_drain):
+                break
+    finally:
+        token.undeclare()
+        subscriber.undeclare()
+        session.close()
+        for key, payload, attachment in inbox.take():
+            dispatcher.handle(key, payload, attachment)
+        rec.flush()
+        rec.disconnect()  # writes the .rrd footer
+    log.info("logger done: %d malformed, %d dropped", dispatcher.malformed, inbox.dropped)
+    return 0

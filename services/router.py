@@ -1,0 +1,55 @@
+"""Run a zenoh router for standalone services (zenoh's own router, through the Python binding)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+
+from services.zenoh_session import (
+    DEFAULT_ENDPOINT,
+    ZenohSetupError,
+    open_config,
+    router_config,
+)
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt router                                   # listens on tcp/127.0.0.1:7447
+  gngdt router --listen tcp/127.0.0.1:7450
+  gngdt router --zenoh-config config/router.json5   # TLS, access control, ...
+"""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to listen on (repeatable; default {DEFAULT_ENDPOINT})",
+    )
+    parser.add_argument(
+        "--zenoh-config",
+        metavar="FILE.json5",
+        help="zenoh configuration file (mode and listen endpoints are set by this command)",
+    )
+
+
+def main(args: argparse.Namespace) -> int:
+    listen = args.listen or [DEFAULT_ENDPOINT]
+    try:
+        session = open_config(router_config(listen, args.zenoh_config), what="router")
+    except ZenohSetupError as error:
+        log.error("%s", error)
+        return 1
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    print(f"zenoh router listening on {', '.join(listen)} (Ctrl-C to stop)", flush=True)
+    while not stop.wait(0.5):
+        pass
+    session.close()
+    log.info("router stopped")
+    return 0

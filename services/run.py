@@ -1,0 +1,317 @@
+"""Run the whole pipeline on one recording: a loopback router, then learner, logger and capture.
+
+The router is this process's own zenoh session (mode router, a free port on 127.0.0.1, scouting
+off); the three services are child processes connected to it. ``run`` starts the learner and the
+logger, waits for their liveliness tokens, starts the capture, waits for the end of the stream,
+lets the learner finish its last frame and the logger flush, then prints a summary. SIGINT and
+SIGTERM stop everything cleanly. Exit status is non-zero when a service failed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import IO, TYPE_CHECKING
+
+from schemas.wire import DEFAULT_CAMERA, topic
+from services.logger import LIVELINESS_KEY, default_rrd_path
+from services.zenoh_session import free_tcp_port, open_config, router_config
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from schemas.packing import LearnerStatusInfo, StreamEndInfo
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt run recordings/tabletop.mcap                 # writes runs/tabletop-<time>.rrd
+  gngdt run recordings/tabletop.mcap --fast --save out.rrd
+  gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
+"""
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("recording", type=Path, metavar="RECORDING", help="MCAP recording")
+    viewer = parser.add_mutually_exclusive_group()
+    viewer.add_argument("--save", type=Path, metavar="PATH",
+                        help="write the rerun recording here (default runs/<recording>-<time>.rrd)")
+    viewer.add_argument("--connect", action="store_true", help="log to a running rerun viewer")
+    viewer.add_argument("--serve", action="store_true", help="serve a web viewer")
+    parser.add_argument("--url", help="rerun viewer URL for --connect")
+    speed = parser.add_mutually_exclusive_group()
+    speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
+    speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
+    parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
+    parser.add_argument("--voxel", type=float, metavar="SIZE_M", help="capture voxel size, metres")
+    parser.add_argument("--max-points", type=int, help="capture point cap per frame")
+    parser.add_argument("--params", type=Path, metavar="FILE.toml", help="learner parameters")
+    parser.add_argument("--checkpoint", type=Path, metavar="PATH", help="learner checkpoint")
+    parser.add_argument("--samples-per-frame", type=int, help="learning steps per frame")
+    parser.add_argument("--max-nodes", type=int, help="learner node budget")
+    parser.add_argument("--startup-timeout", type=float, default=60.0, metavar="SECONDS",
+                        help="how long the learner and logger may take to come up (default 60)")
+    parser.add_argument("--drain-timeout", type=float, default=30.0, metavar="SECONDS",
+                        help="after the stream ends, how long learner and logger may take to "
+                        "finish before they are interrupted (default 30)")
+
+
+@dataclass
+class Child:
+    """One service process; its stderr goes to a file whose tail is shown when it fails."""
+
+    name: str
+    process: subprocess.Popen
+    stderr_path: Path
+    stderr_file: IO[bytes]
+
+    def stderr_tail(self, lines: int = 20) -> str:
+        text = self.stderr_path.read_text(errors="replace").splitlines()
+        return "\n".join(text[-lines:])
+
+    def interrupt(self) -> None:
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGINT)
+
+    def stop(self, timeout_s: float) -> int:
+        """Wait for the process, escalating SIGINT -> SIGKILL after ``timeout_s``."""
+        try:
+            return self.process.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            self.interrupt()
+        try:
+            return self.process.wait(10.0)
+        except subprocess.TimeoutExpired:
+            log.error("%s did not stop; killing it", self.name)
+            self.process.kill()
+            return self.process.wait()
+
+
+@dataclass
+class Observed:
+    """What ``run`` hears on its own router session: liveliness, status and eos."""
+
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    alive: set[str] = field(default_factory=set)
+    status: LearnerStatusInfo | None = None
+    end: StreamEndInfo | None = None
+
+    def on_liveliness(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        key = str(sample.key_expr)
+        with self.lock:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.alive.add(key)
+            else:
+                self.alive.discard(key)
+
+    def on_status(self, sample: zenoh.Sample) -> None:
+        from schemas.packing import MessageError, decode_status
+
+        try:
+            status = decode_status(sample.payload.to_bytes())
+        except MessageError:
+            return
+        with self.lock:
+            self.status = status
+
+    def on_eos(self, sample: zenoh.Sample) -> None:
+        from schemas.packing import MessageError, decode_stream_end
+
+        try:
+            end = decode_stream_end(sample.payload.to_bytes())
+        except MessageError:
+            return
+        with self.lock:
+            self.end = end
+
+    def has_alive(self, prefix: str) -> bool:
+        with self.lock:
+            return any(key.startswith(prefix) for key in self.alive)
+
+
+class Pipeline:
+    """The child processes of one run."""
+
+    def __init__(self, endpoint: str, log_dir: Path, log_level: str) -> None:
+        self.endpoint = endpoint
+        self.log_dir = log_dir
+        self.log_level = log_level
+        self.children: list[Child] = []
+        self.interrupted = False
+
+    def start(self, name: str, arguments: list[str]) -> Child:
+        command = [sys.executable, "-m", "services.cli", name, *arguments,
+                   "--zenoh-connect", self.endpoint, "--log-level", self.log_level]
+        stderr_path = self.log_dir / f"{name}.log"
+        stderr_file = open(stderr_path, "wb")  # closed in Pipeline.close()
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO_ROOT),
+                                                          env.get("PYTHONPATH")]))
+        log.debug("starting %s", " ".join(command))
+        process = subprocess.Popen(command, stdout=stderr_file, stderr=subprocess.STDOUT,
+                                   stdin=subprocess.DEVNULL, env=env, start_new_session=True)
+        child = Child(name, process, stderr_path, stderr_file)
+        self.children.append(child)
+        return child
+
+    def failed(self) -> Child | None:
+        """The first child that exited with an error, if any (not counting our own SIGINT)."""
+        interrupted_codes = (130, -signal.SIGINT) if self.interrupted else ()
+        for child in self.children:
+            code = child.process.poll()
+            if code is not None and code != 0 and code not in interrupted_codes:
+                return child
+        return None
+
+    def interrupt_all(self) -> None:
+        self.interrupted = True
+        for child in self.children:
+            child.interrupt()
+
+    def close(self) -> None:
+        for child in self.children:
+            if child.process.poll() is None:
+                child.process.kill()
+                child.process.wait()
+            child.stderr_file.close()
+
+
+def wait_until(condition, timeout_s: float, stop: threading.Event, pipeline: Pipeline) -> bool:
+    """Poll ``condition`` until true; False on timeout, stop request or a failed child."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and not stop.is_set() and pipeline.failed() is None:
+        if condition():
+            return True
+        time.sleep(0.05)
+    return bool(condition())
+
+
+def learner_arguments(args: argparse.Namespace) -> list[str]:
+    arguments = ["--cam", args.cam, "--exit-on-eos"]
+    for flag, value in (("--params", args.params), ("--checkpoint", args.checkpoint),
+                        ("--samples-per-frame", args.samples_per_frame),
+                        ("--max-nodes", args.max_nodes)):
+        if value is not None:
+            arguments += [flag, str(value)]
+    return arguments
+
+
+def capture_arguments(args: argparse.Namespace) -> list[str]:
+    arguments = [str(args.recording), "--cam", args.cam]
+    arguments += ["--fast"] if args.fast else ["--rate", str(args.rate)]
+    for flag, value in (("--voxel", args.voxel), ("--max-points", args.max_points)):
+        if value is not None:
+            arguments += [flag, str(value)]
+    return arguments
+
+
+def logger_arguments(args: argparse.Namespace, rrd_path: Path | None) -> list[str]:
+    if args.connect:
+        return ["--connect"] + (["--url", args.url] if args.url else [])
+    if args.serve:
+        return ["--serve", "--keep-running"]
+    return ["--save", str(rrd_path)]
+
+
+def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
+                   destination: str) -> str:
+    """The lines ``run`` prints at the end."""
+    lines = [f"frames sent:        {end.frames_sent if end else 'no end of stream'}"]
+    if status is None:
+        lines.append("learner:            no status received")
+    else:
+        clusters = ", ".join(f"{name} {count}" for name, count in
+                             sorted(status.cluster_counts.items()))
+        lines += [
+            f"frames learned:     {status.frames_used} ({status.frames_dropped} dropped, "
+            f"{status.malformed_messages} malformed)",
+            f"learning steps:     {status.steps} ({status.steps_per_second:,.0f} steps/s)",
+            f"nodes:              {status.nodes}",
+            f"clusters:           {clusters}",
+            f"latency:            p50 {status.latency_p50_ms:.1f} ms, "
+            f"p99 {status.latency_p99_ms:.1f} ms",
+        ]
+    lines.append(f"rerun:              {destination}")
+    return "\n".join(lines)
+
+
+def main(args: argparse.Namespace) -> int:
+    if not args.recording.is_file():
+        log.error("recording %s: no such file", args.recording)
+        return 2
+    if args.url and not args.connect:
+        log.error("--url needs --connect")
+        return 2
+    topic(args.cam, "points")  # validates the camera name
+    rrd_path = None
+    if not (args.connect or args.serve):
+        rrd_path = args.save or default_rrd_path(args.recording.stem)
+        rrd_path.parent.mkdir(parents=True, exist_ok=True)
+        destination = str(rrd_path)
+    else:
+        destination = "rerun viewer"
+
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_config(router_config([endpoint]), what="router")
+    observed = Observed()
+    declared = [
+        router.liveliness().declare_subscriber("gngdt/**", observed.on_liveliness, history=True),
+        router.declare_subscriber(topic(args.cam, "learner/status"), observed.on_status),
+        router.declare_subscriber(topic(args.cam, "eos"), observed.on_eos),
+    ]
+    log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))
+    pipeline = Pipeline(endpoint, log_dir, args.log_level)
+    failure: Child | None = None
+    try:
+        pipeline.start("learn", learner_arguments(args))
+        pipeline.start("log", logger_arguments(args, rrd_path))
+        ready = wait_until(
+            lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
+            and observed.has_alive(LIVELINESS_KEY),
+            args.startup_timeout, stop, pipeline)
+        if not ready and not stop.is_set() and pipeline.failed() is None:
+            log.error("learner and logger did not come up within %.0f s", args.startup_timeout)
+            pipeline.interrupt_all()
+            return 1
+        if ready:
+            capture = pipeline.start("capture", capture_arguments(args))
+            wait_until(lambda: capture.process.poll() is not None, float("inf"), stop, pipeline)
+        if stop.is_set() or pipeline.failed() is not None:
+            log.info("%s; stopping the services",
+                     "interrupted" if stop.is_set() else "a service failed")
+            pipeline.interrupt_all()
+        for child in pipeline.children:
+            child.stop(args.drain_timeout)
+        failure = pipeline.failed()
+    finally:
+        pipeline.close()
+        for entity in declared:
+            entity.undeclare()
+        router.close()
+    with observed.lock:
+        status, end = observed.status, observed.end
+    print(format_summary(status, end, destination), flush=True)
+    if failure is not None:
+        print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"
+              f"{failure.stderr_tail()}", file=sys.stderr)
+        return 1
+    shutil.rmtree(log_dir, ignore_errors=True)
+    return 130 if stop.is_set() else 0

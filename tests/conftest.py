@@ -1,0 +1,90 @@
+"""Shared fixtures: free ports, an in-process loopback zenoh router, small synthetic recordings,
+and a private rerun config directory (rerun writes its analytics config on first use)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+from services.zenoh_session import free_tcp_port, open_config, router_config
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_rerun_config(tmp_path_factory: pytest.TempPathFactory) -> Iterator[None]:
+    previous = os.environ.get("XDG_CONFIG_HOME")
+    os.environ["XDG_CONFIG_HOME"] = str(tmp_path_factory.mktemp("xdg-config"))
+    yield
+    if previous is None:
+        os.environ.pop("XDG_CONFIG_HOME", None)
+    else:
+        os.environ["XDG_CONFIG_HOME"] = previous
+
+
+@pytest.fixture
+def free_port() -> int:
+    return free_tcp_port()
+
+
+@pytest.fixture
+def router_endpoint(free_port: int) -> Iterator[str]:
+    """A zenoh router (this process, mode router) on a free loopback port; yields its endpoint."""
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    session = open_config(router_config([endpoint]), what="router")
+    yield endpoint
+    session.close()
+
+
+def _render_recording(directory: Path, scene: str, frames: int) -> Path:
+    from services.recording.synth import render_scene
+    from services.recording.writer import RecordingWriter
+
+    path = directory / f"{scene}_small.mcap"
+    with RecordingWriter(path) as writer:
+        for frame in render_scene(scene, frames, width=320, height=240):
+            writer.write_frame(frame)
+    return path
+
+
+@pytest.fixture(scope="session")
+def data2_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An 8-frame 320x240 recording of the paper's Data2 scene (rendered once per session)."""
+    return _render_recording(tmp_path_factory.mktemp("recordings"), "data2", 8)
+
+
+@pytest.fixture(scope="session")
+def tabletop_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An 8-frame 320x240 synthetic tabletop recording (rendered once per session)."""
+    return _render_recording(tmp_path_factory.mktemp("recordings"), "tabletop", 8)
+
+
+@pytest.fixture
+def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
+    """Start ``python -m services.cli ARGS...`` in its own process group; output to a log file
+    in tmp_path (``process.log_path``). Every process is killed at teardown, pass or fail."""
+    processes: list[subprocess.Popen] = []
+
+    def start(*arguments: str) -> subprocess.Popen:
+        log_path = tmp_path / f"{arguments[0]}-{len(processes)}.log"
+        with open(log_path, "wb") as log_file:
+            process = subprocess.Popen(
+                [sys.executable, "-m", "services.cli", *arguments],
+                cwd=REPO_ROOT, stdout=log_file, stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL, start_new_session=True,
+            )
+        process.log_path = log_path  # type: ignore[attr-defined]
+        processes.append(process)
+        return process
+
+    yield start
+    for process in processes:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()

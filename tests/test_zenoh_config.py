@@ -1,0 +1,107 @@
+"""Zenoh configuration: secure defaults, pass-through files, router rendezvous on loopback."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from services.zenoh_session import (
+    DEFAULT_ENDPOINT,
+    ZenohSetupError,
+    client_config,
+    open_config,
+    router_config,
+)
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def setting(config, key: str):
+    return json.loads(config.get_json(key))
+
+
+def test_default_client_config_is_loopback_only_without_scouting() -> None:
+    config = client_config()
+    assert setting(config, "mode") == "client"
+    assert setting(config, "connect/endpoints") == [DEFAULT_ENDPOINT]
+    assert setting(config, "listen/endpoints") == []
+    assert setting(config, "scouting/multicast/enabled") is False
+    assert setting(config, "scouting/gossip/enabled") is False
+
+
+def test_router_config_listens_where_told_only() -> None:
+    config = router_config(["tcp/127.0.0.1:7999"])
+    assert setting(config, "mode") == "router"
+    assert setting(config, "listen/endpoints") == ["tcp/127.0.0.1:7999"]
+    assert setting(config, "scouting/multicast/enabled") is False
+
+
+def test_config_file_passes_through(tmp_path: Path) -> None:
+    path = tmp_path / "site.json5"
+    path.write_text('{ mode: "peer", connect: { endpoints: ["tcp/10.1.2.3:7447"] },\n'
+                    "  // a comment, as json5 allows\n"
+                    '  scouting: { multicast: { enabled: false } } }\n')
+    config = client_config(config_file=path)
+    assert setting(config, "mode") == "peer"
+    assert setting(config, "connect/endpoints") == ["tcp/10.1.2.3:7447"]
+    overridden = client_config(["tcp/127.0.0.1:1234"], config_file=path)
+    assert setting(overridden, "connect/endpoints") == ["tcp/127.0.0.1:1234"]
+
+
+def test_missing_or_bad_config_file_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(ZenohSetupError, match="no such file"):
+        client_config(config_file=tmp_path / "absent.json5")
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ mode: ")
+    with pytest.raises(ZenohSetupError, match=r"bad\.json5"):
+        client_config(config_file=bad)
+
+
+def test_unreachable_router_is_a_clear_error(free_port: int) -> None:
+    with pytest.raises(ZenohSetupError, match="gngdt router"):
+        open_config(client_config([f"tcp/127.0.0.1:{free_port}"]))
+
+
+def test_clients_meet_through_the_router(router_endpoint: str) -> None:
+    import zenoh
+
+    publisher_session = open_config(client_config([router_endpoint]))
+    subscriber_session = open_config(client_config([router_endpoint]))
+    received: list[bytes] = []
+    subscriber = subscriber_session.declare_subscriber(
+        "gngdt/test/x", lambda sample: received.append(sample.payload.to_bytes()))
+    publisher = publisher_session.declare_publisher(
+        "gngdt/test/x", congestion_control=zenoh.CongestionControl.BLOCK)
+    deadline = time.monotonic() + 5
+    while not received and time.monotonic() < deadline:
+        publisher.put(b"hello")
+        time.sleep(0.05)
+    subscriber.undeclare()
+    publisher_session.close()
+    subscriber_session.close()
+    assert received and received[0] == b"hello"
+
+
+@pytest.mark.timeout(60)
+def test_gngdt_router_process_serves_clients(free_port: int) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "services.cli", "router", "--listen", endpoint],
+        cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+    )
+    try:
+        assert "listening on" in process.stdout.readline().decode()
+        session = open_config(client_config([endpoint]))
+        session.close()
+        process.send_signal(signal.SIGINT)
+        assert process.wait(20) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
