@@ -28,10 +28,15 @@ from gngdt_core import _kernels as K
 from gngdt_core.clustering import connected_component_labels
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
-from gngdt_core.sampling import as_samples, initial_indices, sample_orders
+from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 _STATE_VERSION = 1
+
+
+def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
+    """Batch rows of ``indices`` into the finite rows (all rows are finite when None)."""
+    return indices if finite_rows is None else finite_rows[indices]
 
 
 class _GrowingGas:
@@ -111,28 +116,32 @@ class _GrowingGas:
         scale, or None (given on every call or on none). Rows with NaN/inf are dropped and counted
         in ``n_invalid_``.
         """
-        samples, sample_colors, n_invalid = as_samples(positions, colors)
+        batch, batch_colors, finite_rows, n_invalid = check_batch(positions, colors)
         if n_steps is not None:
             if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)):
                 raise ValueError(f"n_steps must be an integer or None, got {n_steps!r}")
             if n_steps < 0:
                 raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+        has_col = batch_colors is not None
         if self._dim == 0:
-            self._allocate(samples.shape[1], sample_colors is not None)
+            self._allocate(batch.shape[1], has_col)
         else:
-            self._check_consistent(samples.shape[1], sample_colors is not None)
+            self._check_consistent(batch.shape[1], has_col)
         self.n_invalid_ += n_invalid
-        n_samples = samples.shape[0]
+        n_samples = batch.shape[0] if finite_rows is None else finite_rows.size
         if n_samples == 0:
             return self
         steps = n_samples if n_steps is None else int(n_steps)
         if self.n_nodes_ == 0:
-            self._initialise(samples, sample_colors)
-        kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
+            first_two = initial_indices(self._rng, n_samples)
+            self._initialise(*gather(batch, batch_colors, _rows(finite_rows, first_two)))
         fparams, iparams = self._kernel_parameters()
         a = self._arrays
         for order in sample_orders(self._rng, n_samples, steps):
-            K.learn(samples, kernel_colors, order,
+            # only the sampled rows are converted: a frame's cost follows the steps, not its size
+            samples, sample_colors = gather(batch, batch_colors, _rows(finite_rows, order))
+            kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
+            K.learn(samples, kernel_colors, np.arange(order.size),
                     a["pos"], a["col"], a["nor"], a["err"],
                     a["nbr"], a["age"], a["emask"], a["rev"], a["deg"],
                     a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
@@ -149,13 +158,13 @@ class _GrowingGas:
             raise ValueError(f"colors must be {expected}, as in the first batch this model learned")
 
     def _initialise(self, samples: np.ndarray, sample_colors: np.ndarray | None) -> None:
-        """Step 0: two nodes on random samples, connected in every property with age 0."""
-        first, second = initial_indices(self._rng, samples.shape[0])
+        """Step 0: two nodes on two random samples (``samples`` (2, D)), connected in every
+        property with age 0."""
         a = self._arrays
-        for node, sample in enumerate((first, second)):
-            a["pos"][node] = samples[sample]
+        for node in (0, 1):
+            a["pos"][node] = samples[node]
             if sample_colors is not None:
-                a["col"][node] = sample_colors[sample]
+                a["col"][node] = sample_colors[node]
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
         K.add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
         self._istate[K.I_NODES] = 2
