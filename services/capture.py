@@ -169,14 +169,22 @@ class CapturePublisher:
         )
 
 
+def log_bad_frame(error: Exception) -> None:
+    """A bad frame of the recording (named by file and frame) is logged; replay goes on."""
+    log.error("%s; skipped, continuing with the next good frame", error)
+
+
 def replay_frames(path: Path, loop: bool, stop: threading.Event) -> Iterator[Frame]:
-    """Frames of the recording (forever with ``loop``); a damaged file ends a pass, logged."""
+    """Frames of the recording (forever with ``loop``).
+
+    A bad frame is logged and skipped; damage to the file itself ends a pass, logged.
+    """
     from services.recording.reader import RecordingError, read_frames
 
     while not stop.is_set():
         yielded = 0
         try:
-            for frame in read_frames(path):
+            for frame in read_frames(path, on_bad_frame=log_bad_frame):
                 yielded += 1
                 yield frame
         except RecordingError as error:

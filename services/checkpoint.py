@@ -1,8 +1,11 @@
 """Learner checkpoints: a model state plus metadata in one ``.npz``, written atomically.
 
 Layout: every state array under ``state/<name>``; ``metadata`` is a JSON string (0-d unicode
-array) holding the caller's metadata and ``state_sha256``, a digest of the state arrays (names,
-dtypes, shapes and bytes) that catches truncated or altered files. Loading never unpickles.
+array) holding the caller's metadata, ``format_version`` and ``sha256``, a digest of the state
+arrays (names, dtypes, shapes and bytes) and of the rest of the metadata, which catches truncated
+or altered files. Loading is all or nothing: nothing is returned unless every check passes. It
+never unpickles or evaluates anything, and refuses archives whose declared size is beyond
+``MAX_CHECKPOINT_BYTES`` before reading them.
 """
 
 from __future__ import annotations
@@ -19,20 +22,26 @@ import numpy as np
 
 _STATE_PREFIX = "state/"
 _METADATA_KEY = "metadata"
-FORMAT_VERSION = 1
+_DIGEST_KEY = "sha256"
+FORMAT_VERSION = 2
+#: largest uncompressed checkpoint accepted (a 1,000,000-node model is ~100 MB)
+MAX_CHECKPOINT_BYTES = 2 * 1024**3
 
 
 class CheckpointError(ValueError):
     """A checkpoint file cannot be used; the message names the file and the reason."""
 
 
-def state_digest(state: dict[str, np.ndarray]) -> str:
-    """sha256 hex digest of the arrays' names, dtypes, shapes and contents."""
+def checkpoint_digest(state: dict[str, np.ndarray], metadata: dict[str, Any]) -> str:
+    """sha256 hex digest of the arrays' names, dtypes, shapes and contents and of ``metadata``
+    (canonical JSON, without the digest itself)."""
     digest = hashlib.sha256()
     for name in sorted(state):
         array = np.ascontiguousarray(state[name])
         digest.update(f"{name}|{array.dtype.str}|{array.shape}|".encode())
         digest.update(array.tobytes())
+    signed = {key: value for key, value in metadata.items() if key != _DIGEST_KEY}
+    digest.update(json.dumps(signed, sort_keys=True).encode())
     return digest.hexdigest()
 
 
@@ -45,11 +54,8 @@ def save_checkpoint(
     for key, array in arrays.items():
         if array.dtype == object:
             raise ValueError(f"checkpoint state {key!r} is an object array; numeric arrays only")
-    full_metadata = {
-        **(metadata or {}),
-        "format_version": FORMAT_VERSION,
-        "state_sha256": state_digest(state),
-    }
+    full_metadata = {**(metadata or {}), "format_version": FORMAT_VERSION}
+    full_metadata[_DIGEST_KEY] = checkpoint_digest(state, full_metadata)
     arrays[_METADATA_KEY] = np.array(json.dumps(full_metadata))
     path.parent.mkdir(parents=True, exist_ok=True)
     descriptor, temporary = tempfile.mkstemp(
@@ -70,7 +76,10 @@ def load_checkpoint(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """``(state, metadata)`` of a checkpoint; ``CheckpointError`` if it is corrupt or foreign."""
     path = Path(path)
     try:
+        _check_declared_size(path)
         with np.load(path, allow_pickle=False) as archive:
+            if not isinstance(archive, np.lib.npyio.NpzFile):
+                raise CheckpointError(f"checkpoint {path}: not an .npz archive")
             if _METADATA_KEY not in archive.files:
                 raise CheckpointError(f"checkpoint {path}: no metadata; not a gngdt checkpoint")
             metadata = json.loads(str(archive[_METADATA_KEY]))
@@ -83,8 +92,29 @@ def load_checkpoint(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as error:
         raise CheckpointError(f"checkpoint {path}: unreadable ({error})") from error
-    if not isinstance(metadata, dict) or "state_sha256" not in metadata:
-        raise CheckpointError(f"checkpoint {path}: metadata has no state_sha256")
-    if metadata["state_sha256"] != state_digest(state):
-        raise CheckpointError(f"checkpoint {path}: content does not match its sha256")
+    if not isinstance(metadata, dict) or _DIGEST_KEY not in metadata:
+        raise CheckpointError(f"checkpoint {path}: metadata has no {_DIGEST_KEY}")
+    if metadata.get("format_version") != FORMAT_VERSION:
+        raise CheckpointError(
+            f"checkpoint {path}: format version {metadata.get('format_version')!r}, "
+            f"this gngdt reads version {FORMAT_VERSION}"
+        )
+    if metadata[_DIGEST_KEY] != checkpoint_digest(state, metadata):
+        raise CheckpointError(
+            f"checkpoint {path}: content does not match its sha256 (torn or tampered file)"
+        )
     return state, metadata
+
+
+def _check_declared_size(path: Path) -> None:
+    """Refuse an archive that declares more than ``MAX_CHECKPOINT_BYTES`` (e.g. a zip bomb)."""
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint {path}: no such file")
+    if not zipfile.is_zipfile(path):
+        raise CheckpointError(f"checkpoint {path}: not a zip (.npz) archive; torn or foreign file")
+    with zipfile.ZipFile(path) as archive:
+        declared = sum(item.file_size for item in archive.infolist())
+    if declared > MAX_CHECKPOINT_BYTES:
+        raise CheckpointError(
+            f"checkpoint {path}: declares {declared} bytes, more than {MAX_CHECKPOINT_BYTES}"
+        )

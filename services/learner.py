@@ -60,16 +60,38 @@ class LearnerOptions:
     checkpoint_every_seconds: float = 30.0
     #: points of the frame sampled to compute the quantization error (eq. 17)
     quantization_sample: int = 2_000
+    #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
+    max_points: int = 2_000_000
     seed: int | None = 0
 
     def validate(self) -> None:
+        """Raise ``ValueError`` naming the option for a wrong type or a non-positive value."""
+        for item in fields(self):
+            value = getattr(self, item.name)
+            allowed = _OPTION_TYPES[item.name]
+            if isinstance(value, bool) or not isinstance(value, allowed):
+                raise ValueError(f"learner option {item.name} must be "
+                                 f"{' or '.join(kind.__name__ for kind in allowed)}, "
+                                 f"got {value!r}")
         for name in ("samples_per_frame", "min_cluster_size", "checkpoint_every_frames",
-                     "quantization_sample"):
+                     "quantization_sample", "max_points"):
             value = getattr(self, name)
             if value <= 0:
                 raise ValueError(f"learner option {name} must be positive, got {value}")
         if self.checkpoint_every_seconds <= 0:
             raise ValueError("learner option checkpoint_every_seconds must be positive")
+
+
+#: accepted types of each option (TOML integers are accepted where floats are)
+_OPTION_TYPES: dict[str, tuple[type, ...]] = {
+    "samples_per_frame": (int,),
+    "min_cluster_size": (int,),
+    "checkpoint_every_frames": (int,),
+    "checkpoint_every_seconds": (int, float),
+    "quantization_sample": (int,),
+    "max_points": (int,),
+    "seed": (int, type(None)),
+}
 
 
 @dataclass
@@ -119,6 +141,10 @@ def load_params(path: Path | None) -> LearnerConfig:
         else:
             known = ", ".join(sorted(model_names | option_names))
             raise ValueError(f"--params {path}: unknown key {key!r} (known: {known})")
+    try:
+        config.options.validate()
+    except ValueError as error:
+        raise ValueError(f"--params {path}: {error}") from error
     return config
 
 
@@ -189,6 +215,26 @@ class Counters:
         if self.last_sequence >= 0 and sequence > self.last_sequence + 1:
             self.frames_dropped += sequence - self.last_sequence - 1
         self.last_sequence = sequence
+
+
+def counters_from_metadata(path: Path, saved: Any) -> Counters:
+    """The counters kept in a checkpoint's metadata, type-checked (``CheckpointError``)."""
+    from services.checkpoint import CheckpointError
+
+    if not isinstance(saved, dict):
+        raise CheckpointError(f"checkpoint {path}: counters are not a mapping")
+    values: dict[str, Any] = {}
+    for item in fields(Counters):
+        if item.name not in saved:
+            continue
+        value = saved[item.name]
+        expected = float if item.type in ("float", float) else int
+        if isinstance(value, bool) or not isinstance(value, int | float) or (
+                expected is int and not isinstance(value, int)):
+            raise CheckpointError(
+                f"checkpoint {path}: counter {item.name} is {value!r}, expected a number")
+        values[item.name] = expected(value)
+    return Counters(**values)
 
 
 class Learner:
@@ -289,8 +335,7 @@ class Learner:
             model = GNGDT.from_state(state)
         except (KeyError, ValueError, TypeError) as error:
             raise CheckpointError(f"checkpoint {path}: not a GNG-DT state ({error})") from error
-        saved = metadata.get("counters", {})
-        counters = Counters(**{k: v for k, v in saved.items() if k in Counters.__annotations__})
+        counters = counters_from_metadata(path, metadata.get("counters", {}))
         counters.last_sequence = -1  # a new capture restarts its sequence numbers
         log.info("resumed from %s: %d nodes, %d steps", path, model.n_nodes_, model.n_steps_)
         return cls(camera, config, model=model, counters=counters)
@@ -304,6 +349,25 @@ def finite_points(
         return positions, colors
     finite = np.isfinite(positions).all(axis=1)
     return positions[finite], None if colors is None else colors[finite]
+
+
+def decode_points(
+    payload: bytes, attachment: bytes | None, max_points: int = LearnerOptions.max_points
+) -> tuple[FrameStamp, np.ndarray, np.ndarray | None]:
+    """The learner's decode path for one ``points`` sample: stamp, finite positions, colours.
+
+    positions: (N, 3) float32 metres, N >= 1; colors: (N, 3) uint8 or None. Raises
+    ``ValueError`` (``MessageError`` for the payload) for a missing/malformed attachment, an
+    undecodable or oversized cloud (``max_points``, checked before allocation) or a cloud
+    without a single finite point.
+    """
+    from schemas.packing import MessageError, msg_to_cloud
+
+    stamp = FrameStamp.from_attachment(attachment)
+    positions, colors = finite_points(*msg_to_cloud(payload, max_points=max_points))
+    if len(positions) == 0:
+        raise MessageError("no finite points in the cloud")
+    return stamp, positions, colors
 
 
 def warm_up(config: LearnerConfig) -> None:
@@ -365,7 +429,7 @@ class LatestTopology:
 def main(args: argparse.Namespace) -> int:
     import zenoh
 
-    from schemas.packing import MessageError, decode_stream_end, msg_to_cloud
+    from schemas.packing import MessageError, decode_stream_end
     from services.checkpoint import CheckpointError
 
     try:
@@ -425,11 +489,10 @@ def main(args: argparse.Namespace) -> int:
                 continue
             counters.frames_received += 1
             try:
-                stamp = FrameStamp.from_attachment(
-                    sample.attachment.to_bytes() if sample.attachment is not None else None)
-                positions, colors = finite_points(*msg_to_cloud(sample.payload.to_bytes()))
-                if len(positions) == 0:
-                    raise MessageError("no finite points in the cloud")
+                stamp, positions, colors = decode_points(
+                    sample.payload.to_bytes(),
+                    sample.attachment.to_bytes() if sample.attachment is not None else None,
+                    config.options.max_points)
                 counters.note_sequence(stamp.sequence)
                 received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
                 learner.learn(positions, colors)  # ValueError: e.g. colours missing mid-stream

@@ -9,6 +9,11 @@ camera ``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/`
 
 The logger stops on its own once every camera it heard of has ended its stream (eos) and the
 topology of its last frame has arrived, or ``--eos-drain`` seconds after that eos.
+
+Crash safety: the ``.rrd`` is flushed every ``FLUSH_EVERY_SECONDS``, so a logger killed outright
+(``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which only makes
+rerun scan it whole). An existing ``--save`` file is never overwritten: a restarted logger writes
+``<name>.1.rrd`` (then ``.2``, ...) beside it and says so.
 """
 
 from __future__ import annotations
@@ -40,7 +45,7 @@ log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
   gngdt log                                   # saves runs/log-<time>.rrd
-  gngdt log --save out.rrd
+  gngdt log --save out.rrd                    # out.1.rrd if out.rrd exists (never overwritten)
   gngdt log --connect --url rerun+http://127.0.0.1:9876/proxy   # a running viewer
   gngdt log --stdout | rerun -
 """
@@ -50,6 +55,8 @@ TOPOLOGY_VIEWS = ("pos", "col", "nor", "col+nor")
 LATEST_ONLY_STREAMS = ("color", "depth", "points")
 RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
+#: how often the .rrd is flushed to disk: what a killed logger can lose at most
+FLUSH_EVERY_SECONDS = 1.0
 
 
 def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
@@ -84,6 +91,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def default_rrd_path(name: str) -> Path:
     """``runs/<name>-<local time>.rrd``."""
     return RUNS_DIR / f"{name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}.rrd"
+
+
+def unused_rrd_path(path: Path) -> Path:
+    """``path`` if no file is there, else the first free ``<stem>.<n><suffix>`` beside it."""
+    if not path.exists():
+        return path
+    number = 1
+    while True:
+        candidate = path.with_name(f"{path.stem}.{number}{path.suffix}")
+        if not candidate.exists():
+            return candidate
+        number += 1
 
 
 @dataclass(frozen=True)
@@ -381,7 +400,10 @@ def open_recording(args: argparse.Namespace, default_name: str = "log") -> tuple
     if args.connect:
         rec.connect_grpc(args.url, default_blueprint=initial)
         return rec, f"connected to {args.url or 'the default viewer'}"
-    path = Path(args.save) if args.save else default_rrd_path(default_name)
+    requested = Path(args.save) if args.save else default_rrd_path(default_name)
+    path = unused_rrd_path(requested)
+    if path != requested:
+        log.warning("%s exists (an earlier run); writing %s instead", requested, path)
     path.parent.mkdir(parents=True, exist_ok=True)
     rec.save(str(path), default_blueprint=initial)
     return rec, str(path)
@@ -412,11 +434,15 @@ def main(args: argparse.Namespace) -> int:
         return 1
     subscriber = session.declare_subscriber("gngdt/**", inbox.put)
     token = session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}")
+    last_flush = time.monotonic()
     try:
         while not stop.is_set():
             inbox.arrived.wait(0.05)
             for key, payload, attachment in inbox.take():
                 dispatcher.handle(key, payload, attachment)
+            if time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
+                rec.flush()
+                last_flush = time.monotonic()
             if not args.keep_running and dispatcher.all_finished(args.eos_drain):
                 break
     finally:

@@ -19,6 +19,9 @@ and labels carrying the colour stamp if they came before the pair. Depth is norm
 millimetres (32FC1 metres -> mm, NaN/negative -> 0), colour to RGB uint8.
 
 A damaged file yields every frame before the damage, then raises :class:`RecordingError`.
+With ``on_bad_frame``, a bad *frame* (an undecodable image or calibration message, colour/depth/
+calibration sizes that disagree) is reported to it and skipped, and reading goes on with the next
+good frame; only damage to the file itself (truncation, corrupt chunks) still ends the reading.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from __future__ import annotations
 import logging
 import os
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -222,11 +225,22 @@ def _open_messages(stream: IO[bytes]) -> Iterator[tuple[Any, Any, Any]]:
     return NonSeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=False)
 
 
+#: receives each bad frame's error when the caller chose to skip bad frames
+BadFrameHandler = Callable[[RecordingError], None]
+
+
 class _FrameAssembler:
     """Pairs colour and depth, attaches calibration and labels, and checks sizes."""
 
-    def __init__(self, path: Path, intrinsics: CameraIntrinsics | None, max_skew_ns: int) -> None:
+    def __init__(
+        self,
+        path: Path,
+        intrinsics: CameraIntrinsics | None,
+        max_skew_ns: int,
+        on_bad_frame: BadFrameHandler | None = None,
+    ) -> None:
         self.path = path
+        self.on_bad_frame = on_bad_frame
         self.calibration = intrinsics
         self.max_skew_ns = max_skew_ns
         self.pending: dict[str, deque[_Image]] = {
@@ -240,11 +254,17 @@ class _FrameAssembler:
     def error(self, reason: str) -> RecordingError:
         return RecordingError(self.path, self.next_index, reason)
 
+    def skip_or_raise(self, error: RecordingError) -> None:
+        """Report a bad frame to ``on_bad_frame`` (reading goes on), or raise it."""
+        if self.on_bad_frame is None:
+            raise error
+        self.on_bad_frame(error)
+
     def add_calibration(self, intrinsics: CameraIntrinsics) -> Iterator[Frame]:
         self.calibration = intrinsics
         held, self.awaiting_calibration = self.awaiting_calibration, []
         for color, depth, labels in held:
-            yield self._frame(color, depth, labels)
+            yield from self._checked_frame(color, depth, labels)
 
     def add_labels(self, image: _Image) -> None:
         self.labels.append(image)
@@ -272,13 +292,23 @@ class _FrameAssembler:
                 )
             self.awaiting_calibration.append((color, depth, labels))
             return
-        yield self._frame(color, depth, labels)
+        yield from self._checked_frame(color, depth, labels)
 
     def finish(self) -> None:
         if self.awaiting_calibration:
             raise RecordingError(
                 self.path, 0, "no calibration (foxglove CameraCalibration or ROS CameraInfo) found"
             )
+
+    def _checked_frame(
+        self, color: _Image, depth: _Image, labels: np.ndarray | None
+    ) -> Iterator[Frame]:
+        """The frame, or nothing when it is bad and bad frames are skipped (index still used)."""
+        try:
+            yield self._frame(color, depth, labels)
+        except RecordingError as error:
+            self.next_index += 1
+            self.skip_or_raise(error)
 
     def _frame(self, color: _Image, depth: _Image, labels: np.ndarray | None) -> Frame:
         assert self.calibration is not None
@@ -323,12 +353,14 @@ def read_frames(
     *,
     intrinsics: CameraIntrinsics | None = None,
     max_skew_ns: int = 0,
+    on_bad_frame: BadFrameHandler | None = None,
 ) -> Iterator[Frame]:
     """Yield the frames of an MCAP recording in log-time order (see the module docstring).
 
     camera_prefix: only topics under it (``"/camera"``, ``"/kinect"``). intrinsics: used until a
     calibration message arrives (and when the recording has none). max_skew_ns: largest stamp
-    difference between a paired colour and depth image.
+    difference between a paired colour and depth image. on_bad_frame: called with the
+    RecordingError of each bad frame, which is then skipped (default: raise it).
     Raises RecordingError naming the file and frame for missing calibration, mismatched sizes,
     undecodable messages and truncated or corrupt files -- after yielding the frames before.
     """
@@ -338,17 +370,14 @@ def read_frames(
     except OSError as error:
         raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
     with stream:
-        yield from _read_stream(path, stream, camera_prefix, intrinsics, max_skew_ns)
+        assembler = _FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame)
+        yield from _read_stream(path, stream, camera_prefix, assembler)
 
 
 def _read_stream(
-    path: Path,
-    stream: IO[bytes],
-    camera_prefix: str | None,
-    intrinsics: CameraIntrinsics | None,
-    max_skew_ns: int,
+    path: Path, stream: IO[bytes], camera_prefix: str | None, assembler: _FrameAssembler
 ) -> Iterator[Frame]:
-    assembler = _FrameAssembler(path, intrinsics, max_skew_ns)
+    max_skew_ns = assembler.max_skew_ns
     decoder = _MessageDecoder()
     chosen: dict[str, str] = {}  # role -> topic
     try:
@@ -371,7 +400,10 @@ def _read_stream(
                     decoder.pixels(schema.name, payload),
                 )
             except _DecodeFailure as failure:
-                raise assembler.error(f"{channel.topic}: {failure}") from failure
+                error = assembler.error(f"{channel.topic}: {failure}")
+                error.__cause__ = failure
+                assembler.skip_or_raise(error)
+                continue
             if role == "labels":
                 assembler.add_labels(image)
             else:

@@ -1,0 +1,183 @@
+"""Soak: the whole pipeline on a looped replay at 30 fps for ``--minutes``; prints each service's
+RSS over time (and its slope), dropped frames and latency percentiles at start and end.
+
+    python benchmarks/bench_soak.py --minutes 10
+    python benchmarks/bench_soak.py --minutes 3 --width 640 --height 480 --save-rrd
+
+Processes: ``gngdt router``, ``learn``, ``log`` (``--stdout`` into /dev/null by default, so a
+long soak does not fill the disk; ``--save-rrd`` writes a real .rrd in a temporary directory
+instead) and ``capture --loop`` at the recorded 30 fps. Not a test: it prints figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))
+
+from schemas.packing import LearnerStatusInfo, decode_status  # noqa: E402
+from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
+
+
+def rss_mb(pid: int) -> float:
+    """Resident set size of a process, MB (0 when it has exited)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+@dataclass
+class StatusLog:
+    """Learner status messages with their arrival time (seconds since the soak began)."""
+
+    started: float = field(default_factory=time.monotonic)
+    entries: list[tuple[float, LearnerStatusInfo]] = field(default_factory=list)
+    lock: threading.Lock = field(default_factory=threading.Lock)
+
+    def add(self, sample) -> None:
+        status = decode_status(sample.payload.to_bytes())
+        with self.lock:
+            self.entries.append((time.monotonic() - self.started, status))
+
+    def window(self, start_s: float, end_s: float) -> list[LearnerStatusInfo]:
+        with self.lock:
+            return [status for at, status in self.entries if start_s <= at < end_s]
+
+
+def make_recording(directory: Path, width: int, height: int, frames: int) -> Path:
+    from services.recording.synth import render_scene
+    from services.recording.writer import RecordingWriter
+
+    path = directory / "soak.mcap"
+    with RecordingWriter(path) as writer:
+        for frame in render_scene("tabletop", frames, width=width, height=height, fps=30.0):
+            writer.write_frame(frame)
+    return path
+
+
+def start(arguments: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
+    with open(log_path, "wb") as log_file:
+        return subprocess.Popen(
+            [sys.executable, "-m", "services.cli", *arguments], cwd=REPO_ROOT,
+            stdout=stdout if stdout is not None else log_file, stderr=log_file,
+            stdin=subprocess.DEVNULL, start_new_session=True)
+
+
+def slope_mb_per_min(samples: list[tuple[float, float]]) -> float:
+    """Least-squares slope of (seconds, MB) samples, MB per minute."""
+    if len(samples) < 2:
+        return 0.0
+    seconds, megabytes = np.array(samples).T
+    return float(np.polyfit(seconds / 60.0, megabytes, 1)[0])
+
+
+def latency_line(label: str, statuses: list[LearnerStatusInfo]) -> str:
+    if not statuses:
+        return f"  {label}: no status"
+    latencies = np.array([status.latency_ms for status in statuses])
+    p50, p90, p99 = np.percentile(latencies, [50, 90, 99])
+    return (f"  {label}: {len(statuses)} topologies, latency p50 {p50:.0f} ms, "
+            f"p90 {p90:.0f} ms, p99 {p99:.0f} ms, max {latencies.max():.0f} ms")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--width", type=int, default=320)
+    parser.add_argument("--height", type=int, default=240)
+    parser.add_argument("--frames", type=int, default=60, help="frames in the looped recording")
+    parser.add_argument("--samples-per-frame", type=int, default=5000)
+    parser.add_argument("--sample-every", type=float, default=10.0, metavar="SECONDS")
+    parser.add_argument("--save-rrd", action="store_true",
+                        help="the logger writes a .rrd (default: --stdout to /dev/null)")
+    args = parser.parse_args()
+
+    work = Path(tempfile.mkdtemp(prefix="gngdt-soak-"))
+    recording = make_recording(work, args.width, args.height, args.frames)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    connect = ["--zenoh-connect", endpoint]
+    processes: dict[str, subprocess.Popen] = {}
+    devnull = open(os.devnull, "wb")
+    try:
+        processes["router"] = start(["router", "--listen", endpoint], work / "router.log")
+        time.sleep(1.5)
+        processes["learn"] = start(["learn", "--samples-per-frame", str(args.samples_per_frame),
+                                    *connect], work / "learn.log")
+        viewer = ["--save", str(work / "soak.rrd")] if args.save_rrd else ["--stdout"]
+        processes["log"] = start(["log", *viewer, "--keep-running", *connect], work / "log.log",
+                                 stdout=None if args.save_rrd else devnull)
+        session = open_config(client_config([endpoint]))
+        statuses = StatusLog()
+        session.declare_subscriber("gngdt/camera/learner/status", statuses.add)
+        time.sleep(5.0)  # learner warm-up (numba)
+        statuses.started = time.monotonic()
+        processes["capture"] = start(["capture", str(recording), "--loop", *connect],
+                                     work / "capture.log")
+        duration = args.minutes * 60.0
+        rss: dict[str, list[tuple[float, float]]] = {name: [] for name in processes}
+        while (elapsed := time.monotonic() - statuses.started) < duration:
+            for name, process in processes.items():
+                if process.poll() is not None:
+                    raise SystemExit(f"{name} exited with {process.returncode}; see {work}")
+                rss[name].append((elapsed, rss_mb(process.pid)))
+            time.sleep(min(args.sample_every, max(0.0, duration - elapsed)))
+        for name, process in processes.items():
+            rss[name].append((time.monotonic() - statuses.started, rss_mb(process.pid)))
+        session.close()
+    finally:
+        for process in processes.values():
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)
+        for process in processes.values():
+            try:
+                process.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+        devnull.close()
+
+    print(f"soak: {args.minutes:g} min, {args.width}x{args.height} at 30 fps looped "
+          f"({args.frames} frames), {args.samples_per_frame} steps/frame, logger "
+          f"{'to .rrd' if args.save_rrd else 'to --stdout > /dev/null'}; logs in {work}")
+    print("RSS (MB) over time; slope fitted after the first minute:")
+    for name, samples in rss.items():
+        steady = [sample for sample in samples if sample[0] >= 60.0] or samples
+        shown = ", ".join(f"{at / 60:.1f}m {mb:.0f}" for at, mb in samples[:: max(
+            1, len(samples) // 8)])
+        print(f"  {name:8s} start {samples[0][1]:6.0f}  end {samples[-1][1]:6.0f}  "
+              f"slope {slope_mb_per_min(steady):+.2f} MB/min   [{shown}]")
+    minute = min(60.0, duration / 3)
+    first, last = statuses.window(0, minute), statuses.window(duration - minute, duration + 1)
+    print(f"latency (capture -> topology published), first and last {minute:.0f} s:")
+    print(latency_line("start", first))
+    print(latency_line("end  ", last))
+    with statuses.lock:
+        final = statuses.entries[-1][1] if statuses.entries else None
+    if final is not None:
+        sent = final.frame_sequence + 1
+        print(f"frames: ~{sent} sent, {final.frames_received} received by the learner, "
+              f"{final.frames_used} learned, {final.frames_dropped} dropped (latest-wins), "
+              f"{final.malformed_messages} malformed; {final.nodes} nodes, "
+              f"{final.steps_per_second:,.0f} steps/s")
+        capture_rate = sent / duration
+        print(f"capture rate: {capture_rate:.1f} frames/s (target 30)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

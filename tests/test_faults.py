@@ -1,0 +1,190 @@
+"""Faults with real processes on loopback: torn checkpoints refused by a running learner's
+start-up, a logger killed outright leaves a readable .rrd and its restart does not clobber it,
+and every service reconnects after a router restart. (kill -9 of the learner and its resume
+from the checkpoint: tests/test_pipeline.py.)"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from schemas.packing import decode_topology
+from services.zenoh_session import ZenohSetupError, client_config, open_config
+
+
+def _log(process) -> str:
+    return Path(process.log_path).read_text(errors="replace")
+
+
+def _wait(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+def _rrd_entities(path: Path) -> dict[str, int]:
+    """Rows per entity path of an .rrd (with or without its footer)."""
+    import warnings
+
+    from rerun.chunk import RrdReader
+
+    rows: dict[str, int] = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # "no footer" after a kill -9: expected here
+        store = RrdReader(path).stream().collect()
+    for chunk in store.stream():
+        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
+    return rows
+
+
+# ------------------------------------------------------------------------------ checkpoints
+def _trained_checkpoint(path: Path) -> None:
+    from gngdt_core import GNGDT
+    from services.checkpoint import save_checkpoint
+
+    rng = np.random.default_rng(0)
+    model = GNGDT(random_state=0).partial_fit(
+        rng.random((2000, 3), dtype=np.float32), rng.integers(0, 256, (2000, 3), np.uint8),
+        n_steps=2000)
+    save_checkpoint(path, model.get_state(), {"camera": "camera", "counters": {}})
+
+
+@pytest.mark.parametrize("damage", ["torn", "flipped byte", "tampered counters"])
+@pytest.mark.timeout(60)
+def test_learner_refuses_a_damaged_checkpoint_with_a_clear_message(
+    damage: str, spawn: Callable, tmp_path: Path
+) -> None:
+    import json
+
+    path = tmp_path / "learner.npz"
+    _trained_checkpoint(path)
+    data = bytearray(path.read_bytes())
+    if damage == "torn":  # a crash half-way through a copy (our own writes are atomic)
+        path.write_bytes(bytes(data[: len(data) // 2]))
+    elif damage == "flipped byte":  # the last data byte of the largest array
+        import zipfile
+
+        with zipfile.ZipFile(path) as archive:
+            largest = max(archive.infolist(), key=lambda item: item.file_size)
+        start = largest.header_offset + 30 + len(largest.filename.encode()) + len(largest.extra)
+        data[start + largest.file_size - 1] ^= 0xFF
+        path.write_bytes(bytes(data))
+    else:
+        with np.load(path, allow_pickle=False) as archive:
+            arrays = {key: archive[key] for key in archive.files}
+        metadata = json.loads(str(arrays["metadata"]))
+        metadata["counters"] = {"frames_used": 10**9}
+        arrays["metadata"] = np.array(json.dumps(metadata))
+        np.savez(path, **arrays)
+    learner = spawn("learn", "--checkpoint", str(path), "--zenoh-connect", "tcp/127.0.0.1:9")
+    assert learner.wait(40) == 2, _log(learner)
+    logged = _log(learner)
+    assert f"checkpoint {path}" in logged
+    assert "Traceback" not in logged
+
+
+# ---------------------------------------------------------------------------------- logger
+@pytest.mark.timeout(150)
+def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
+    router_endpoint: str, tabletop_recording: Path, spawn: Callable, tmp_path: Path
+) -> None:
+    rrd_path = tmp_path / "run.rrd"
+    connect = ("--zenoh-connect", router_endpoint)
+    logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
+    _wait(lambda: "logging to" in _log(logger), 60, "the logger")
+    spawn("capture", str(tabletop_recording), "--rate", "0.5", "--loop", *connect)
+    _wait(lambda: rrd_path.exists() and rrd_path.stat().st_size > 200_000, 60, "logged frames")
+    time.sleep(1.5)  # at least one periodic flush after those frames
+    logger.send_signal(signal.SIGKILL)
+    logger.wait(10)
+    size_at_kill = rrd_path.stat().st_size
+    rows = _rrd_entities(rrd_path)
+    assert rows.get("/world/camera/image/rgb", 0) >= 1, rows
+
+    restarted = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
+    second = tmp_path / "run.1.rrd"
+    _wait(lambda: second.exists() and second.stat().st_size > 100_000, 60,
+          "the restarted logger's frames")
+    restarted.send_signal(signal.SIGINT)
+    assert restarted.wait(30) == 0, _log(restarted)
+    assert f"writing {second} instead" in _log(restarted)
+    assert rrd_path.stat().st_size == size_at_kill  # the first file is untouched
+    assert _rrd_entities(rrd_path) == rows
+    assert _rrd_entities(second).get("/world/camera/image/rgb", 0) >= 1
+
+
+# ---------------------------------------------------------------------------------- router
+class TopologyWatch:
+    """Topology frame sequences seen through the router (its own reconnecting client)."""
+
+    def __init__(self, endpoint: str) -> None:
+        self.session = open_config(client_config([endpoint]))
+        self.lock = threading.Lock()
+        self.sequences: list[int] = []
+        self.session.declare_subscriber("gngdt/camera/topology", self._on_topology)
+
+    def _on_topology(self, sample) -> None:
+        snapshot = decode_topology(sample.payload.to_bytes())
+        with self.lock:
+            self.sequences.append(snapshot.frame_sequence)
+
+    def count(self) -> int:
+        with self.lock:
+            return len(self.sequences)
+
+
+def _start_router(spawn: Callable, endpoint: str):
+    router = spawn("router", "--listen", endpoint)
+    _wait(lambda: "listening on" in _log(router), 30, "the router")
+    return router
+
+
+@pytest.mark.timeout(180)
+def test_services_reconnect_after_a_router_restart(
+    free_port: int, tabletop_recording: Path, spawn: Callable, tmp_path: Path
+) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    connect = ("--zenoh-connect", endpoint)
+    router = _start_router(spawn, endpoint)
+    rrd_path = tmp_path / "reconnect.rrd"
+    learner = spawn("learn", "--samples-per-frame", "2000", *connect)
+    logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
+    watch = TopologyWatch(endpoint)
+    try:
+        capture = spawn("capture", str(tabletop_recording), "--rate", "1", "--loop", *connect)
+        _wait(lambda: watch.count() >= 3, 90, "topologies before the restart")
+
+        router.send_signal(signal.SIGKILL)
+        router.wait(10)
+        time.sleep(2.0)  # the clients notice the lost router and start retrying
+        for process in (learner, logger, capture):
+            assert process.poll() is None, _log(process)
+        before = watch.count()
+        router = _start_router(spawn, endpoint)
+        _wait(lambda: watch.count() >= before + 3, 60, "topologies after the restart")
+        with watch.lock:
+            after_restart = watch.sequences[before:]
+        assert max(after_restart) > max(watch.sequences[:before])  # new frames, not replays
+        size_before = rrd_path.stat().st_size
+        _wait(lambda: rrd_path.stat().st_size > size_before, 30, "the logger to write again")
+    finally:
+        watch.session.close()
+    for process in (capture, learner, logger):
+        process.send_signal(signal.SIGINT)
+        assert process.wait(30) == 0, _log(process)
+
+
+def test_no_router_is_a_clear_error_not_a_hang(free_port: int) -> None:
+    started = time.monotonic()
+    with pytest.raises(ZenohSetupError, match="gngdt router"):
+        open_config(client_config([f"tcp/127.0.0.1:{free_port}"]))
+    assert time.monotonic() - started < 30

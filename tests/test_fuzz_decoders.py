@@ -1,0 +1,332 @@
+"""Hostile payloads on every topic: the services' own per-sample decode paths never raise
+anything but ``ValueError`` (counted, skipped), and size limits hold before any allocation.
+
+Property-based (hypothesis) on random bytes and on structurally valid messages with hostile
+fields, plus one process-level flood of a running learner and logger over a real zenoh router.
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import time
+import tracemalloc
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from schemas import gngdt_pb2
+from schemas.packing import (
+    MAX_IMAGE_PIXELS,
+    MessageError,
+    calibration_to_intrinsics,
+    cloud_to_msg,
+    decode_topology,
+    encode_stream_end,
+    encode_topology,
+    raw_to_image,
+)
+from schemas.wire import FrameStamp
+from services.learner import decode_points
+
+FUZZ = settings(max_examples=200, deadline=None,
+                suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+#: every stream the logger subscribes to (``gngdt/<cam>/<stream>``)
+STREAMS = ("color", "depth", "calibration", "points", "topology", "learner/status", "eos")
+UINT32 = st.integers(0, 2**32 - 1)
+GOOD_ATTACHMENT = FrameStamp(1, 1_000_000_000).to_attachment()
+
+attachments = st.one_of(st.none(), st.just(GOOD_ATTACHMENT), st.binary(max_size=32))
+
+
+# ------------------------------------------------------------------------- message strategies
+@st.composite
+def hostile_clouds(draw: st.DrawFn) -> bytes:
+    """A foxglove PointCloud with arbitrary stride, fields and data (often inconsistent)."""
+    names = st.sampled_from(["x", "y", "z", "red", "green", "blue", "intensity", ""])
+    cloud_fields = draw(st.lists(
+        st.builds(PackedElementField, name=names, offset=st.integers(0, 2**32 - 1),
+                  type=st.integers(0, 9)),
+        max_size=8))
+    if draw(st.booleans()):  # often a plausible layout, so decoding gets past the field checks
+        cloud_fields = [PackedElementField(name=axis, offset=4 * index, type=7)
+                        for index, axis in enumerate("xyz")] + cloud_fields
+    message = PointCloud(point_stride=draw(st.one_of(st.integers(0, 40), UINT32)),
+                         fields=cloud_fields, data=draw(st.binary(max_size=400)))
+    return message.SerializeToString()
+
+
+@st.composite
+def hostile_images(draw: st.DrawFn) -> bytes:
+    encodings = st.one_of(
+        st.sampled_from(["rgb8", "bgr8", "rgba8", "mono8", "16UC1", "mono16", "32FC1"]),
+        st.text(max_size=8))
+    message = RawImage(width=draw(st.one_of(st.integers(0, 20), UINT32)),
+                       height=draw(st.one_of(st.integers(0, 20), UINT32)),
+                       step=draw(st.one_of(st.integers(0, 80), UINT32)),
+                       encoding=draw(encodings), data=draw(st.binary(max_size=600)))
+    return message.SerializeToString()
+
+
+@st.composite
+def hostile_calibrations(draw: st.DrawFn) -> bytes:
+    numbers = st.floats(allow_nan=True, allow_infinity=True)
+    message = CameraCalibration(width=draw(UINT32), height=draw(UINT32),
+                                K=draw(st.lists(numbers, max_size=12)),
+                                D=draw(st.lists(numbers, max_size=6)))
+    return message.SerializeToString()
+
+
+def hostile_arrays() -> st.SearchStrategy[gngdt_pb2.PackedArray]:
+    dtypes = st.sampled_from(["float32", "uint8", "uint32", "int32", "float64", "object", ""])
+    shapes = st.lists(st.one_of(st.integers(0, 8), st.integers(0, 2**32 - 1)), max_size=3)
+    return st.builds(gngdt_pb2.PackedArray, dtype=dtypes, shape=shapes,
+                     data=st.binary(max_size=200))
+
+
+@st.composite
+def hostile_topologies(draw: st.DrawFn) -> bytes:
+    """A Topology from a valid one with some parts replaced by hostile arrays."""
+    nodes = draw(st.integers(0, 6))
+    rng = np.random.default_rng(draw(st.integers(0, 1000)))
+    message = encode_topology(
+        positions=rng.random((nodes, 3), dtype=np.float32),
+        colors=rng.integers(0, 256, (nodes, 3)), normals=None, errors=None,
+        edges={"pos": rng.integers(0, max(nodes, 1), (nodes, 2)) if nodes else np.zeros((0, 2))},
+        clusterings={"pos": np.zeros(nodes, np.int32)},
+        steps=1, frame_sequence=1, timestamp_ns=1, frame_id="camera")
+    for part in draw(st.lists(st.sampled_from(["positions", "colors", "normals", "errors",
+                                                "edges", "labels"]), max_size=3)):
+        array = draw(hostile_arrays())
+        if part == "edges":
+            message.edges.add(property=draw(st.sampled_from(["pos", "col"])), pairs=array)
+        elif part == "labels":
+            message.clusterings.add(name=draw(st.sampled_from(["pos", "nor"])), labels=array)
+        else:
+            getattr(message, part).CopyFrom(array)
+    return message.SerializeToString()
+
+
+def any_payload() -> st.SearchStrategy[bytes]:
+    return st.one_of(st.binary(max_size=300), hostile_clouds(), hostile_images(),
+                     hostile_calibrations(), hostile_topologies())
+
+
+# ------------------------------------------------------------------------- the learner's path
+@FUZZ
+@given(payload=st.one_of(st.binary(max_size=300), hostile_clouds()), attachment=attachments)
+def test_learner_decode_path_raises_only_value_error(payload: bytes, attachment) -> None:
+    try:
+        stamp, positions, colors = decode_points(payload, attachment)
+    except ValueError:
+        return
+    assert attachment == GOOD_ATTACHMENT and stamp.sequence == 1
+    assert positions.dtype == np.float32 and positions.ndim == 2 and positions.shape[1] == 3
+    assert len(positions) >= 1 and np.isfinite(positions).all()
+    assert colors is None or (colors.dtype == np.uint8 and colors.shape == positions.shape)
+
+
+def test_learner_refuses_a_cloud_over_its_point_limit_before_allocating() -> None:
+    rng = np.random.default_rng(0)
+    positions = rng.random((50_000, 3), dtype=np.float32)
+    payload = cloud_to_msg(positions, rng.integers(0, 256, (50_000, 3), dtype=np.uint8),
+                           timestamp_ns=1).SerializeToString()
+    tracemalloc.start()
+    try:
+        with pytest.raises(MessageError, match="limit of 49999"):
+            decode_points(payload, GOOD_ATTACHMENT, max_points=49_999)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < len(payload) + 100_000  # the protobuf copy of the data, no point arrays
+    _, decoded, _ = decode_points(payload, GOOD_ATTACHMENT, max_points=50_000)
+    np.testing.assert_array_equal(decoded, positions)
+
+
+# ------------------------------------------------------------------ the logger's decoders
+@FUZZ
+@given(payload=hostile_images())
+def test_image_decoder_gives_the_declared_shape_or_message_error(payload: bytes) -> None:
+    message = RawImage.FromString(payload)
+    try:
+        image = raw_to_image(payload)
+    except MessageError:
+        return
+    assert image.shape[:2] == (message.height, message.width)
+    assert image.flags.c_contiguous and image.flags.writeable
+
+
+@FUZZ
+@given(payload=hostile_calibrations())
+def test_calibration_decoder_gives_usable_intrinsics_or_message_error(payload: bytes) -> None:
+    try:
+        intrinsics = calibration_to_intrinsics(payload)
+    except MessageError:
+        return
+    assert intrinsics.fx > 0 and intrinsics.fy > 0
+    assert np.isfinite([intrinsics.fx, intrinsics.fy]).all()
+    assert intrinsics.width > 0 and intrinsics.height > 0
+
+
+@FUZZ
+@given(payload=hostile_topologies())
+def test_topology_decoder_gives_a_consistent_snapshot_or_message_error(payload: bytes) -> None:
+    try:
+        snapshot = decode_topology(payload)
+    except MessageError:
+        return
+    count = snapshot.node_count
+    assert snapshot.positions.shape == (count, 3)
+    for pairs in snapshot.edges.values():
+        assert pairs.ndim == 2 and pairs.shape[1] == 2 and (pairs < max(count, 1)).all()
+    for labels in snapshot.clusterings.values():
+        assert labels.shape == (count,) and (labels >= -1).all()
+
+
+@pytest.mark.parametrize(
+    ("decode", "message", "match"),
+    [
+        (raw_to_image, RawImage(width=60_000, height=60_000, step=180_000, encoding="rgb8",
+                                data=b"\x00" * 64), f"exceeds {MAX_IMAGE_PIXELS} pixels"),
+        (raw_to_image, RawImage(width=4000, height=4000, step=12_000, encoding="rgb8",
+                                data=b"\x00" * 64), "needs 48000000"),
+        (decode_topology, gngdt_pb2.Topology(positions=gngdt_pb2.PackedArray(
+            dtype="float32", shape=[2_000_000, 3], data=b"")), "exceed the limit"),
+        (decode_topology, gngdt_pb2.Topology(positions=gngdt_pb2.PackedArray(
+            dtype="float32", shape=[2**32 - 1, 2**32 - 1], data=b"")), "exceed the limit"),
+    ],
+)
+def test_size_limits_are_checked_before_allocating(decode, message, match: str) -> None:
+    payload = message.SerializeToString()
+    tracemalloc.start()
+    try:
+        with pytest.raises(MessageError, match=match):
+            decode(payload)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 1_000_000, f"{peak} bytes allocated for a {len(payload)}-byte payload"
+
+
+def test_topology_node_limit_is_the_callers() -> None:
+    message = encode_topology(
+        positions=np.zeros((11, 3), np.float32), colors=None, normals=None, errors=None,
+        edges={}, clusterings={}, steps=0, frame_sequence=0, timestamp_ns=0, frame_id="c")
+    assert decode_topology(message, max_nodes=11).node_count == 11
+    with pytest.raises(MessageError, match="limit"):
+        decode_topology(message.SerializeToString(), max_nodes=10)
+
+
+@pytest.fixture(scope="module")
+def dispatcher():
+    """The logger's real per-sample path (decode + rerun logging) into an in-memory recording."""
+    import rerun as rr
+
+    from services.logger import Dispatcher, RerunLog
+
+    recording = rr.RecordingStream("gngdt-fuzz")
+    recording.memory_recording()
+    yield Dispatcher(RerunLog(recording, max_cloud_points=100))
+    recording.disconnect()
+
+
+@FUZZ
+@given(stream=st.sampled_from(STREAMS), payload=any_payload(), attachment=attachments)
+def test_logger_dispatch_counts_malformed_and_never_raises(
+    dispatcher, stream: str, payload: bytes, attachment
+) -> None:
+    before = dispatcher.malformed
+    dispatcher.handle(f"gngdt/fuzzcam/{stream}", payload, attachment)
+    assert dispatcher.malformed in (before, before + 1)
+    if attachment != GOOD_ATTACHMENT:
+        assert dispatcher.malformed == before + 1  # no frame stamp: never logged
+
+
+# ------------------------------------------------------------ flooding the running services
+def _wait(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out waiting for {what}")
+
+
+@pytest.mark.timeout(150)
+def test_flooded_learner_and_logger_count_garbage_and_keep_working(
+    router_endpoint: str, spawn: Callable, tmp_path: Path
+) -> None:
+    import zenoh
+    from rerun.chunk import RrdReader
+
+    from schemas.packing import decode_status
+    from services.zenoh_session import client_config, open_config
+
+    rrd_path = tmp_path / "flood.rrd"
+    connect = ("--zenoh-connect", router_endpoint)
+    learner = spawn("learn", "--samples-per-frame", "500", *connect)
+    logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
+    session = open_config(client_config([router_endpoint]))
+    statuses: list = []
+    session.declare_subscriber("gngdt/camera/learner/status",
+                               lambda sample: statuses.append(decode_status(
+                                   sample.payload.to_bytes())))
+    try:
+        liveliness = session.liveliness()
+        _wait(lambda: len(list(liveliness.get("gngdt/**/alive/**", timeout=1))) >= 2,
+              60, "learner and logger liveliness tokens")
+        block = zenoh.CongestionControl.BLOCK
+        rng = np.random.default_rng(7)
+        garbage = 0
+        for index in range(60):
+            stream = STREAMS[index % len(STREAMS)]
+            # non-empty bytes that are not a valid message of any kind: a varint-length field
+            # running past the end, so protobuf refuses it on every topic
+            payload = b"\x0a\xff\xff\x03" + rng.bytes(int(rng.integers(0, 200)))
+            attachment = GOOD_ATTACHMENT if index % 2 else rng.bytes(5)
+            session.put(f"gngdt/camera/{stream}", payload, attachment=attachment,
+                        congestion_control=block)
+            garbage += 1
+            time.sleep(0.01)
+        time.sleep(1.0)
+        assert learner.poll() is None and logger.poll() is None
+        # then a good frame: still learned and logged
+        positions = rng.random((3000, 3), dtype=np.float32)
+        cloud = cloud_to_msg(positions, rng.integers(0, 256, (3000, 3), dtype=np.uint8),
+                             timestamp_ns=time.time_ns())
+        session.put("gngdt/camera/points", cloud.SerializeToString(),
+                    attachment=FrameStamp(5, time.time_ns()).to_attachment(),
+                    congestion_control=block)
+        _wait(lambda: any(status.frame_sequence == 5 for status in statuses), 60,
+              "the good frame's status")
+        good = next(status for status in statuses if status.frame_sequence == 5)
+        # the points ring channel keeps only the newest sample, so not every garbage cloud is
+        # seen; the eos ones always are (a callback)
+        eos_garbage = sum(1 for index in range(60) if STREAMS[index % len(STREAMS)] == "eos")
+        assert good.malformed_messages >= eos_garbage
+        assert good.frames_used == 1 and good.nodes > 2
+        end = encode_stream_end(timestamp_ns=1, frames_sent=1, last_frame_sequence=5)
+        session.put("gngdt/camera/eos", end.SerializeToString(),
+                    attachment=FrameStamp(5, time.time_ns()).to_attachment(),
+                    congestion_control=block)
+        time.sleep(1.0)
+    finally:
+        session.close()
+    for process in (learner, logger):
+        process.send_signal(signal.SIGINT)
+        assert process.wait(30) == 0, Path(process.log_path).read_text()
+    logged = Path(logger.log_path).read_text()
+    malformed = int(re.search(r"logger done: (\d+) malformed", logged).group(1))
+    assert malformed >= garbage - 10  # images/points are latest-only: a few may be superseded
+    store = RrdReader(rrd_path).stream().collect()
+    entities = {chunk.entity_path for chunk in store.stream()}
+    assert {"/world/gng/nodes", "/metrics/nodes"} <= entities

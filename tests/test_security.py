@@ -1,0 +1,273 @@
+"""Security: loopback-only defaults without scouting, the TLS + access-control deployment of
+``config/secure/`` on loopback, and checkpoint/parameter files that are validated, never
+unpickled or evaluated."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from services.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from services.zenoh_session import (
+    DEFAULT_ENDPOINT,
+    ZenohSetupError,
+    client_config,
+    open_config,
+    router_config,
+)
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+SECURE = REPO_ROOT / "config" / "secure"
+
+
+def setting(config, key: str):
+    return json.loads(config.get_json(key))
+
+
+# ------------------------------------------------------------------------ secure defaults
+def test_default_configs_listen_on_loopback_only_with_scouting_off() -> None:
+    router = router_config([DEFAULT_ENDPOINT])
+    assert setting(router, "listen/endpoints") == ["tcp/127.0.0.1:7447"]
+    assert setting(router, "connect/endpoints") == []
+    service = client_config()
+    assert setting(service, "mode") == "client"
+    assert setting(service, "listen/endpoints") == []
+    for config in (router, service):
+        assert setting(config, "scouting/multicast/enabled") is False
+        assert setting(config, "scouting/gossip/enabled") is False
+
+
+def _sockets_of(pid: int) -> set[str]:
+    """Socket inodes the process holds open."""
+    inodes = set()
+    for descriptor in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(descriptor)
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[len("socket:["):-1])
+    return inodes
+
+
+def _ipv4(hex_address: str) -> str:
+    address, port = hex_address.split(":")
+    octets = bytes.fromhex(address)[::-1]  # /proc/net is in host (little-endian) order
+    return f"{'.'.join(str(octet) for octet in octets)}:{int(port, 16)}"
+
+
+def _bound_sockets(pid: int) -> list[tuple[str, str, str]]:
+    """(protocol, local address, state) of every TCP listener and UDP socket of ``pid``."""
+    inodes = _sockets_of(pid)
+    found = []
+    for protocol in ("tcp", "tcp6", "udp", "udp6"):
+        lines = Path(f"/proc/net/{protocol}").read_text().splitlines()[1:]
+        for line in lines:
+            columns = line.split()
+            local, state, inode = columns[1], columns[3], columns[9]
+            if inode not in inodes:
+                continue
+            listening = state == "0A"  # TCP_LISTEN
+            if protocol.startswith("udp") or listening:
+                shown = _ipv4(local) if protocol in ("tcp", "udp") else local
+                found.append((protocol, shown, "listen" if listening else "bound"))
+    return found
+
+
+@pytest.mark.timeout(90)
+def test_running_router_and_learner_hold_only_loopback_listeners(
+    free_port: int, spawn: Callable
+) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    router = spawn("router", "--listen", endpoint)
+    learner = spawn("learn", "--zenoh-connect", endpoint)
+    probe = None
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:  # wait until the learner's session is up
+        try:
+            probe = open_config(client_config([endpoint]))
+        except ZenohSetupError:
+            time.sleep(0.2)
+            continue
+        if list(probe.liveliness().get("gngdt/camera/learner/alive", timeout=1)):
+            break
+        time.sleep(0.2)
+    else:
+        raise AssertionError(Path(learner.log_path).read_text())
+    probe.close()
+
+    router_sockets = _bound_sockets(router.pid)
+    assert router_sockets == [("tcp", f"127.0.0.1:{free_port}", "listen")], router_sockets
+    learner_sockets = _bound_sockets(learner.pid)
+    assert learner_sockets == [], learner_sockets  # a client: no listener, no scouting socket
+
+
+# ------------------------------------------------------------------ TLS + access control
+@pytest.fixture(scope="module")
+def certificates(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """CA, router and client certificates made by ``config/secure/make-certs.sh``: one allowed
+    service (``gngdt-service``) and one signed by the same CA but not in the ACL."""
+    if shutil.which("openssl") is None:
+        pytest.skip("the openssl command is needed to make test certificates")
+    directory = tmp_path_factory.mktemp("certs")
+    subprocess.run(["sh", str(SECURE / "make-certs.sh"), str(directory), "localhost",
+                    "gngdt-service", "intruder"], check=True, capture_output=True, timeout=60)
+    return directory
+
+
+def _with_certificates(source: Path, certificates: Path, target: Path) -> Path:
+    """A copy of a shipped config whose certificate paths point at ``certificates``."""
+    text = source.read_text()
+    assert "config/secure/certs/" in text
+    target.write_text(text.replace("config/secure/certs/", f"{certificates}/"))
+    return target
+
+
+def _client(config_file: Path, endpoint: str, *, name: str | None = "gngdt-service",
+            certificates: Path | None = None):
+    config = client_config([endpoint], config_file)
+    config.insert_json5("connect/timeout_ms", "3000")
+    if name is None:  # the client has the CA but no certificate of its own
+        config.insert_json5("transport/link/tls/connect_certificate", "null")
+        config.insert_json5("transport/link/tls/connect_private_key", "null")
+    elif name != "gngdt-service":
+        config.insert_json5("transport/link/tls/connect_certificate",
+                            json.dumps(f"{certificates}/{name}.pem"))
+        config.insert_json5("transport/link/tls/connect_private_key",
+                            json.dumps(f"{certificates}/{name}.key"))
+    return open_config(config)
+
+
+@pytest.mark.timeout(120)
+def test_tls_router_with_access_control_admits_only_certified_services(
+    certificates: Path, free_port: int, spawn: Callable, tmp_path: Path
+) -> None:
+    import zenoh
+
+    router_file = _with_certificates(SECURE / "router.json5", certificates,
+                                     tmp_path / "router.json5")
+    client_file = _with_certificates(SECURE / "client.json5", certificates,
+                                     tmp_path / "client.json5")
+    endpoint = f"tls/127.0.0.1:{free_port}"
+    router = spawn("router", "--listen", endpoint, "--zenoh-config", str(router_file))
+    deadline = time.monotonic() + 30
+    while "listening on" not in Path(router.log_path).read_text():
+        assert time.monotonic() < deadline and router.poll() is None, \
+            Path(router.log_path).read_text()
+        time.sleep(0.1)
+
+    # no client certificate: the mutual-TLS handshake fails, no session at all
+    with pytest.raises(ZenohSetupError):
+        _client(client_file, endpoint, name=None)
+    # plain TCP to the TLS port: no session either
+    plain = client_config([endpoint.replace("tls/", "tcp/")])
+    plain.insert_json5("connect/timeout_ms", "3000")
+    with pytest.raises(ZenohSetupError):
+        open_config(plain)
+
+    publisher = _client(client_file, endpoint)
+    listener = _client(client_file, endpoint)
+    intruder = _client(client_file, endpoint, name="intruder", certificates=certificates)
+    received: dict[str, list[bytes]] = {"service": [], "intruder": []}
+    subscribers = [
+        listener.declare_subscriber("gngdt/**", lambda s: received["service"].append(
+            s.payload.to_bytes())),
+        intruder.declare_subscriber("gngdt/**", lambda s: received["intruder"].append(
+            s.payload.to_bytes())),
+    ]
+    intruder_put_seen: list[bytes] = []
+    subscribers.append(listener.declare_subscriber(
+        "gngdt/camera/eos", lambda s: intruder_put_seen.append(s.payload.to_bytes())))
+    try:
+        time.sleep(0.5)
+        deadline = time.monotonic() + 10
+        while len(received["service"]) < 5 and time.monotonic() < deadline:
+            publisher.put("gngdt/camera/points", b"cloud",
+                          congestion_control=zenoh.CongestionControl.BLOCK)
+            time.sleep(0.05)
+        for _ in range(10):  # the intruder may not publish into the pipeline either
+            intruder.put("gngdt/camera/eos", b"forged end of stream")
+            time.sleep(0.05)
+        time.sleep(0.5)
+    finally:
+        for subscriber in subscribers:
+            subscriber.undeclare()
+        for session in (publisher, listener, intruder):
+            session.close()
+    assert len(received["service"]) >= 5 and set(received["service"]) == {b"cloud"}
+    assert b"cloud" not in received["intruder"]  # (its own puts are delivered to it locally)
+    assert intruder_put_seen == []
+
+
+# --------------------------------------------------------------- files are data, not code
+class _Exploit:
+    """Unpickling this would create ``marker``: proof that something was unpickled."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self):
+        return (Path.touch, (self.marker,))
+
+
+def test_checkpoint_with_a_pickled_object_is_refused_without_unpickling(tmp_path: Path) -> None:
+    marker = tmp_path / "unpickled"
+    path = tmp_path / "evil.npz"
+    save_checkpoint(path, {"weights": np.arange(4, dtype=np.float32)})
+    with np.load(path, allow_pickle=False) as archive:
+        arrays = {key: archive[key] for key in archive.files}
+    exploit = np.empty(1, dtype=object)
+    exploit[0] = _Exploit(marker)
+    arrays["state/weights"] = exploit
+    np.savez(path, **arrays)  # numpy pickles object arrays
+    with pytest.raises(CheckpointError, match=r"evil\.npz"):
+        load_checkpoint(path)
+    assert not marker.exists()
+
+
+def test_checkpoint_metadata_is_covered_by_the_digest(tmp_path: Path) -> None:
+    path = tmp_path / "ckpt.npz"
+    save_checkpoint(path, {"weights": np.arange(4, dtype=np.float32)},
+                    {"counters": {"frames_used": 3}})
+    with np.load(path, allow_pickle=False) as archive:
+        arrays = {key: archive[key] for key in archive.files}
+    metadata = json.loads(str(arrays["metadata"]))
+    metadata["counters"]["frames_used"] = 10**12
+    arrays["metadata"] = np.array(json.dumps(metadata))
+    np.savez(path, **arrays)
+    with pytest.raises(CheckpointError, match="tampered"):
+        load_checkpoint(path)
+
+
+def test_checkpoint_zip_bomb_is_refused_before_reading(tmp_path: Path, monkeypatch) -> None:
+    import zipfile
+
+    from services import checkpoint
+
+    path = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("state/weights.npy", b"\x00" * 5_000_000)  # compresses to ~5 kB
+    monkeypatch.setattr(checkpoint, "MAX_CHECKPOINT_BYTES", 1_000_000)
+    assert path.stat().st_size < 100_000
+    with pytest.raises(CheckpointError, match="declares 5000"):
+        load_checkpoint(path)
+
+
+def test_params_values_are_type_checked_never_evaluated(tmp_path: Path) -> None:
+    from services.learner import load_params
+
+    marker = tmp_path / "evaluated"
+    params = tmp_path / "evil.toml"
+    params.write_text(f'samples_per_frame = "__import__(\'pathlib\').Path(\'{marker}\').touch()"\n')
+    with pytest.raises(ValueError, match=r"evil\.toml: learner option samples_per_frame must be "
+                                         r"int"):
+        load_params(params)
+    assert not marker.exists()
