@@ -48,7 +48,12 @@ EXAMPLES = """examples:
   gngdt capture recordings/tabletop.mcap               # at the recorded rate, then end-of-stream
   gngdt capture recordings/tabletop.mcap --fast --voxel 0.01 --max-points 50000
   gngdt capture recordings/tabletop.mcap --loop --cam left --zenoh-connect tcp/10.0.0.2:7447
+  gngdt capture mybag_0.mcap --topics /camera --max-skew-ms 20   # a ROS 2 bag, unsynchronised
 """
+
+#: colour and depth of one frame may differ by this much in a ROS 2 bag (half a 60 Hz period;
+#: gngdt's own recordings stamp both identically)
+DEFAULT_MAX_SKEW_MS = 8.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,6 +79,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="wait this long for a points subscriber before the first frame (default 10)",
     )
     parser.add_argument("--seed", type=int, default=0, help="seed of the point-cap sampling")
+    parser.add_argument(
+        "--topics",
+        metavar="PREFIX",
+        help="read only the recording's topics under PREFIX (a bag with several cameras)",
+    )
+    parser.add_argument(
+        "--max-skew-ms",
+        type=float,
+        default=DEFAULT_MAX_SKEW_MS,
+        help="largest stamp difference between a frame's colour and depth images "
+        f"(default {DEFAULT_MAX_SKEW_MS:g})",
+    )
     add_zenoh_arguments(parser)
 
 
@@ -174,17 +191,27 @@ def log_bad_frame(error: Exception) -> None:
     log.error("%s; skipped, continuing with the next good frame", error)
 
 
-def replay_frames(path: Path, loop: bool, stop: threading.Event) -> Iterator[Frame]:
+def replay_frames(
+    path: Path,
+    loop: bool,
+    stop: threading.Event,
+    topic_prefix: str | None = None,
+    max_skew_ms: float = DEFAULT_MAX_SKEW_MS,
+) -> Iterator[Frame]:
     """Frames of the recording (forever with ``loop``).
 
     A bad frame is logged and skipped; damage to the file itself ends a pass, logged.
     """
     from services.recording.reader import RecordingError, read_frames
 
+    max_skew_ns = round(max_skew_ms * 1e6)
     while not stop.is_set():
         yielded = 0
         try:
-            for frame in read_frames(path, on_bad_frame=log_bad_frame):
+            frames = read_frames(
+                path, topic_prefix, max_skew_ns=max_skew_ns, on_bad_frame=log_bad_frame
+            )
+            for frame in frames:
                 yielded += 1
                 yield frame
         except RecordingError as error:
@@ -228,6 +255,8 @@ def main(args: argparse.Namespace) -> int:
             CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points), args.seed
         )
         clock = ReplayClock(None if args.fast else args.rate)
+        if args.max_skew_ms < 0:
+            raise ValueError(f"--max-skew-ms must be >= 0, got {args.max_skew_ms}")
     except ValueError as error:
         log.error("%s", error)
         return 2
@@ -249,7 +278,8 @@ def main(args: argparse.Namespace) -> int:
                         topic(args.cam, "points"), args.wait_subscribers)
         sequence = -1
         frames_sent = 0
-        for frame in replay_frames(args.recording, args.loop, stop):
+        frames = replay_frames(args.recording, args.loop, stop, args.topics, args.max_skew_ms)
+        for frame in frames:
             clock.wait_for(frame.timestamp_ns, stop)
             if stop.is_set():
                 break

@@ -19,7 +19,7 @@ log = logging.getLogger(__name__)
 EXAMPLES = """examples:
   gngdt router                                   # listens on tcp/127.0.0.1:7447
   gngdt router --listen tcp/127.0.0.1:7450
-  gngdt router --zenoh-config config/router.json5   # TLS, access control, ...
+  gngdt router --listen tls/127.0.0.1:7447 --zenoh-config config/secure/router.json5  # TLS, ACL
 """
 
 

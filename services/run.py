@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from schemas.wire import DEFAULT_CAMERA, topic
-from services.logger import LIVELINESS_KEY, default_rrd_path
+from services.logger import LIVELINESS_KEY, default_rrd_path, unused_rrd_path
 from services.zenoh_session import free_tcp_port, open_config, router_config
 
 if TYPE_CHECKING:
@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap                 # writes runs/tabletop-<time>.rrd
-  gngdt run recordings/tabletop.mcap --fast --save out.rrd
+  gngdt run recordings/tabletop.mcap --fast --save out.rrd   # out.1.rrd if out.rrd exists
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
 """
 
@@ -259,7 +259,8 @@ def main(args: argparse.Namespace) -> int:
     topic(args.cam, "points")  # validates the camera name
     rrd_path = None
     if not (args.connect or args.serve):
-        rrd_path = args.save or default_rrd_path(args.recording.stem)
+        # the logger never overwrites a file: name the one it will really write
+        rrd_path = unused_rrd_path(args.save or default_rrd_path(args.recording.stem))
         rrd_path.parent.mkdir(parents=True, exist_ok=True)
         destination = str(rrd_path)
     else:
