@@ -29,9 +29,9 @@ def check_batch(
             raise ValueError(
                 f"colors must have shape ({pos.shape[0]}, 3) to match positions, got {col.shape}"
             )
-    finite = _finite_rows(pos)
+    finite = finite_rows(pos)
     if col is not None:
-        finite_colors = _finite_rows(col)
+        finite_colors = finite_rows(col)
         finite = finite_colors if finite is None else (
             finite if finite_colors is None else finite & finite_colors
         )
@@ -41,16 +41,24 @@ def check_batch(
     return pos, col, (np.flatnonzero(finite) if n_invalid else None), n_invalid
 
 
-def _finite_rows(array: np.ndarray) -> np.ndarray | None:
-    """(N,) bool mask of the rows without NaN/inf, or None when every row is finite.
+def finite_rows(array: np.ndarray) -> np.ndarray | None:
+    """(N,) bool mask of the rows of ``array`` (N, D) without NaN/inf, or None when all are.
 
-    The whole-array test comes first: the row-wise reduction is ten times slower and only
-    needed when something is not finite (integer arrays never are).
+    Screens the row sums first: a NaN or inf anywhere makes its row's sum non-finite, so
+    finite sums prove every element finite, at a fifth of the cost of an element-wise test
+    (less still on the strided views of a decoded point cloud). Only a float overflow in a sum
+    sends a finite batch to the exact per-row test. Integer arrays are always finite.
     """
     if not np.issubdtype(array.dtype, np.inexact):
         return None
-    finite = np.isfinite(array)
-    return None if finite.all() else finite.all(axis=1)
+    row_sums = array[:, 0].copy()
+    with np.errstate(invalid="ignore", over="ignore"):  # inf - inf and overflow are the point
+        for column in range(1, array.shape[1]):
+            row_sums += array[:, column]
+    if np.isfinite(row_sums).all():
+        return None
+    finite = np.isfinite(array).all(axis=1)
+    return None if finite.all() else finite
 
 
 def gather(

@@ -430,7 +430,7 @@ def _color_channel(column: np.ndarray) -> np.ndarray:
 
 
 def msg_to_cloud(
-    message: PointCloud | bytes, *, max_points: int = 10_000_000
+    message: PointCloud | bytes, *, max_points: int = 10_000_000, copy: bool = True
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """``(positions, colors)`` of a foxglove PointCloud in any field order and stride.
 
@@ -438,6 +438,8 @@ def msg_to_cloud(
     colors: (N, 3) uint8 RGB from red/green/blue fields, or None when the cloud has none
     (float colour fields are taken as 0..1). The point count is checked against ``max_points``
     before any allocation. The pose is not applied.
+    copy=False: for gngdt's own layout, read-only strided views into the payload instead of
+    copies (a consumer that samples or decimates the cloud then copies only what it uses).
     """
     message = parse_message(PointCloud, message)
     by_name = {element.name: element for element in message.fields}
@@ -456,6 +458,8 @@ def msg_to_cloud(
         raise MessageError(f"point cloud has {count} points, more than the limit of {max_points}")
     if stride == CLOUD_POINT_STRIDE and _is_gngdt_layout(message.fields):
         points = np.frombuffer(data, dtype=_GNGDT_POINT, count=count)
+        if not copy:
+            return points["xyz"], points["rgb"]
         return np.array(points["xyz"], dtype=np.float32), np.array(points["rgb"], dtype=np.uint8)
     x, y, z = (by_name[axis] for axis in ("x", "y", "z"))
     float32_xyz = all(element.type == PackedElementField.FLOAT32 for element in (x, y, z))

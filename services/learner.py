@@ -345,9 +345,11 @@ def finite_points(
     positions: np.ndarray, colors: np.ndarray | None
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Drop points with a NaN/inf coordinate (a foreign publisher may send them)."""
-    if np.isfinite(positions.reshape(-1)).all():  # the common case, ~10x cheaper than per row
+    from gngdt_core.sampling import finite_rows
+
+    finite = finite_rows(positions)
+    if finite is None:
         return positions, colors
-    finite = np.isfinite(positions).all(axis=1)
     return positions[finite], None if colors is None else colors[finite]
 
 
@@ -364,7 +366,8 @@ def decode_points(
     from schemas.packing import MessageError, msg_to_cloud
 
     stamp = FrameStamp.from_attachment(attachment)
-    positions, colors = finite_points(*msg_to_cloud(payload, max_points=max_points))
+    # views into the payload: learning samples only samples_per_frame of its points
+    positions, colors = finite_points(*msg_to_cloud(payload, max_points=max_points, copy=False))
     if len(positions) == 0:
         raise MessageError("no finite points in the cloud")
     return stamp, positions, colors

@@ -342,7 +342,9 @@ class Dispatcher:
                 paths, packing.calibration_to_intrinsics(payload)),
             "color": lambda: self.rerun_log.color(paths, packing.raw_to_image(payload)),
             "depth": lambda: self.rerun_log.depth(paths, packing.raw_to_image(payload)),
-            "points": lambda: self.rerun_log.points(paths, *packing.msg_to_cloud(payload)),
+            # views: the logger decimates, so only the logged points are copied
+            "points": lambda: self.rerun_log.points(
+                paths, *packing.msg_to_cloud(payload, copy=False)),
             "topology": lambda: self._topology(camera, paths, packing.decode_topology(payload)),
             "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
             "eos": lambda: self._eos(camera, packing.decode_stream_end(payload)),

@@ -81,3 +81,17 @@ def test_queries_are_checked():
         model.clusters("col")
     with pytest.raises(ValueError, match="min_size"):
         model.clusters("pos", min_size=0)
+
+
+def test_finite_rows_screen_is_exact_including_overflowing_sums():
+    from gngdt_core.sampling import finite_rows
+
+    rows = np.ones((6, 3), dtype=np.float32)
+    assert finite_rows(rows) is None
+    rows[1, 2] = np.nan
+    rows[3, 0] = np.inf
+    rows[4] = [np.inf, -np.inf, 1.0]  # sums to NaN
+    assert finite_rows(rows).tolist() == [True, False, True, False, False, True]
+    huge = np.full((2, 3), 3e38, dtype=np.float32)  # finite, but the row sums overflow
+    assert finite_rows(huge) is None
+    assert finite_rows(np.zeros((4, 3), dtype=np.uint8)) is None

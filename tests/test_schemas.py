@@ -197,6 +197,16 @@ def test_cloud_round_trip_layout() -> None:
     np.testing.assert_array_equal(restored_colors, colors)
 
 
+def test_cloud_views_without_copy_equal_the_copies_and_are_read_only() -> None:
+    rng = np.random.default_rng(3)
+    positions = rng.normal(size=(1000, 3)).astype(np.float32)
+    colors = rng.integers(0, 256, (1000, 3), dtype=np.uint8)
+    payload = cloud_to_msg(positions, colors, timestamp_ns=1).SerializeToString()
+    view_positions, view_colors = msg_to_cloud(payload, copy=False)
+    assert np.array_equal(view_positions, positions) and np.array_equal(view_colors, colors)
+    assert not view_positions.flags.writeable and not view_colors.flags.writeable
+
+
 def test_cloud_without_colors() -> None:
     positions = np.arange(12, dtype=np.float32).reshape(4, 3)
     message = cloud_to_msg(positions, timestamp_ns=0)
