@@ -7,12 +7,14 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
 
-from services.zenoh_session import free_tcp_port, open_config, router_config
+from services.zenoh_session import client_config, free_tcp_port, open_config, router_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -88,3 +90,40 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
         if process.poll() is None:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait()
+
+
+@dataclass
+class CaptureOutput:
+    """What one capture run published: decoded clouds, end-of-stream messages, its log."""
+
+    clouds: list = field(default_factory=list)
+    ends: list = field(default_factory=list)
+    log: str = ""
+
+
+@pytest.fixture
+def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureOutput]:
+    """``run_capture(RECORDING, *OPTIONS)`` runs `gngdt capture RECORDING --fast OPTIONS` to its
+    end against ``router_endpoint`` and returns what it published on the default camera."""
+    from schemas.packing import decode_stream_end, msg_to_cloud
+
+    def run(recording: Path, *options: str) -> CaptureOutput:
+        output = CaptureOutput()
+        session = open_config(client_config([router_endpoint]))
+        session.declare_subscriber("gngdt/camera/points", lambda sample: output.clouds.append(
+            msg_to_cloud(sample.payload.to_bytes())))
+        session.declare_subscriber("gngdt/camera/eos", lambda sample: output.ends.append(
+            decode_stream_end(sample.payload.to_bytes())))
+        try:
+            capture = spawn("capture", str(recording), "--fast",
+                            "--zenoh-connect", router_endpoint, *options)
+            assert capture.wait(60) == 0, Path(capture.log_path).read_text()
+            deadline = time.monotonic() + 10
+            while not output.ends and time.monotonic() < deadline:
+                time.sleep(0.05)
+        finally:
+            session.close()
+        output.log = Path(capture.log_path).read_text()
+        return output
+
+    return run

@@ -4,7 +4,6 @@ the next good frame where one exists (reader's ``on_bad_frame``, and the capture
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -210,11 +209,8 @@ def test_truncated_file_still_ends_the_reading_after_the_good_frames(tmp_path: P
 
 @pytest.mark.timeout(120)
 def test_capture_skips_bad_frames_and_sends_the_good_ones(
-    router_endpoint: str, spawn: Callable, tmp_path: Path
+    run_capture: Callable, tmp_path: Path
 ) -> None:
-    from schemas.packing import decode_stream_end
-    from services.zenoh_session import client_config, open_config
-
     path = tmp_path / "holes.mcap"
     recording = RawRecording(path)
     for index in range(7):
@@ -224,24 +220,9 @@ def test_capture_skips_bad_frames_and_sends_the_good_ones(
             recording.write_frame(index)
     recording.close()
 
-    session = open_config(client_config([router_endpoint]))
-    ends: list = []
-    clouds: list[bytes] = []
-    session.declare_subscriber("gngdt/camera/points",
-                               lambda sample: clouds.append(sample.payload.to_bytes()))
-    session.declare_subscriber("gngdt/camera/eos",
-                               lambda sample: ends.append(decode_stream_end(
-                                   sample.payload.to_bytes())))
-    try:
-        capture = spawn("capture", str(path), "--fast", "--zenoh-connect", router_endpoint)
-        assert capture.wait(60) == 0, Path(capture.log_path).read_text()
-        deadline = time.monotonic() + 10
-        while not ends and time.monotonic() < deadline:
-            time.sleep(0.05)
-    finally:
-        session.close()
-    logged = Path(capture.log_path).read_text()
-    assert "holes.mcap: frame 1: depth 40x15 does not match colour 40x30" in logged
-    assert "holes.mcap: frame 4:" in logged
-    assert len(ends) == 1 and ends[0].frames_sent == 5
-    assert len(clouds) == 5
+    output = run_capture(path)
+
+    assert "holes.mcap: frame 1: depth 40x15 does not match colour 40x30" in output.log
+    assert "holes.mcap: frame 4:" in output.log
+    assert len(output.ends) == 1 and output.ends[0].frames_sent == 5
+    assert len(output.clouds) == 5
