@@ -19,11 +19,17 @@ Layout (``cap`` = node capacity = ``max_nodes``, ``K`` = ``MAX_DEGREE``):
   ``K`` in practice.
 - Spatial hash grid for the winner search: ``ghead`` (T,) int32 first node of each bucket,
   ``gnext``/``gprev`` (cap,) int32 doubly linked bucket lists, ``gbucket`` (cap,) int64 bucket of
-  each node (-1: not in the grid), ``gcell`` (cap, 3) int64 integer cell of each node.
+  each node (-1: not in the grid), ``gcell`` (cap, 3) int64 integer cell of each node. A node's
+  cell is ``floor(position * (1 / cell_size))`` per axis (the z cell is 0 in 2-D); every node
+  in the grid is kept in the bucket of its current cell.
 - ``istate`` int64: [n_nodes, n_steps, grid_active]; ``fstate`` float64: [error_scale, cell_size,
   spacing_ema].
 
 Nodes are deleted by swapping the last node into the hole, so indices stay compact.
+
+Speed notes: a step takes well under a microsecond, so the per-step loop (`_learn_steps`) runs
+without numba's reference counting, its helpers are inlined at the numba IR level
+(``inline="always"``), and samples and nodes are read by index, never through array views.
 """
 
 from __future__ import annotations
@@ -44,8 +50,16 @@ MODE_GNGW = 2
 MAX_DEGREE = 16
 # Below this many nodes a brute-force winner search is cheaper than the grid.
 GRID_MIN_NODES = 48
+# Grid cell edge in running node spacings (the search is fastest at about 1.5-2.5), and the factor
+# by which the cell may drift from that before the grid is rebuilt.
+GRID_CELL_SPACINGS = 2.0
+GRID_CELL_TOLERANCE = 1.4
 # Renormalise stored errors when the global decay factor falls below this.
 ERROR_SCALE_FLOOR = 1e-60
+# Relative safety margin of the grid search's distance bounds: cell coordinates carry rounding
+# errors of a few ulps, so a cell is skipped (or the search stopped) only when its bound beats the
+# best distance by this factor. It costs nothing in exactness, only a rare extra cell visit.
+BOUND_SLACK = 1e-9
 
 # indices into istate / fstate / fparams / iparams
 I_NODES, I_STEPS, I_GRID = 0, 1, 2
@@ -54,11 +68,14 @@ P_ETA1, P_ETA2, P_ALPHA, P_BETA, P_TAU_COL, P_TAU_NOR, P_MU = 0, 1, 2, 3, 4, 5, 
 P_VX, P_VY, P_VZ, P_W_POS, P_W_COL = 7, 8, 9, 10, 11
 Q_LAMBDA, Q_AGE_MAX, Q_MAX_NODES, Q_MODE, Q_HAS_COL, Q_HAS_NOR, Q_ORIENT = 0, 1, 2, 3, 4, 5, 6
 
+# helpers of the per-step loop: inlined into their callers at the numba IR level
+inlined = njit(cache=True, inline="always")
+
 
 # --------------------------------------------------------------------------- adjacency
 
 
-@njit(cache=True)
+@inlined
 def find_slot(nbr, deg, i, j):
     """Slot of neighbour ``j`` in row ``i``, or -1."""
     for k in range(deg[i]):
@@ -67,7 +84,7 @@ def find_slot(nbr, deg, i, j):
     return -1
 
 
-@njit(cache=True)
+@inlined
 def add_edge(nbr, age, emask, rev, deg, i, j, mask):
     """Connect ``i`` and ``j`` with age 0 and property bits ``mask``; False on degree overflow."""
     ki = deg[i]
@@ -87,7 +104,7 @@ def add_edge(nbr, age, emask, rev, deg, i, j, mask):
     return True
 
 
-@njit(cache=True)
+@inlined
 def _drop_slot(nbr, age, emask, rev, deg, i, k):
     """Remove slot ``k`` of row ``i`` only (the twin is handled by the caller)."""
     last = deg[i] - 1
@@ -100,7 +117,7 @@ def _drop_slot(nbr, age, emask, rev, deg, i, k):
     deg[i] = last
 
 
-@njit(cache=True)
+@inlined
 def remove_edge(nbr, age, emask, rev, deg, i, k):
     """Delete the edge at slot ``k`` of node ``i`` (all properties), from both endpoints."""
     j = nbr[i, k]
@@ -112,24 +129,25 @@ def remove_edge(nbr, age, emask, rev, deg, i, k):
 # --------------------------------------------------------------------------- spatial hash grid
 
 
-@njit(cache=True)
+@inlined
 def _bucket(cx, cy, cz, table_mask):
     return ((cx * 73856093) ^ (cy * 19349663) ^ (cz * 83492791)) & table_mask
 
 
-@njit(cache=True)
-def _cell_of(pos, i, cell_size):
-    cx = math.floor(pos[i, 0] / cell_size)
-    cy = math.floor(pos[i, 1] / cell_size)
+@inlined
+def _cell_of(pos, i, inv_cell):
+    cx = math.floor(pos[i, 0] * inv_cell)
+    cy = math.floor(pos[i, 1] * inv_cell)
     cz = 0.0
     if pos.shape[1] > 2:
-        cz = math.floor(pos[i, 2] / cell_size)
+        cz = math.floor(pos[i, 2] * inv_cell)
     return np.int64(cx), np.int64(cy), np.int64(cz)
 
 
-@njit(cache=True)
-def grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size):
-    cx, cy, cz = _cell_of(pos, i, cell_size)
+@inlined
+def grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell):
+    """Put node ``i`` (not in the grid) at the head of its cell's bucket."""
+    cx, cy, cz = _cell_of(pos, i, inv_cell)
     b = _bucket(cx, cy, cz, ghead.shape[0] - 1)
     gcell[i, 0] = cx
     gcell[i, 1] = cy
@@ -143,7 +161,7 @@ def grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size):
     ghead[b] = i
 
 
-@njit(cache=True)
+@inlined
 def grid_remove(ghead, gnext, gprev, gbucket, i):
     b = gbucket[i]
     if b < 0:
@@ -157,14 +175,36 @@ def grid_remove(ghead, gnext, gprev, gbucket, i):
     gbucket[i] = -1
 
 
-@njit(cache=True)
-def grid_update(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size):
-    """Move node ``i`` to its current cell's bucket if it crossed a cell border."""
-    cx, cy, cz = _cell_of(pos, i, cell_size)
-    if cx == gcell[i, 0] and cy == gcell[i, 1] and cz == gcell[i, 2]:
-        return
-    grid_remove(ghead, gnext, gprev, gbucket, i)
-    grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size)
+@inlined
+def _crossed_cell(old, new, inv_cell):
+    """Whether a coordinate moving from ``old`` to ``new`` changes its cell."""
+    return math.floor(old * inv_cell) != math.floor(new * inv_cell)
+
+
+@inlined
+def _move_toward(pos, i, x0, x1, x2, dim, rate, grid_on, ghead, gnext, gprev, gbucket, gcell,
+                 inv_cell):
+    """Step 5 for a position: ``h_i += rate * (x - h_i)``, keeping node ``i``'s grid bucket.
+
+    The grid invariant (each node is in the bucket of ``floor(h * inv_cell)``) lets the cell test
+    compare the old and new coordinates instead of loading the stored cell.
+    """
+    old0 = pos[i, 0]
+    old1 = pos[i, 1]
+    new0 = old0 + rate * (x0 - old0)
+    new1 = old1 + rate * (x1 - old1)
+    pos[i, 0] = new0
+    pos[i, 1] = new1
+    crossed = grid_on and (_crossed_cell(old0, new0, inv_cell)
+                           or _crossed_cell(old1, new1, inv_cell))
+    if dim > 2:
+        old2 = pos[i, 2]
+        new2 = old2 + rate * (x2 - old2)
+        pos[i, 2] = new2
+        crossed = crossed or (grid_on and _crossed_cell(old2, new2, inv_cell))
+    if crossed:
+        grid_remove(ghead, gnext, gprev, gbucket, i)
+        grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell)
 
 
 @njit(cache=True)
@@ -195,41 +235,41 @@ def grid_rebuild(pos, n, ghead, gnext, gprev, gbucket, gcell, cell_size):
         if b >= 0:
             ghead[b] = -1
             gbucket[i] = -1
+    inv_cell = 1.0 / cell_size
     for i in range(n):
-        grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, cell_size)
+        grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell)
 
 
 # --------------------------------------------------------------------------- winner search
 
 
-@njit(cache=True)
-def _sq_dist(x, pos, i):
-    """Squared distance between vector ``x`` and row ``i`` of ``pos`` (unrolled for 2 and 3)."""
-    if x.shape[0] == 3:
-        t0 = x[0] - pos[i, 0]
-        t1 = x[1] - pos[i, 1]
-        t2 = x[2] - pos[i, 2]
+@inlined
+def _sq_dist(pos, i, x0, x1, x2, dim):
+    """Squared distance between the point (x0, x1[, x2]) and row ``i`` of ``pos``."""
+    t0 = x0 - pos[i, 0]
+    t1 = x1 - pos[i, 1]
+    if dim > 2:
+        t2 = x2 - pos[i, 2]
         return t0 * t0 + t1 * t1 + t2 * t2
-    if x.shape[0] == 2:
-        t0 = x[0] - pos[i, 0]
-        t1 = x[1] - pos[i, 1]
-        return t0 * t0 + t1 * t1
-    d = 0.0
-    for a in range(x.shape[0]):
-        t = x[a] - pos[i, a]
-        d += t * t
-    return d
+    return t0 * t0 + t1 * t1
 
 
-@njit(cache=True)
-def nearest_two_brute(x, pos, n):
+@inlined
+def _node_sq_dist(values, i, j):
+    """Squared distance between rows ``i`` and ``j`` of ``values`` ((cap, 2) or (cap, 3))."""
+    x2 = values[i, 2] if values.shape[1] > 2 else 0.0
+    return _sq_dist(values, j, values[i, 0], values[i, 1], x2, values.shape[1])
+
+
+@inlined
+def nearest_two_brute(pos, n, x0, x1, x2, dim):
     """The two nodes nearest to ``x`` by position, and the squared distance of the first."""
     best1 = np.inf
     best2 = np.inf
     s1 = -1
     s2 = -1
     for i in range(n):
-        d = _sq_dist(x, pos, i)
+        d = _sq_dist(pos, i, x0, x1, x2, dim)
         if d < best1:
             best2 = best1
             s2 = s1
@@ -241,67 +281,142 @@ def nearest_two_brute(x, pos, n):
     return s1, s2, best1
 
 
-@njit(cache=True)
-def nearest_two_grid(x, pos, n, ghead, gnext, cell_size):
-    """Exact nearest two by position, searching grid rings outward until no closer node can exist.
+def _first_cells(dim: int) -> np.ndarray:
+    """(27, 3) or (9, 3) int64: the query's cell and its ring-1 neighbours, likely nearest first.
 
-    Falls back to brute force when the rings would cover more cells than there are nodes
-    (a query far away from every node).
+    Offsets are along each axis toward the query's nearer cell face (+1) or away from it (-1),
+    ordered by the expected squared gap for a query uniform in its cell (near gap 1/4, far 3/4),
+    so the two nearest nodes are usually found early and the remaining cells are pruned.
     """
-    dim = x.shape[0]
+    expected_gap2 = {0: 0.0, 1: 0.0625, -1: 0.5625}
+    z_offsets = (-1, 0, 1) if dim == 3 else (0,)
+    offsets = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in z_offsets]
+    offsets.sort(key=lambda o: (sum(expected_gap2[v] for v in o), o))
+    return np.array(offsets, dtype=np.int64)
+
+
+FIRST_CELLS_3D = _first_cells(3)
+FIRST_CELLS_2D = _first_cells(2)
+
+
+@inlined
+def _axis_gap(offset, toward_near, near, far):
+    """Gap (in cells) along one axis from the query to the cell ``offset`` away."""
+    if offset == 0:
+        return 0.0
+    return abs(offset) - 1 + (near if (offset > 0) == toward_near else far)
+
+
+@inlined
+def _scan_bucket(p, gnext, pos, x0, x1, x2, dim, s1, s2, best1, best2):
+    """Fold the nodes of one bucket list (starting at ``p``) into the two nearest so far."""
+    while p >= 0:
+        d = _sq_dist(pos, p, x0, x1, x2, dim)
+        if d < best1:
+            best2 = best1
+            s2 = s1
+            best1 = d
+            s1 = p
+        elif d < best2 and p != s1:
+            best2 = d
+            s2 = p
+        p = gnext[p]
+    return s1, s2, best1, best2
+
+
+@inlined
+def nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext, cell_size, inv_cell):
+    """Exact nearest two by position from the grid; returns s1, s2 and the squared distance of s1.
+
+    Visits the query's cell and its ring-1 neighbours (likely nearest first), skipping every cell
+    whose box is farther than the current second-best distance, then further rings (pruned the
+    same way) until no unvisited cell can hold a closer node. Falls back to brute force when the
+    rings would cover more cells than there are nodes (a query far away from every node).
+    """
     table_mask = ghead.shape[0] - 1
-    qx = x[0] / cell_size
-    qy = x[1] / cell_size
-    qz = x[2] / cell_size if dim > 2 else 0.0
+    qx = x0 * inv_cell
+    qy = x1 * inv_cell
+    qz = x2 * inv_cell if dim > 2 else 0.0
     fx = math.floor(qx)
     fy = math.floor(qy)
     fz = math.floor(qz)
     cx = np.int64(fx)
     cy = np.int64(fy)
     cz = np.int64(fz)
-    # distance (in cells) from x to the nearest face of its own cell
-    margin = min(qx - fx, 1.0 - (qx - fx), qy - fy, 1.0 - (qy - fy))
+    # per axis: is the nearer face on the + side, and the gaps (in cells) to the near/far face
+    rx = qx - fx
+    ry = qy - fy
+    rz = qz - fz
+    up_x = rx >= 0.5
+    up_y = ry >= 0.5
+    up_z = rz >= 0.5
+    near_x = min(rx, 1.0 - rx)
+    near_y = min(ry, 1.0 - ry)
+    near_z = min(rz, 1.0 - rz)
+    far_x = 1.0 - near_x
+    far_y = 1.0 - near_y
+    far_z = 1.0 - near_z
+    step_x = 1 if up_x else -1
+    step_y = 1 if up_y else -1
+    step_z = 1 if up_z else -1
     if dim > 2:
-        margin = min(margin, qz - fz, 1.0 - (qz - fz))
+        first_cells = FIRST_CELLS_3D
+        margin = min(near_x, near_y, near_z)
+    else:
+        first_cells = FIRST_CELLS_2D
+        margin = min(near_x, near_y)
+    cell2 = cell_size * cell_size
+    # a cell is skipped when (its gap in cells)^2 > best2 * prune
+    prune = (1.0 + BOUND_SLACK) / cell2
     best1 = np.inf
     best2 = np.inf
     s1 = -1
     s2 = -1
-    r = 0
+    for e in range(first_cells.shape[0]):
+        ox = first_cells[e, 0]
+        oy = first_cells[e, 1]
+        oz = first_cells[e, 2]
+        gx = 0.0 if ox == 0 else (near_x if ox > 0 else far_x)
+        gy = 0.0 if oy == 0 else (near_y if oy > 0 else far_y)
+        gz = 0.0 if oz == 0 else (near_z if oz > 0 else far_z)
+        if gx * gx + gy * gy + gz * gz > best2 * prune:
+            continue
+        p = ghead[_bucket(cx + ox * step_x, cy + oy * step_y, cz + oz * step_z, table_mask)]
+        s1, s2, best1, best2 = _scan_bucket(p, gnext, pos, x0, x1, x2, dim,
+                                            s1, s2, best1, best2)
+    r = 1
     while True:
-        zr = r if dim > 2 else 0
-        for dx in range(-r, r + 1):
-            adx = abs(dx)
-            for dy in range(-r, r + 1):
-                ady = abs(dy)
-                for dz in range(-zr, zr + 1):
-                    if adx != r and ady != r and abs(dz) != r:
-                        continue
-                    p = ghead[_bucket(cx + dx, cy + dy, cz + dz, table_mask)]
-                    while p >= 0:
-                        d = _sq_dist(x, pos, p)
-                        if d < best1:
-                            best2 = best1
-                            s2 = s1
-                            best1 = d
-                            s1 = p
-                        elif d < best2 and p != s1:
-                            best2 = d
-                            s2 = p
-                        p = gnext[p]
         if s2 >= 0:
+            # every unvisited cell is at least (r + margin) cells away
             bound = (r + margin) * cell_size
-            if best2 <= bound * bound:
+            if best2 * (1.0 + BOUND_SLACK) <= bound * bound:
                 return s1, s2, best1
         r += 1
         side = 2 * r + 1
-        cells = side * side * (side if dim > 2 else 1)
-        if cells > 2 * n:
-            return nearest_two_brute(x, pos, n)
+        if side * side * (side if dim > 2 else 1) > 2 * n:
+            return nearest_two_brute(pos, n, x0, x1, x2, dim)
+        zr = r if dim > 2 else 0
+        for dx in range(-r, r + 1):
+            gx = _axis_gap(dx, up_x, near_x, far_x)
+            for dy in range(-r, r + 1):
+                gy = _axis_gap(dy, up_y, near_y, far_y)
+                gxy = gx * gx + gy * gy
+                if gxy > best2 * prune:
+                    continue
+                on_ring = abs(dx) == r or abs(dy) == r
+                for dz in range(-zr, zr + 1):
+                    if not on_ring and abs(dz) != r:
+                        continue
+                    gz = _axis_gap(dz, up_z, near_z, far_z)
+                    if gxy + gz * gz > best2 * prune:
+                        continue
+                    p = ghead[_bucket(cx + dx, cy + dy, cz + dz, table_mask)]
+                    s1, s2, best1, best2 = _scan_bucket(p, gnext, pos, x0, x1, x2, dim,
+                                                        s1, s2, best1, best2)
 
 
-@njit(cache=True)
-def nearest_two_weighted(x, c, pos, col, n, mode, has_col, w_pos, w_col):
+@inlined
+def nearest_two_weighted(pos, col, n, x0, x1, x2, dim, c0, c1, c2, mode, has_col, w_pos, w_col):
     """GNG / GNG-W winner search (eqs. 13-14) over position and colour; brute force.
 
     GNG: Euclidean distance over the concatenated vector (pos, col).
@@ -314,10 +429,10 @@ def nearest_two_weighted(x, c, pos, col, n, mode, has_col, w_pos, w_col):
     s2 = -1
     err1 = 0.0
     for i in range(n):
-        dp = _sq_dist(x, pos, i)
+        dp = _sq_dist(pos, i, x0, x1, x2, dim)
         dc = 0.0
         if has_col:
-            dc = _sq_dist(c, col, i)
+            dc = _sq_dist(col, i, c0, c1, c2, 3)
         if mode == MODE_GNG:
             d = dp + dc
             e = d
@@ -393,7 +508,7 @@ def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
     return vx * inv, vy * inv, vz * inv, True
 
 
-@njit(cache=True)
+@inlined
 def _orient(nor, pos, i, vx, vy, vz):
     """Flip normal ``i`` so that it points toward the viewpoint."""
     dot = (
@@ -405,7 +520,14 @@ def _orient(nor, pos, i, vx, vy, vz):
         nor[i, 2] = -nor[i, 2]
 
 
-@njit(cache=True)
+@inlined
+def _set_normal(nor, i, x, y, z):
+    nor[i, 0] = x
+    nor[i, 1] = y
+    nor[i, 2] = z
+
+
+@inlined
 def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
     """Eq. 16: normal of node ``i`` from its position neighbours, written to ``nor[i]``.
 
@@ -417,9 +539,7 @@ def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
     """
     k_count = deg[i]
     if k_count < 2:
-        nor[i, 0] = 0.0
-        nor[i, 1] = 0.0
-        nor[i, 2] = 0.0
+        _set_normal(nor, i, 0.0, 0.0, 0.0)
         return
     px = pos[i, 0]
     py = pos[i, 1]
@@ -427,16 +547,10 @@ def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
     if mu <= 0.0:
         total = 0.0
         for k in range(k_count):
-            j = nbr[i, k]
-            dx = pos[j, 0] - px
-            dy = pos[j, 1] - py
-            dz = pos[j, 2] - pz
-            total += math.sqrt(dx * dx + dy * dy + dz * dz)
+            total += math.sqrt(_sq_dist(pos, nbr[i, k], px, py, pz, 3))
         mu = total / k_count
         if mu <= 0.0:
-            nor[i, 0] = 0.0
-            nor[i, 1] = 0.0
-            nor[i, 2] = 0.0
+            _set_normal(nor, i, 0.0, 0.0, 0.0)
             return
     # one pass in coordinates relative to h_i: weighted moments about h_i, then about the centroid
     inv_mu2 = 1.0 / (mu * mu)
@@ -476,19 +590,17 @@ def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
     c12 -= wsum * my * mz
     c22 -= wsum * mz * mz
     x, y, z, ok = smallest_eigenvector(c00, c01, c02, c11, c12, c22)
-    nor[i, 0] = x
-    nor[i, 1] = y
-    nor[i, 2] = z
+    _set_normal(nor, i, x, y, z)
     if ok and orient:
         _orient(nor, pos, i, vx, vy, vz)
 
 
-@njit(cache=True)
+@inlined
 def _normal_defined(nor, i):
     return nor[i, 0] != 0.0 or nor[i, 1] != 0.0 or nor[i, 2] != 0.0
 
 
-@njit(cache=True)
+@inlined
 def normals_close(nor, i, j, tau):
     """Eq. 4/9 for normals, sign-invariant: min(||n_i - n_j||, ||n_i + n_j||) < tau."""
     if not (_normal_defined(nor, i) and _normal_defined(nor, j)):
@@ -503,13 +615,13 @@ def normals_close(nor, i, j, tau):
     return min(dm, dp) < tau * tau
 
 
-@njit(cache=True)
+@inlined
 def colours_close(col, i, j, tau):
     """Eq. 4/9 for colours: ||c_i - c_j|| < tau."""
-    return _sq_dist(col[i], col, j) < tau * tau
+    return _node_sq_dist(col, i, j) < tau * tau
 
 
-@njit(cache=True)
+@inlined
 def property_bits(col, nor, i, j, has_col, has_nor, tau_col, tau_nor):
     """Position bit plus the bits of the other properties whose eq. 4/9 test holds for (i, j)."""
     mask = POS_BIT
@@ -562,6 +674,24 @@ def learn(samples, sample_colors, order,
 
     samples: (N, D) float64 positions; sample_colors: (N, 3) float64 (ignored without colour).
     """
+    # scratch for Step 7: the neighbours whose edge to s1 just expired
+    candidates = np.empty(nbr.shape[1], dtype=np.int64)
+    _learn_steps(samples, sample_colors, order,
+                 pos, col, nor, err, nbr, age, emask, rev, deg,
+                 ghead, gnext, gprev, gbucket, gcell,
+                 istate, fstate, fparams, iparams, candidates)
+
+
+# Compiled without the numba runtime (``_nrt=False``, the option numba uses for its own hot
+# helpers): every array here is owned by the caller, so the atomic reference counting that numba
+# would otherwise emit around each inlined helper is pure overhead (it cost ~40% of a step).
+# Without the runtime the function cannot allocate; numba refuses to compile it if it tries.
+@njit(cache=True, _nrt=False)
+def _learn_steps(samples, sample_colors, order,
+                 pos, col, nor, err, nbr, age, emask, rev, deg,
+                 ghead, gnext, gprev, gbucket, gcell,
+                 istate, fstate, fparams, iparams, candidates):
+    """The body of `learn`; ``candidates`` (MAX_DEGREE,) int64 scratch."""
     eta1 = fparams[P_ETA1]
     eta2 = fparams[P_ETA2]
     alpha = fparams[P_ALPHA]
@@ -589,26 +719,37 @@ def learn(samples, sample_colors, order,
     grid_on = istate[I_GRID] != 0
     error_scale = fstate[F_ERROR_SCALE]
     cell_size = fstate[F_CELL]
+    inv_cell = 1.0 / cell_size if grid_on else 0.0
     spacing = fstate[F_SPACING]
     dim = pos.shape[1]
-    candidates = np.empty(nbr.shape[1], dtype=np.int64)
+    # steps since the last Step 8 (t % lam, counted instead of divided each step)
+    phase = t % lam
 
     for idx in order:
-        x = samples[idx]
-        c = sample_colors[idx]
+        x0 = samples[idx, 0]
+        x1 = samples[idx, 1]
+        x2 = samples[idx, 2] if dim > 2 else 0.0
+        c0 = sample_colors[idx, 0]
+        c1 = sample_colors[idx, 1]
+        c2 = sample_colors[idx, 2]
         t += 1
+        phase += 1
+        if phase == lam:
+            phase = 0
         # Step 2 (and the error of Step 3)
         if mode == MODE_GNGDT:
             if grid_on:
-                s1, s2, err_add = nearest_two_grid(x, pos, n, ghead, gnext, cell_size)
+                s1, s2, err_add = nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext,
+                                                   cell_size, inv_cell)
             else:
-                s1, s2, err_add = nearest_two_brute(x, pos, n)
+                s1, s2, err_add = nearest_two_brute(pos, n, x0, x1, x2, dim)
         else:
-            s1, s2, err_add = nearest_two_weighted(x, c, pos, col, n, mode, has_col, w_pos, w_col)
+            s1, s2, err_add = nearest_two_weighted(pos, col, n, x0, x1, x2, dim, c0, c1, c2,
+                                                   mode, has_col, w_pos, w_col)
         # Step 3
         err[s1] += err_add / error_scale
         # running node spacing (distance between winners) sizes the grid cells
-        d12 = math.sqrt(_sq_dist(pos[s1], pos, s2))
+        d12 = math.sqrt(_node_sq_dist(pos, s1, s2))
         if spacing <= 0.0:
             spacing = d12
         else:
@@ -626,25 +767,23 @@ def learn(samples, sample_colors, order,
             age[s2, k21] = 0
             emask[s2, k21] = mask
         # Step 5: the winner moves in every input property ...
-        for a in range(dim):
-            pos[s1, a] += eta1 * (x[a] - pos[s1, a])
+        _move_toward(pos, s1, x0, x1, x2, dim, eta1, grid_on, ghead, gnext, gprev, gbucket,
+                     gcell, inv_cell)
         if has_col:
-            for a in range(3):
-                col[s1, a] += eta1 * (c[a] - col[s1, a])
+            col[s1, 0] += eta1 * (c0 - col[s1, 0])
+            col[s1, 1] += eta1 * (c1 - col[s1, 1])
+            col[s1, 2] += eta1 * (c2 - col[s1, 2])
         # ... each neighbour in property o only along an edge of o. Step 6: ages.
         for k in range(deg[s1]):
             j = nbr[s1, k]
-            for a in range(dim):
-                pos[j, a] += eta2 * (x[a] - pos[j, a])
+            _move_toward(pos, j, x0, x1, x2, dim, eta2, grid_on, ghead, gnext, gprev, gbucket,
+                         gcell, inv_cell)
             if has_col and (col_follows_pos or (emask[s1, k] & COL_BIT) != 0):
-                for a in range(3):
-                    col[j, a] += eta2 * (c[a] - col[j, a])
+                col[j, 0] += eta2 * (c0 - col[j, 0])
+                col[j, 1] += eta2 * (c1 - col[j, 1])
+                col[j, 2] += eta2 * (c2 - col[j, 2])
             age[s1, k] += 1
             age[j, rev[s1, k]] += 1
-            if grid_on:
-                grid_update(pos, ghead, gnext, gprev, gbucket, gcell, j, cell_size)
-        if grid_on:
-            grid_update(pos, ghead, gnext, gprev, gbucket, gcell, s1, cell_size)
         # Step 7: delete old edges of s1, then nodes left without position edges
         n_candidates = 0
         k = 0
@@ -673,17 +812,22 @@ def learn(samples, sample_colors, order,
         elif has_nor:
             compute_normal(s1, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
         # Step 8: insertion every lambda steps, until max_nodes
-        if t % lam == 0:
+        if phase == 0:
             if n < max_nodes:
                 n = _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
                                  has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz)
                 if grid_on:
-                    grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, cell_size)
-            # keep grid cells about one node spacing wide (amortised O(n) per lambda steps)
+                    _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, inv_cell)
+            # keep grid cells about GRID_CELL_SPACINGS node spacings wide (amortised O(n) per
+            # lambda steps); the cell size only affects speed, never the winners found
+            target_cell = GRID_CELL_SPACINGS * spacing
             if mode == MODE_GNGDT and n >= GRID_MIN_NODES and spacing > 0.0 and (
-                not grid_on or spacing > 2.0 * cell_size or spacing < 0.5 * cell_size
+                not grid_on
+                or cell_size > GRID_CELL_TOLERANCE * target_cell
+                or target_cell > GRID_CELL_TOLERANCE * cell_size
             ):
-                cell_size = spacing
+                cell_size = target_cell
+                inv_cell = 1.0 / cell_size
                 grid_rebuild(pos, n, ghead, gnext, gprev, gbucket, gcell, cell_size)
                 grid_on = True
         # Step 9, lazily: true error = stored error * error_scale
@@ -699,6 +843,12 @@ def learn(samples, sample_colors, order,
     fstate[F_ERROR_SCALE] = error_scale
     fstate[F_CELL] = cell_size
     fstate[F_SPACING] = spacing
+
+
+@njit(cache=True)
+def _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell):
+    """`grid_insert` out of line, for the rare insertion of Step 8."""
+    grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell)
 
 
 @njit(cache=True)
