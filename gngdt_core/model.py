@@ -137,11 +137,17 @@ class _GrowingGas:
             self._initialise(*gather(batch, batch_colors, _rows(finite_rows, first_two)))
         fparams, iparams = self._kernel_parameters()
         a = self._arrays
+        # Fewer steps than samples (a large frame): convert only the sampled rows, so a frame
+        # costs what its steps cost. A pass or more: convert the batch once, visit it by index.
+        whole_batch = gather(batch, batch_colors, finite_rows) if steps >= n_samples else None
         for order in sample_orders(self._rng, n_samples, steps):
-            # only the sampled rows are converted: a frame's cost follows the steps, not its size
-            samples, sample_colors = gather(batch, batch_colors, _rows(finite_rows, order))
+            if whole_batch is None:
+                samples, sample_colors = gather(batch, batch_colors, _rows(finite_rows, order))
+                order = np.arange(order.size)
+            else:
+                samples, sample_colors = whole_batch
             kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
-            K.learn(samples, kernel_colors, np.arange(order.size),
+            K.learn(samples, kernel_colors, order,
                     a["pos"], a["col"], a["nor"], a["err"],
                     a["nbr"], a["age"], a["emask"], a["rev"], a["deg"],
                     a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
