@@ -80,17 +80,21 @@ def bench_cloud() -> None:
     positions = rng.normal(size=(POINTS, 3)).astype(np.float32)
     colors = rng.integers(0, 256, (POINTS, 3), dtype=np.uint8)
 
-    def round_trip() -> None:
+    def round_trip(copy: bool) -> None:
         payload = cloud_to_msg(positions, colors, timestamp_ns=0).SerializeToString()
-        msg_to_cloud(payload)
+        msg_to_cloud(payload, copy=copy)
 
     pack_s = best_of(lambda: cloud_to_msg(positions, colors, timestamp_ns=0), repeats=20)
-    total_s = best_of(round_trip, repeats=20)
+    total_s = best_of(lambda: round_trip(copy=False), repeats=20)
+    total_copy_s = best_of(lambda: round_trip(copy=True), repeats=20)
     sample = 10_000
     naive_s = best_of(lambda: naive_pack(positions[:sample], colors[:sample]), repeats=3)
     naive_scaled_ms = naive_s * POINTS / sample * 1e3
     print(f"pack {POINTS} points -> PointCloud: {pack_s * 1e3:6.2f} ms")
-    print(f"pack + serialize + parse + unpack: {total_s * 1e3:6.2f} ms (target < 10)")
+    print(f"pack + serialize + parse + unpack to views (learner, logger): "
+          f"{total_s * 1e3:6.2f} ms (target < 10)")
+    print(f"pack + serialize + parse + unpack to copies:                  "
+          f"{total_copy_s * 1e3:6.2f} ms")
     print(
         f"naive per-point struct.pack ({sample} points, scaled to {POINTS}): "
         f"{naive_scaled_ms:7.1f} ms  -> {naive_scaled_ms / (pack_s * 1e3):.0f}x slower than pack"
