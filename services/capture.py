@@ -70,7 +70,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres"
     )
-    parser.add_argument("--max-points", type=int, help="random subset of at most this many points")
+    parser.add_argument(
+        "--max-points",
+        type=int,
+        default=0,
+        help="publish a random subset of at most this many points per frame (default 0: all)",
+    )
     parser.add_argument(
         "--wait-subscribers",
         type=float,
@@ -111,7 +116,9 @@ class FrameToCloud:
         if options.voxel_size_m is not None and options.voxel_size_m <= 0:
             raise ValueError(f"--voxel must be positive, got {options.voxel_size_m}")
         if options.max_points is not None and options.max_points <= 0:
-            raise ValueError(f"--max-points must be positive, got {options.max_points}")
+            raise ValueError(
+                f"--max-points must be positive (0 for all points), got {options.max_points}"
+            )
         self.options = options
         self._deproject = Deprojector(options.min_depth_m, options.max_depth_m)
         self._rng = np.random.default_rng(seed)
@@ -252,7 +259,8 @@ def main(args: argparse.Namespace) -> int:
         return 2
     try:
         to_cloud = FrameToCloud(
-            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points), args.seed
+            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None),
+            args.seed,
         )
         clock = ReplayClock(None if args.fast else args.rate)
         if args.max_skew_ms < 0:
