@@ -672,7 +672,8 @@ def learn(samples, sample_colors, order,
           istate, fstate, fparams, iparams):
     """Run one learning step (Steps 1-9) per index in ``order`` (rows of ``samples``).
 
-    samples: (N, D) float64 positions; sample_colors: (N, 3) float64 (ignored without colour).
+    samples: (N, D) float64 positions; sample_colors: (N, 3) float64, or any (1, 3) placeholder
+    without colour (then never read).
     """
     # scratch for Step 7: the neighbours whose edge to s1 just expired
     candidates = np.empty(nbr.shape[1], dtype=np.int64)
@@ -729,9 +730,13 @@ def _learn_steps(samples, sample_colors, order,
         x0 = samples[idx, 0]
         x1 = samples[idx, 1]
         x2 = samples[idx, 2] if dim > 2 else 0.0
-        c0 = sample_colors[idx, 0]
-        c1 = sample_colors[idx, 1]
-        c2 = sample_colors[idx, 2]
+        c0 = 0.0
+        c1 = 0.0
+        c2 = 0.0
+        if has_col:  # without colour, sample_colors is a (1, 3) placeholder: never index it
+            c0 = sample_colors[idx, 0]
+            c1 = sample_colors[idx, 1]
+            c2 = sample_colors[idx, 2]
         t += 1
         phase += 1
         if phase == lam:
@@ -746,6 +751,8 @@ def _learn_steps(samples, sample_colors, order,
         else:
             s1, s2, err_add = nearest_two_weighted(pos, col, n, x0, x1, x2, dim, c0, c1, c2,
                                                    mode, has_col, w_pos, w_col)
+        if s2 < 0:  # every distance overflowed (|x| ~ 1e154): no winner, learn nothing
+            continue
         # Step 3
         err[s1] += err_add / error_scale
         # running node spacing (distance between winners) sizes the grid cells

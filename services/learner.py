@@ -355,19 +355,23 @@ def finite_points(
 
 def decode_points(
     payload: bytes, attachment: bytes | None, max_points: int = LearnerOptions.max_points
-) -> tuple[FrameStamp, np.ndarray, np.ndarray | None]:
+) -> tuple[FrameStamp, np.ndarray, np.ndarray]:
     """The learner's decode path for one ``points`` sample: stamp, finite positions, colours.
 
-    positions: (N, 3) float32 metres, N >= 1; colors: (N, 3) uint8 or None. Raises
-    ``ValueError`` (``MessageError`` for the payload) for a missing/malformed attachment, an
-    undecodable or oversized cloud (``max_points``, checked before allocation) or a cloud
+    positions: (N, 3) float32 metres, N >= 1; colors: (N, 3) uint8. Raises ``ValueError``
+    (``MessageError`` for the payload) for a missing/malformed attachment, an undecodable or
+    oversized cloud (``max_points``, checked before allocation), a cloud without colour fields
+    (DESIGN's points carry red, green, blue: a colourless model could learn nothing else) or
     without a single finite point.
     """
     from schemas.packing import MessageError, msg_to_cloud
 
     stamp = FrameStamp.from_attachment(attachment)
     # views into the payload: learning samples only samples_per_frame of its points
-    positions, colors = finite_points(*msg_to_cloud(payload, max_points=max_points, copy=False))
+    positions, colors = msg_to_cloud(payload, max_points=max_points, copy=False)
+    if colors is None:
+        raise MessageError("cloud has no red/green/blue fields; the learner needs colour")
+    positions, colors = finite_points(positions, colors)
     if len(positions) == 0:
         raise MessageError("no finite points in the cloud")
     return stamp, positions, colors

@@ -93,6 +93,12 @@ def test_without_colours_and_in_2d_the_property_sets_follow():
         model2.edges("nor")
 
 
+def test_a_large_colourless_batch_learns_positions_only():
+    positions, _, _ = make_data2(random_state=0)  # 112,500 points, no colours given
+    model = GNGDT(max_nodes=50, random_state=0).fit(positions, n_steps=len(positions))
+    assert model.n_nodes_ == 50 and not model.colors_.any()
+
+
 def test_normals_are_unit_and_face_the_viewpoint():
     positions, colors, _ = make_data2(n_points=20_000, random_state=0)
     viewpoint = np.array([150.0, -200.0, 300.0])

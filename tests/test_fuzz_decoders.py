@@ -152,6 +152,24 @@ def test_learner_refuses_a_cloud_over_its_point_limit_before_allocating() -> Non
     np.testing.assert_array_equal(decoded, positions)
 
 
+def test_a_colourless_cloud_is_refused_before_it_can_shape_the_model() -> None:
+    payload = cloud_to_msg(np.ones((10, 3), np.float32), timestamp_ns=1).SerializeToString()
+    with pytest.raises(MessageError, match="colour"):
+        decode_points(payload, GOOD_ATTACHMENT)
+
+
+def test_overflowing_coordinates_are_not_learned() -> None:
+    from gngdt_core import GNGDT
+
+    model = GNGDT(max_nodes=20, random_state=0).partial_fit(np.ones((50, 3)) * [[1, 2, 3]])
+    before = model.get_state()
+    model.partial_fit(np.full((100, 3), 1e300))  # finite, but every squared distance is inf
+    after = model.get_state()
+    for name in ("pos", "col", "err", "nbr", "age"):
+        np.testing.assert_array_equal(before[name], after[name])
+    assert np.isfinite(model.positions_).all() and model.n_nodes_ == 2
+
+
 # ------------------------------------------------------------------ the logger's decoders
 @FUZZ
 @given(payload=hostile_images())
