@@ -531,9 +531,9 @@ def _set_normal(nor, i, x, y, z):
 def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
     """Eq. 16: normal of node ``i`` from its position neighbours, written to ``nor[i]``.
 
-    Weighted centroid ``m = (h_i + sum w_j h_j) / (1 + sum w_j)`` with
-    ``w_j = exp(-||h_i - h_j||^2 / mu^2)``; covariance of the node (weight 1) and its neighbours
-    (weights ``w_j``) about ``m``; normal = eigenvector of the smallest eigenvalue. ``mu <= 0``
+    As the paper: weighted centroid ``m = (h_i + sum w_j h_j) / (1 + sum w_j)`` with
+    ``w_j = exp(-||h_i - h_j||^2 / mu^2)``; covariance ``sum_j (h_j - m)(h_j - m)^T`` over the
+    k neighbours (unweighted); normal = eigenvector of its smallest eigenvalue. ``mu <= 0``
     means the scale-free default: ``mu`` = mean distance from ``i`` to its neighbours.
     Undefined (zero) with fewer than two neighbours.
     """
@@ -552,9 +552,14 @@ def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
         if mu <= 0.0:
             _set_normal(nor, i, 0.0, 0.0, 0.0)
             return
-    # one pass in coordinates relative to h_i: weighted moments about h_i, then about the centroid
+    # one pass in coordinates d_j = h_j - h_i: the weighted sums give the centroid m, the plain
+    # sums S1 = sum d_j and S2 = sum d_j d_j^T give sum (d_j - m)(d_j - m)^T
+    #   = S2 - m S1^T - S1 m^T + k m m^T
     inv_mu2 = 1.0 / (mu * mu)
     wsum = 1.0
+    wx = 0.0
+    wy = 0.0
+    wz = 0.0
     sx = 0.0
     sy = 0.0
     sz = 0.0
@@ -571,24 +576,27 @@ def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
         dz = pos[j, 2] - pz
         w = math.exp(-(dx * dx + dy * dy + dz * dz) * inv_mu2)
         wsum += w
-        sx += w * dx
-        sy += w * dy
-        sz += w * dz
-        c00 += w * dx * dx
-        c01 += w * dx * dy
-        c02 += w * dx * dz
-        c11 += w * dy * dy
-        c12 += w * dy * dz
-        c22 += w * dz * dz
-    mx = sx / wsum
-    my = sy / wsum
-    mz = sz / wsum
-    c00 -= wsum * mx * mx
-    c01 -= wsum * mx * my
-    c02 -= wsum * mx * mz
-    c11 -= wsum * my * my
-    c12 -= wsum * my * mz
-    c22 -= wsum * mz * mz
+        wx += w * dx
+        wy += w * dy
+        wz += w * dz
+        sx += dx
+        sy += dy
+        sz += dz
+        c00 += dx * dx
+        c01 += dx * dy
+        c02 += dx * dz
+        c11 += dy * dy
+        c12 += dy * dz
+        c22 += dz * dz
+    mx = wx / wsum
+    my = wy / wsum
+    mz = wz / wsum
+    c00 += k_count * mx * mx - 2.0 * mx * sx
+    c01 += k_count * mx * my - mx * sy - sx * my
+    c02 += k_count * mx * mz - mx * sz - sx * mz
+    c11 += k_count * my * my - 2.0 * my * sy
+    c12 += k_count * my * mz - my * sz - sy * mz
+    c22 += k_count * mz * mz - 2.0 * mz * sz
     x, y, z, ok = smallest_eigenvector(c00, c01, c02, c11, c12, c22)
     _set_normal(nor, i, x, y, z)
     if ok and orient:

@@ -93,11 +93,10 @@ class ReferenceGNGDT:
         h_j = self.positions[neighbours]
         distances = np.linalg.norm(h_j - h_i, axis=1)
         mu = self.params["normal_mu"] or distances.mean()
-        weights = np.concatenate([[1.0], np.exp(-(distances**2) / mu**2)])
-        points = np.vstack([h_i, h_j])
-        centre = weights @ points / weights.sum()
-        deviations = points - centre
-        covariance = (weights[:, None] * deviations).T @ deviations
+        weights = np.exp(-(distances**2) / mu**2)
+        centre = (h_i + weights @ h_j) / (1.0 + weights.sum())
+        deviations = h_j - centre
+        covariance = deviations.T @ deviations
         eigenvalues, eigenvectors = np.linalg.eigh(covariance)
         spread = np.sum((eigenvalues - eigenvalues.mean()) ** 2)
         gap = (eigenvalues[1] - eigenvalues[0]) * (eigenvalues[2] - eigenvalues[0])
