@@ -57,6 +57,8 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         rng_state = json.loads(_scalar_text(state, "rng_state"))
     except json.JSONDecodeError as exc:
         raise ValueError(f"state params/rng_state are not valid JSON: {exc}") from exc
+    if not isinstance(params, dict):
+        raise ValueError(f"state params must be a JSON object, got {type(params).__name__}")
     unknown = set(params) - set(cls._PARAM_NAMES)
     if unknown:
         raise ValueError(f"state params has unknown parameters {sorted(unknown)}")

@@ -8,12 +8,18 @@ from typing import Any
 
 import numpy as np
 
+#: node budget ceiling: the adjacency alone takes ~200 bytes a node, so 10 million nodes is
+#: ~2 GB; a larger budget (e.g. from a crafted checkpoint) is refused before any allocation
+MAX_NODES_LIMIT = 10_000_000
 
-def _integer(name: str, value: Any, minimum: int) -> int:
+
+def _integer(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{name} must be an integer, got {value!r}")
     if value < minimum:
         raise ValueError(f"{name} must be >= {minimum}, got {value}")
+    if maximum is not None and value > maximum:
+        raise ValueError(f"{name} must be <= {maximum}, got {value}")
     return int(value)
 
 
@@ -36,7 +42,7 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
     Raises ValueError naming the offending parameter.
     """
     checked = dict(params)
-    checked["max_nodes"] = _integer("max_nodes", params["max_nodes"], 2)
+    checked["max_nodes"] = _integer("max_nodes", params["max_nodes"], 2, MAX_NODES_LIMIT)
     checked["lambda_"] = _integer("lambda_", params["lambda_"], 1)
     checked["age_max"] = _integer("age_max", params["age_max"], 1)
     checked["eta1"] = _real("eta1", params["eta1"], 0.0, 1.0, low_open=True)

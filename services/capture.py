@@ -284,25 +284,25 @@ def main(args: argparse.Namespace) -> int:
         if not wait_for_subscribers(publisher.points, args.wait_subscribers):
             log.warning("no subscriber on %s after %.1f s; publishing anyway",
                         topic(args.cam, "points"), args.wait_subscribers)
-        sequence = -1
-        frames_sent = 0
+        frames_sent = 0  # also the next frame's sequence: only published frames are numbered
         frames = replay_frames(args.recording, args.loop, stop, args.topics, args.max_skew_ms)
         for frame in frames:
             clock.wait_for(frame.timestamp_ns, stop)
             if stop.is_set():
                 break
-            sequence += 1
-            stamp = FrameStamp(sequence, time.time_ns())
+            capture_time_ns = time.time_ns()
             try:
                 positions, colors = to_cloud(frame)
             except ValueError as error:
                 log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
                 continue
-            publisher.publish_frame(frame, stamp, positions, colors)
+            publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
+                                    positions, colors)
+            log.debug("frame %d: %d points", frames_sent, len(positions))
             frames_sent += 1
-            log.debug("frame %d: %d points", sequence, len(positions))
         if not stop.is_set() or not args.loop:
-            publisher.publish_end(frames_sent, max(sequence, 0), args.recording.name)
+            # with nothing sent, frame 0 is named and frames_sent = 0 says it never came
+            publisher.publish_end(frames_sent, max(frames_sent - 1, 0), args.recording.name)
             log.info("sent %d frames of %s, end of stream", frames_sent, args.recording)
         time.sleep(0.2)  # let BLOCK puts drain to the router before the session closes
         token.undeclare()

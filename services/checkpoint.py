@@ -3,7 +3,9 @@
 Layout: every state array under ``state/<name>``; ``metadata`` is a JSON string (0-d unicode
 array) holding the caller's metadata, ``format_version`` and ``sha256``, a digest of the state
 arrays (names, dtypes, shapes and bytes) and of the rest of the metadata, which catches truncated
-or altered files. Loading is all or nothing: nothing is returned unless every check passes. It
+or corrupted files and edits that did not recompute it (an integrity check, not a signature:
+whoever may write the file may rewrite the digest, so keep checkpoints where only the learner
+writes). Loading is all or nothing: nothing is returned unless every check passes. It
 never unpickles or evaluates anything, and refuses archives whose declared size is beyond
 ``MAX_CHECKPOINT_BYTES`` before reading them.
 """
@@ -101,7 +103,7 @@ def load_checkpoint(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         )
     if metadata[_DIGEST_KEY] != checkpoint_digest(state, metadata):
         raise CheckpointError(
-            f"checkpoint {path}: content does not match its sha256 (torn or tampered file)"
+            f"checkpoint {path}: content does not match its sha256 (torn or altered file)"
         )
     return state, metadata
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import inspect
+import json
 import logging
 import signal
 import threading
@@ -103,10 +104,12 @@ class LearnerConfig:
 
 
 def model_parameter_names() -> set[str]:
-    """Names of the ``GNGDT`` constructor arguments."""
+    """Names of the ``GNGDT`` constructor arguments a params file may set."""
     from gngdt_core import GNGDT
 
-    return {name for name in inspect.signature(GNGDT.__init__).parameters if name != "self"}
+    # the seed is a learner option (``seed``, ``--seed``), so one key sets it
+    excluded = {"self", "random_state"}
+    return {name for name in inspect.signature(GNGDT.__init__).parameters if name not in excluded}
 
 
 def load_params(path: Path | None) -> LearnerConfig:
@@ -316,13 +319,21 @@ class Learner:
             cluster_counts={c.name: c.cluster_count for c in topology.clusterings},
         )
 
-    def save(self, path: Path) -> None:
+    def save(self, path: Path) -> bool:
+        """Checkpoint to ``path``; a failed write (disk full, permissions) is logged, not fatal:
+        the learner goes on and the previous checkpoint, replaced atomically, stays intact."""
         from services.checkpoint import save_checkpoint
 
         counters = {item.name: getattr(self.counters, item.name) for item in fields(Counters)}
-        save_checkpoint(path, self.model.get_state(), {"camera": self.camera, "counters": counters})
+        try:
+            save_checkpoint(path, self.model.get_state(),
+                            {"camera": self.camera, "counters": counters})
+        except OSError as error:
+            log.error("checkpoint %s not written: %s", path, error)
+            return False
         log.info("checkpoint %s: %d nodes, %d steps", path, self.model.n_nodes_,
                  self.model.n_steps_)
+        return True
 
     @classmethod
     def resume(cls, path: Path, camera: str, config: LearnerConfig) -> Learner:
@@ -337,6 +348,12 @@ class Learner:
             raise CheckpointError(f"checkpoint {path}: not a GNG-DT state ({error})") from error
         counters = counters_from_metadata(path, metadata.get("counters", {}))
         counters.last_sequence = -1  # a new capture restarts its sequence numbers
+        saved_params = json.loads(str(state["params"]))
+        ignored = sorted(name for name, value in config.model.items()
+                         if saved_params.get(name) != value)
+        if ignored:  # the learned network carries its parameters; changing them mid-life is not
+            log.warning("resuming %s with its own parameters; ignoring the requested %s", path,
+                        ", ".join(f"{name}={config.model[name]!r}" for name in ignored))
         log.info("resumed from %s: %d nodes, %d steps", path, model.n_nodes_, model.n_steps_)
         return cls(camera, config, model=model, counters=counters)
 

@@ -25,7 +25,7 @@ from typing import IO, TYPE_CHECKING
 
 from schemas.wire import DEFAULT_CAMERA, topic
 from services.logger import LIVELINESS_KEY, default_rrd_path, unused_rrd_path
-from services.zenoh_session import free_tcp_port, open_config, router_config
+from services.zenoh_session import ZenohSetupError, free_tcp_port, open_config, router_config
 
 if TYPE_CHECKING:
     import zenoh
@@ -278,7 +278,11 @@ def main(args: argparse.Namespace) -> int:
         signal.signal(signum, lambda *_: stop.set())
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    router = open_config(router_config([endpoint]), what="router")
+    try:
+        router = open_config(router_config([endpoint]), what="router")
+    except ZenohSetupError as error:
+        log.error("%s", error)
+        return 1
     observed = Observed()
     declared = [
         router.liveliness().declare_subscriber("gngdt/**", observed.on_liveliness, history=True),
@@ -296,8 +300,11 @@ def main(args: argparse.Namespace) -> int:
             and observed.has_alive(LIVELINESS_KEY),
             args.startup_timeout, stop, pipeline)
         if not ready and not stop.is_set() and pipeline.failed() is None:
-            log.error("learner and logger did not come up within %.0f s", args.startup_timeout)
+            log.error("learner and logger did not come up within %.0f s; their logs: %s",
+                      args.startup_timeout, log_dir)
             pipeline.interrupt_all()
+            for child in pipeline.children:
+                child.stop(args.drain_timeout)
             return 1
         if ready:
             capture = pipeline.start("capture", capture_arguments(args))

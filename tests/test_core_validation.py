@@ -13,6 +13,7 @@ from gngdt_core import GNG, GNGDT, GNGW
     [
         (GNGDT, {"max_nodes": 1}, "max_nodes"),
         (GNGDT, {"max_nodes": 10.5}, "max_nodes"),
+        (GNGDT, {"max_nodes": 10**12}, "max_nodes"),
         (GNGDT, {"lambda_": 0}, "lambda_"),
         (GNGDT, {"eta1": -0.1}, "eta1"),
         (GNGDT, {"eta2": -1e-4}, "eta2"),

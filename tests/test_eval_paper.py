@@ -137,3 +137,15 @@ def test_eval_paper_small_run(tmp_path) -> None:
     ):
         assert (out / plot).stat().st_size > 5_000
         assert plot in markdown
+
+
+def test_a_scale_the_paper_does_not_have_is_reported_without_a_paper_column(tmp_path) -> None:
+    out = tmp_path / "paper"
+    argv = ["eval", "paper", "--trials", "1", "--steps", "3000", "--max-nodes", "20",
+            "--datasets", "Data1", "--scales", "1", "0.5", "--workers", "1",
+            "--out", str(out), "--no-progress"]
+    assert gngdt_main(argv) == 0
+    findings = json.loads((out / "paper.json").read_text())["findings"]
+    lowest = findings["Data1 scl=0.5: GNG-DT has the lowest position error"]
+    assert "paper" not in lowest
+    assert "paper" in findings["Data1 scl=1: GNG-DT has the lowest position error"]

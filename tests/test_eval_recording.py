@@ -108,6 +108,14 @@ def test_eval_recording_on_missing_file_is_a_clear_error(tmp_path, capsys) -> No
     assert "nope.mcap" in capsys.readouterr().err
 
 
+def test_eval_recording_on_a_broken_file_is_one_line(tmp_path, capsys) -> None:
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(b"\x89MCAP0\r\n" + b"not really" * 100)
+    assert gngdt_main(["eval", "recording", str(broken), "--out", str(tmp_path / "o")]) == 2
+    error = capsys.readouterr().err
+    assert "broken.mcap" in error and "Traceback" not in error
+
+
 @pytest.mark.timeout(300)
 def test_eval_recording_without_labels(tmp_path) -> None:
     """Real-frame recordings have no ground truth: no ARI, everything else reported."""

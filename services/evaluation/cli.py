@@ -9,6 +9,7 @@ figure and PNG plots into ``--out``.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import logging
 import sys
 from pathlib import Path
@@ -179,10 +180,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Dispatch to the chosen evaluation; bad input is reported as one line, exit code 2."""
+    from services.recording.errors import RecordingError
+
+    missing = [name for name in ("matplotlib", "sklearn") if importlib.util.find_spec(name) is None]
+    if missing:  # checked first: the plots and references come after minutes of learning
+        print(f"gngdt eval needs {' and '.join(missing)}: pip install 'gngdt[eval]'",
+              file=sys.stderr)
+        return 2
     handlers = {"paper": _main_paper, "recording": _main_recording, "rrd": _main_rrd}
     try:
         return handlers[args.eval_command](args)
-    except (ValueError, OSError) as error:
+    except (ValueError, OSError, RecordingError) as error:
         print(f"gngdt eval {args.eval_command}: {error}", file=sys.stderr)
         return 2
 

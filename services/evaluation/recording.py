@@ -112,11 +112,14 @@ class FramePoints:
 
 def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
     """Frames of the recording deprojected like the capture service does (labels with them)."""
+    from services.capture import DEFAULT_MAX_SKEW_MS
     from services.pointcloud import Deprojector
     from services.recording.reader import read_frames
 
     deproject = Deprojector(settings.min_depth_m, settings.max_depth_m)
-    for count, frame in enumerate(read_frames(path)):
+    # colour and depth paired as capture pairs them, so a ROS 2 bag replays here as it does live
+    frames = read_frames(path, max_skew_ns=round(DEFAULT_MAX_SKEW_MS * 1e6))
+    for count, frame in enumerate(frames):
         if settings.max_frames is not None and count >= settings.max_frames:
             return
         positions, colors = deproject(frame.depth, frame.color, frame.intrinsics)
