@@ -9,7 +9,7 @@ allocate gigabytes.
 
 Arrays returned by :func:`unpack_array` and :func:`decode_topology` are read-only views on the
 message bytes (zero-copy); ``.copy()`` them to modify. Images and clouds are returned as fresh,
-writable, C-contiguous arrays.
+writable, C-contiguous arrays, except ``msg_to_cloud(..., copy=False)``: read-only strided views.
 """
 
 from __future__ import annotations
