@@ -83,29 +83,37 @@ class Deprojector:
         return positions, colors
 
 
+def voxel_keys(positions: np.ndarray, voxel_size_m: float) -> np.ndarray:
+    """(N,) int64 key of each point's cubic voxel (cell indices packed row-major), so that one
+    1-D ``np.unique`` groups the points. positions: (N, D) metres; voxel_size_m > 0."""
+    if not voxel_size_m > 0:
+        raise ValueError(f"voxel size must be positive, got {voxel_size_m}")
+    cells = np.floor(positions / np.float32(voxel_size_m)).astype(np.int64)
+    cells -= cells.min(axis=0)
+    extents = cells.max(axis=0) + 1
+    if float(np.prod(extents.astype(np.float64))) >= 2.0**62:  # keys would overflow int64
+        raise ValueError(f"voxel size {voxel_size_m} m is too small for these positions")
+    return np.ravel_multi_index(tuple(cells.T), tuple(int(extent) for extent in extents))
+
+
 def voxel_downsample(
     positions: np.ndarray, colors: np.ndarray | None, voxel_size_m: float
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Mean position (and colour) of the points in each occupied cubic voxel.
 
-    positions: (N, 3) float32 metres; colors: (N, 3) uint8 or None; voxel_size_m > 0.
-    Returns (M, 3) float32 positions and (M, 3) uint8 colours (rounded mean), M <= N, voxels in
-    ascending key order.
+    positions: (N, 3) float32 metres (any D works); colors: (N, 3) uint8 or None;
+    voxel_size_m > 0. Returns (M, 3) float32 positions and (M, 3) uint8 colours (rounded
+    mean), M <= N, voxels in ascending key order.
     """
-    if voxel_size_m <= 0:
-        raise ValueError(f"voxel size must be positive, got {voxel_size_m}")
     if len(positions) == 0:
         return positions, colors
-    cells = np.floor(positions / np.float32(voxel_size_m)).astype(np.int64)
-    cells -= cells.min(axis=0)
-    extent = cells.max(axis=0) + 1
-    keys = (cells[:, 0] * extent[1] + cells[:, 1]) * extent[2] + cells[:, 2]
+    keys = voxel_keys(positions, voxel_size_m)
     _, voxel_of_point, counts = np.unique(keys, return_inverse=True, return_counts=True)
     n_voxels = counts.size
 
     def voxel_mean(values: np.ndarray) -> np.ndarray:
-        sums = np.empty((n_voxels, 3), dtype=np.float64)
-        for axis in range(3):
+        sums = np.empty((n_voxels, values.shape[1]), dtype=np.float64)
+        for axis in range(values.shape[1]):
             sums[:, axis] = np.bincount(voxel_of_point, weights=values[:, axis], minlength=n_voxels)
         return sums / counts[:, None]
 

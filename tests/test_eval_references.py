@@ -12,7 +12,6 @@ from services.evaluation.references import (
     dbscan_labels,
     kmeans_reference,
     quantization_error,
-    voxel_downsample,
     voxel_grid_reference,
 )
 from services.evaluation.report import format_mean_std, markdown_table, mean_std, write_report
@@ -56,16 +55,6 @@ def test_kmeans_colours_are_mean_colours_of_won_points() -> None:
     result = kmeans_reference(points, colours, 2, random_state=0)
     order = np.argsort(result.positions[:, 0])
     np.testing.assert_allclose(result.colors[order], [[10, 0, 0], [100, 100, 110]])
-
-
-def test_voxel_downsample_averages_each_occupied_voxel() -> None:
-    points = np.array([[0.1, 0.1, 0.1], [0.3, 0.3, 0.3], [1.5, 0.2, 0.2]])
-    centres, colours = voxel_downsample(
-        points, np.array([[0, 0, 0], [10, 10, 10], [99, 0, 0]]), 1.0
-    )
-    order = np.argsort(centres[:, 0])
-    np.testing.assert_allclose(centres[order], [[0.2, 0.2, 0.2], [1.5, 0.2, 0.2]])
-    np.testing.assert_allclose(colours[order], [[5, 5, 5], [99, 0, 0]])
 
 
 def test_voxel_grid_reaches_the_requested_count_on_a_grid() -> None:

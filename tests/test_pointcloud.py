@@ -78,3 +78,9 @@ def test_cap_points_keeps_a_subset_of_the_given_size() -> None:
     np.testing.assert_array_equal(capped_colors, colors[rows])
     same, _ = cap_points(positions, colors, 1000, np.random.default_rng(1))
     assert same is positions
+
+
+def test_a_voxel_too_small_for_the_extent_is_refused_not_wrapped() -> None:
+    positions = np.array([[0.0, 0.0, 0.0], [1000.0, 1000.0, 1000.0]], dtype=np.float32)
+    with pytest.raises(ValueError, match="too small"):
+        voxel_downsample(positions, None, 1e-6)

@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from services.pointcloud import voxel_downsample, voxel_keys
+
 
 @dataclass(frozen=True)
 class Representatives:
@@ -45,12 +47,12 @@ def quantization_error(
     """
     from scipy.spatial import cKDTree
 
-    positions = np.asarray(positions, dtype=np.float64)
-    distances, winners = cKDTree(representative_positions).query(positions, k=1)
-    result = {"pos": float(math.sqrt(np.mean(distances**2)))}
+    from gngdt_core.metrics import quantization_error as rms_error
+
+    _, winners = cKDTree(representative_positions).query(positions, k=1)
+    result = {"pos": rms_error(positions, representative_positions, winners)}
     if colors is not None and representative_colors is not None:
-        colour_offsets = np.asarray(colors, dtype=np.float64) - representative_colors[winners]
-        result["col"] = float(math.sqrt(np.mean(np.sum(colour_offsets**2, axis=1))))
+        result["col"] = rms_error(colors, representative_colors, winners)
     return result
 
 
@@ -101,28 +103,6 @@ def kmeans_reference(
     )
 
 
-def _voxel_keys(positions: np.ndarray, voxel_size: float) -> np.ndarray:
-    """(N,) int64: one integer per voxel (cell indices packed row-major), for a fast 1-D unique."""
-    cells = np.floor((positions - positions.min(axis=0)) / voxel_size).astype(np.int64)
-    extents = cells.max(axis=0) + 1
-    if float(np.prod(extents.astype(np.float64))) >= 2.0**62:
-        raise ValueError(f"voxel_size {voxel_size} is too small for these positions")
-    return np.ravel_multi_index(tuple(cells.T), tuple(int(e) for e in extents))
-
-
-def voxel_downsample(
-    positions: np.ndarray, colors: np.ndarray | None, voxel_size: float
-) -> tuple[np.ndarray, np.ndarray | None]:
-    """Mean position (and colour) of the points in each occupied cubic voxel of ``voxel_size``."""
-    positions = np.asarray(positions, dtype=np.float64)
-    _, labels = np.unique(_voxel_keys(positions, voxel_size), return_inverse=True)
-    count = int(labels.max()) + 1
-    sums = np.zeros((count, positions.shape[1]))
-    np.add.at(sums, labels, positions)
-    centres = sums / np.bincount(labels, minlength=count)[:, None]
-    return centres, _mean_colours(labels, colors, count)
-
-
 def voxel_grid_reference(
     positions: np.ndarray, colors: np.ndarray | None, n_points: int, *, iterations: int = 40
 ) -> Representatives:
@@ -140,7 +120,7 @@ def voxel_grid_reference(
     small, large = extent * 1e-4, extent * 2.0
 
     def occupied(size: float) -> int:
-        return len(np.unique(_voxel_keys(positions, size)))
+        return len(np.unique(voxel_keys(positions, size)))
 
     best_size, best_gap = large, math.inf
     for _ in range(iterations):
@@ -154,6 +134,7 @@ def voxel_grid_reference(
             small = size
         else:
             large = size
+    # the capture's own voxel grid, as a user would downsample before publishing
     centres, centre_colours = voxel_downsample(positions, colors, best_size)
     return Representatives(
         name="voxel grid",
