@@ -28,6 +28,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
 from schemas.packing import LearnerStatusInfo, decode_status  # noqa: E402
+from services.run import DEFAULT_MAX_POINTS  # noqa: E402
 from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
 
 
@@ -103,6 +104,8 @@ def main() -> int:
     parser.add_argument("--height", type=int, default=240)
     parser.add_argument("--frames", type=int, default=60, help="frames in the looped recording")
     parser.add_argument("--samples-per-frame", type=int, default=5000)
+    parser.add_argument("--max-points", type=int, default=DEFAULT_MAX_POINTS,
+                        help="capture's point cap, as `gngdt run` (default %(default)s; 0: all)")
     parser.add_argument("--sample-every", type=float, default=10.0, metavar="SECONDS")
     parser.add_argument("--save-rrd", action="store_true",
                         help="the logger writes a .rrd (default: --stdout to /dev/null)")
@@ -127,7 +130,8 @@ def main() -> int:
         session.declare_subscriber("gngdt/camera/learner/status", statuses.add)
         time.sleep(5.0)  # learner warm-up (numba)
         statuses.started = time.monotonic()
-        processes["capture"] = start(["capture", str(recording), "--loop", *connect],
+        processes["capture"] = start(["capture", str(recording), "--loop",
+                                      "--max-points", str(args.max_points), *connect],
                                      work / "capture.log")
         duration = args.minutes * 60.0
         rss: dict[str, list[tuple[float, float]]] = {name: [] for name in processes}
