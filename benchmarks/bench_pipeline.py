@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import sys
 import tempfile
 import threading
@@ -26,30 +25,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from procstat import cpu_seconds, status_mb
+
 from schemas.wire import FrameStamp, topic
 from services.logger import LIVELINESS_KEY
 from services.run import Observed, Pipeline, wait_until
 from services.zenoh_session import free_tcp_port, open_config, router_config
-
-
-def peak_rss_mb(pid: int) -> float:
-    """VmHWM (peak resident set) of a live process, MB; 0 when it is gone."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return 0.0
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU time of a live process, seconds; 0 when it is gone."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def render_recording(path: Path, frames: int) -> None:
@@ -174,7 +155,7 @@ def run_pipeline(
             if capture.process.poll() is None:
                 streaming_seconds = time.monotonic() - started
             for name, child in children.items():
-                peaks[name] = max(peaks.get(name, 0.0), peak_rss_mb(child.process.pid))
+                peaks[name] = max(peaks.get(name, 0.0), status_mb(child.process.pid, "VmHWM"))
                 cpu[name] = max(cpu.get(name, 0.0), cpu_seconds(child.process.pid))
             time.sleep(0.1)
             if time.monotonic() - started > 600:

@@ -27,20 +27,11 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
+from procstat import status_mb  # noqa: E402  (benchmarks/, beside this script)
+
 from schemas.packing import LearnerStatusInfo, decode_status  # noqa: E402
 from services.run import DEFAULT_MAX_POINTS  # noqa: E402
 from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
-
-
-def rss_mb(pid: int) -> float:
-    """Resident set size of a process, MB (0 when it has exited)."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith("VmRSS:"):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return 0.0
 
 
 @dataclass
@@ -139,10 +130,10 @@ def main() -> int:
             for name, process in processes.items():
                 if process.poll() is not None:
                     raise SystemExit(f"{name} exited with {process.returncode}; see {work}")
-                rss[name].append((elapsed, rss_mb(process.pid)))
+                rss[name].append((elapsed, status_mb(process.pid, "VmRSS")))
             time.sleep(min(args.sample_every, max(0.0, duration - elapsed)))
         for name, process in processes.items():
-            rss[name].append((time.monotonic() - statuses.started, rss_mb(process.pid)))
+            rss[name].append((time.monotonic() - statuses.started, status_mb(process.pid, "VmRSS")))
         session.close()
     finally:
         for process in processes.values():

@@ -1,0 +1,27 @@
+"""Memory and CPU of a live process from /proc, for the benchmarks (Linux)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+
+def status_mb(pid: int, field: str) -> float:
+    """A memory field of /proc/<pid>/status in MB: ``VmRSS`` (resident now), ``VmHWM`` (peak
+    resident); 0 when the process is gone."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith(f"{field}:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a live process, seconds; 0 when it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
