@@ -62,8 +62,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-points", type=int, default=DEFAULT_MAX_POINTS,
         help=f"capture's random point cap per frame (default {DEFAULT_MAX_POINTS}; 0: full "
         "clouds). The learner samples 10,000 points a frame by default and the logger shows "
-        "50,000, so the "
-        "cap changes neither; on 2 cores at 30 fps it cuts dropped frames from ~30%% to ~5%%")
+        "50,000, so the cap changes neither; on 2 cores at 30 fps it cuts dropped frames from "
+        "~30%% to ~5%%")
     parser.add_argument("--params", type=Path, metavar="FILE.toml", help="learner parameters")
     parser.add_argument("--checkpoint", type=Path, metavar="PATH", help="learner checkpoint")
     parser.add_argument("--samples-per-frame", type=int, help="learning steps per frame")
