@@ -7,6 +7,12 @@ from scipy.sparse import coo_array
 from scipy.sparse.csgraph import connected_components
 
 
+def cluster_count(labels: np.ndarray) -> int:
+    """Distinct clusters in ``labels`` (N,) int, not counting -1 (below min_size, or noise)."""
+    labels = np.asarray(labels)
+    return int(np.unique(labels[labels >= 0]).size)
+
+
 def connected_component_labels(n_nodes: int, edges: np.ndarray, min_size: int = 1) -> np.ndarray:
     """(n_nodes,) int32 component labels 0..k-1, largest component first (ties: lowest node).
 

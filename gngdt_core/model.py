@@ -216,9 +216,13 @@ class _GrowingGas:
             return np.zeros(0)
         return self._arrays["err"][: self.n_nodes_] * self._fstate[K.F_ERROR_SCALE]
 
-    def edges(self, prop: str = "pos") -> np.ndarray:
-        """(E, 2) int64 node-index pairs ``i < j`` of the topology of ``prop``."""
-        return self._edges_with(self._property_mask((prop,)))
+    def edges(self, *props: str) -> np.ndarray:
+        """(E, 2) int64 node-index pairs ``i < j`` of the named topologies combined.
+
+        An edge is kept where every named property has it (``edges("col", "nor")``); no name
+        means "pos".
+        """
+        return self._edges_with(self._property_mask(props or ("pos",)))
 
     def _property_mask(self, props: tuple[str, ...]) -> int:
         mask = 0

@@ -29,8 +29,9 @@ def test_combined_topology_keeps_only_edges_in_every_property():
     pos_edges = {tuple(e) for e in model.edges("pos")}
     col_edges = {tuple(e) for e in model.edges("col")}
     assert col_edges <= pos_edges and col_edges != pos_edges
-    both = model._edges_with(1 | 2)  # pos and col bits: same as the col topology
+    both = model.edges("pos", "col")  # col edges are a subset of pos edges: the col topology
     assert {tuple(e) for e in both} == col_edges
+    assert model.edges().tolist() == model.edges("pos").tolist()
     expected = connected_component_labels(model.n_nodes_, np.array(sorted(col_edges)))
     np.testing.assert_array_equal(model.clusters("col"), expected)
     np.testing.assert_array_equal(model.clusters("pos", "col"), expected)

@@ -24,8 +24,7 @@ EXAMPLES = """examples:
   gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run
 """
 
-METHOD_CHOICES = ("gngdt", "gng", "gngw")
-PAPER_METHOD_NAMES = {"gngdt": "GNG-DT", "gng": "GNG", "gngw": "GNG-W"}
+METHOD_CHOICES = ("gngdt", "gng", "gngw")  # the keys of paper.METHOD_NAMES (kept light for --help)
 
 
 def _positive_int(text: str) -> int:
@@ -222,9 +221,9 @@ def _main_paper(args: argparse.Namespace) -> int:
 
 def _in_paper_order(methods: list[str]) -> tuple[str, ...]:
     """Chosen methods named as in the paper, in its column order (GNG, GNG-W, GNG-DT)."""
-    from services.evaluation.paper import METHODS
+    from services.evaluation.paper import METHOD_NAMES, METHODS
 
-    chosen = {PAPER_METHOD_NAMES[m] for m in methods}
+    chosen = {METHOD_NAMES[m] for m in methods}
     return tuple(m for m in METHODS if m in chosen)
 
 

@@ -32,6 +32,8 @@ from services.evaluation.report import (
 log = logging.getLogger(__name__)
 
 METHODS = ("GNG", "GNG-W", "GNG-DT")
+#: command-line method names -> the paper's names
+METHOD_NAMES = {"gngdt": "GNG-DT", "gng": "GNG", "gngw": "GNG-W"}
 DATASETS = ("Data1", "Data2")
 #: scales in the order the paper's tables list them
 SCALES = (1.0, 10.0, 0.1, 0.01)
@@ -254,7 +256,7 @@ def clusterings_of(method: str, dimensions: int) -> tuple[tuple[str, ...], ...]:
 
 def run_trial(task: TrialTask) -> dict[str, Any]:
     """Learn one run and measure it: quantization errors, clusters, ARI, cluster-centre errors."""
-    from gngdt_core import adjusted_rand_index, cluster_centre_errors
+    from gngdt_core import adjusted_rand_index, cluster_centre_errors, cluster_count
 
     settings = task.settings
     n_points = settings.data1_points if task.dataset == "Data1" else settings.data2_points
@@ -286,12 +288,12 @@ def run_trial(task: TrialTask) -> dict[str, Any]:
     for props in clusterings_of(task.method, positions.shape[1]):
         name = "+".join(props)
         node_labels = np.asarray(model.clusters(*props, min_size=settings.min_cluster_size))
-        result["clusters"][name] = len(np.unique(node_labels[node_labels >= 0]))
+        result["clusters"][name] = cluster_count(node_labels)
         all_labels = np.asarray(model.clusters(*props))
         result["clusters_all"][name] = len(np.unique(all_labels))
         result["ari"][name] = float(adjusted_rand_index(labels, node_labels[winners]))
         topology["labels"][name] = node_labels
-        topology["edges"][name] = combined_edges(model, props)
+        topology["edges"][name] = model.edges(*props)
 
     if task.method == "GNG-DT" and task.dataset == "Data1":
         col_labels = np.asarray(model.clusters("col", min_size=settings.min_cluster_size))
@@ -331,17 +333,6 @@ def separates_regions(
             return False
         majorities.add(int(values[np.argmax(counts)]))
     return len(majorities) == regions
-
-
-def combined_edges(model: Any, props: Sequence[str]) -> np.ndarray:
-    """(E, 2) edges present in every topology of ``props`` (the combined topology drawn)."""
-    edge_sets = [model.edges(p) for p in props]
-    if len(edge_sets) == 1:
-        return np.asarray(edge_sets[0])
-    common = set(map(tuple, np.asarray(edge_sets[0]).tolist()))
-    for edges in edge_sets[1:]:
-        common &= set(map(tuple, np.asarray(edges).tolist()))
-    return np.array(sorted(common), dtype=np.int64).reshape(-1, 2)
 
 
 def data1_centres(scale: float) -> np.ndarray:

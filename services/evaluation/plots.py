@@ -91,6 +91,8 @@ def plot_topology_grid(
 def _draw_topology(axis, panel: TopologyPanel, three_d: bool) -> None:
     from matplotlib.collections import LineCollection
 
+    from gngdt_core import cluster_count
+
     colours = cluster_colours(panel.labels)
     positions = np.asarray(panel.positions, dtype=np.float64)
     if panel.camera_frame:
@@ -117,7 +119,7 @@ def _draw_topology(axis, panel: TopologyPanel, three_d: bool) -> None:
         axis.scatter(positions[:, 0], positions[:, 1], c=colours, s=5, zorder=2)
         axis.set_aspect("equal")
         axis.tick_params(labelsize=6)
-    n_clusters = len(np.unique(panel.labels[panel.labels >= 0]))
+    n_clusters = cluster_count(panel.labels)
     axis.set_title(f"{panel.title}\n{len(positions)} nodes, {n_clusters} clusters", fontsize=8)
 
 

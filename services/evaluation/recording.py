@@ -22,9 +22,9 @@ from typing import Any
 import numpy as np
 
 from services.evaluation.paper import (
+    METHOD_NAMES,
     PAPER_PARAMETERS,
     clusterings_of,
-    combined_edges,
     make_model,
 )
 from services.evaluation.report import (
@@ -37,8 +37,6 @@ from services.evaluation.report import (
 
 log = logging.getLogger(__name__)
 
-#: command-line method names -> the paper's names
-METHOD_NAMES = {"gngdt": "GNG-DT", "gng": "GNG", "gngw": "GNG-W"}
 #: ground-truth label of pixels with no surface (never scored)
 NO_LABEL = 0
 
@@ -145,7 +143,7 @@ def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intr
 
 def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> dict[str, Any]:
     """One method, one seed, every frame: per-frame metrics and the final model's topology."""
-    from gngdt_core import adjusted_rand_index
+    from gngdt_core import adjusted_rand_index, cluster_count
 
     model = make_model(method, settings.max_nodes, random_state=trial)
     frames: list[dict[str, Any]] = []
@@ -175,7 +173,7 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
         for props in clusterings_of(method, 3):
             name = "+".join(props)
             node_labels = np.asarray(model.clusters(*props, min_size=settings.min_cluster_size))
-            record["clusters"][name] = len(np.unique(node_labels[node_labels >= 0]))
+            record["clusters"][name] = cluster_count(node_labels)
             if labelled is not None and labelled.any():
                 record["ari"][name] = float(
                     adjusted_rand_index(points.labels[labelled], node_labels[winners])
@@ -191,7 +189,7 @@ def references(
     last: FramePoints, gngdt_model: Any | None, node_counts: set[int], settings: RecordingSettings
 ) -> dict[str, Any]:
     """k-means and voxel grid at each node count, DBSCAN ARI beside GNG-DT's, on the last frame."""
-    from gngdt_core import adjusted_rand_index
+    from gngdt_core import adjusted_rand_index, cluster_count
     from services.evaluation.references import dbscan_labels, kmeans_reference, voxel_grid_reference
 
     positions = last.positions.astype(np.float64)
@@ -219,7 +217,7 @@ def references(
             "eps_m": eps,
             "min_samples": settings.dbscan_min_samples,
             "points": len(subset),
-            "clusters": len(np.unique(labels[labels >= 0])),
+            "clusters": cluster_count(labels),
             "noise_fraction": float(np.mean(labels < 0)),
             "seconds": time.perf_counter() - started,
         }
@@ -388,7 +386,7 @@ def _write_plots(
                 TopologyPanel(
                     title=f"{run['method']}" + (f" C^{name}" if run["method"] == "GNG-DT" else ""),
                     positions=np.asarray(model.positions_),
-                    edges=combined_edges(model, props),
+                    edges=model.edges(*props),
                     camera_frame=True,
                     labels=np.asarray(model.clusters(*props, min_size=min_cluster_size)),
                 )
