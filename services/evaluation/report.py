@@ -84,8 +84,3 @@ def write_report(
         json.dumps(to_jsonable(data), indent=2, allow_nan=False) + "\n", encoding="utf-8"
     )
     return markdown_path, json_path
-
-
-def image_link(path: Path, relative_to: Path, caption: str) -> str:
-    """A Markdown image line for a PNG written beside the report."""
-    return f"![{caption}]({Path(path).relative_to(relative_to).as_posix()})"
