@@ -25,10 +25,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from gngdt_core import _kernels as K
+from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
 from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
+from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_network
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 _STATE_VERSION = 1
@@ -253,16 +255,30 @@ class _GrowingGas:
         return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
 
     def predict(self, positions: Any) -> np.ndarray:
-        """(N,) int64 index of the winner node (nearest by position) of each row."""
+        """(N,) int64 index of the winner node (nearest by position) of each row.
+
+        Rows in scan order (a depth image's pixels row by row) are fastest: each search starts
+        from the previous row's winner in the learner's own spatial grid.
+        """
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        query = np.asarray(positions, dtype=np.float64)
+        query = np.asarray(positions)
         if query.ndim != 2 or query.shape[1] != self._dim:
             raise ValueError(f"positions must have shape (N, {self._dim}), got {query.shape}")
+        if query.dtype not in (np.float32, np.float64):
+            query = query.astype(np.float64)
         if not np.isfinite(query).all():
             raise ValueError("positions contain NaN or inf")
-        _, winners = cKDTree(self.positions_).query(query, k=1)
-        return np.asarray(winners, dtype=np.int64)
+        if self._dim != 3 or self._MODE != K.MODE_GNGDT:
+            _, winners = cKDTree(self.positions_).query(query, k=1)
+            return np.asarray(winners, dtype=np.int64)
+        winners = np.empty(query.shape[0], dtype=np.int32)
+        sq_distances = np.empty(query.shape[0])
+        a = self._arrays
+        SK.nearest_nodes(np.ascontiguousarray(query), a["pos"], self.n_nodes_, a["ghead"],
+                         a["gnext"], bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL],
+                         winners, sq_distances)
+        return winners.astype(np.int64)
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
         """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
@@ -339,6 +355,33 @@ class GNGDT(_GrowingGas):
         if self._dim == 3:
             props.append("nor")
         return tuple(props)
+
+    def fresh_normals(self) -> np.ndarray:
+        """(n_nodes, 3) eq. 16 normals of every node from the current positions (the stored
+        ``normals_`` are recomputed only for each step's winner, so they lag behind the nodes'
+        moves). Unit vectors facing ``viewpoint``; zero where undefined. The model is unchanged.
+        """
+        if self._dim != 3:
+            raise ValueError("normals need 3-D positions")
+        a = self._arrays
+        normals = a["nor"].copy()
+        fparams, iparams = self._kernel_parameters()
+        SK.refresh_normals(self.n_nodes_, a["pos"], normals, a["nbr"], a["deg"],
+                           fparams[K.P_MU], bool(iparams[K.Q_ORIENT]), fparams[K.P_VX],
+                           fparams[K.P_VY], fparams[K.P_VZ])
+        return normals[: self.n_nodes_]
+
+    def segmentation(self, params: SegmentationParams | None = None) -> Segmentation:
+        """Segments of the current network by local convexity (`gngdt_core.segmentation`),
+        from fresh normals and the position topology; details (patches, convex edges) included.
+        """
+        return segment_network(self.positions_, self.fresh_normals(), self.edges("pos"), params)
+
+    def segment(self, params: SegmentationParams | None = None) -> np.ndarray:
+        """(n_nodes,) int32 segment of each node, 0..k-1 by decreasing size: one segment per
+        object, support surfaces apart (see `gngdt_core.segmentation`). Label points or pixels
+        with ``labels[model.predict(points)]``."""
+        return self.segmentation(params).labels
 
 
 class GNG(_GrowingGas):
