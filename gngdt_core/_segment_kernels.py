@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from gngdt_core._kernels import (
     BOUND_SLACK,
@@ -123,33 +123,29 @@ def _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess):
         r += 1
 
 
-@njit(cache=True, parallel=True)
-def nearest_nodes(points, pos, n, ghead, gnext, grid_on, cell_size, winners, sq_distances):
-    """Nearest node by position of every point, through the learner's spatial hash grid.
+@njit(cache=True, nogil=True)
+def nearest_nodes(points, start, stop, pos, n, ghead, gnext, grid_on, cell_size, winners,
+                  sq_distances):
+    """Nearest node by position of points ``start..stop-1``, through the learner's hash grid.
 
-    points: (N, 3) float32/float64, ideally in scan order (neighbouring rows close in space: each
-    search starts from the previous row's winner); pos: (cap, 3) float64 node positions, nodes
-    ``0..n-1`` (n >= 1). Writes ``winners`` (N,) int32 and ``sq_distances`` (N,) float64. Exact;
-    without a grid (few nodes) brute force.
+    points: (N, 3) float32/float64, ideally in scan order (each search starts from the previous
+    point's winner); pos: (cap, 3) float64 node positions, nodes ``0..n-1`` (n >= 1). Writes
+    ``winners`` (N,) int32 and ``sq_distances`` (N,) float64 in that range. Exact; brute force
+    without a grid (few nodes). Releases the GIL, so threads can label disjoint ranges at once.
     """
-    n_points = points.shape[0]
-    n_chunks = min(n_points, 64)
     inv_cell = 1.0 / cell_size if grid_on else 0.0
-    for chunk in prange(n_chunks):
-        start = chunk * n_points // n_chunks
-        stop = (chunk + 1) * n_points // n_chunks
-        guess = -1
-        for q in range(start, stop):
-            x0 = np.float64(points[q, 0])
-            x1 = np.float64(points[q, 1])
-            x2 = np.float64(points[q, 2])
-            if grid_on:
-                s, d = _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess)
-            else:
-                s, d = _nearest_brute(pos, n, x0, x1, x2)
-            winners[q] = s
-            sq_distances[q] = d
-            guess = s
+    guess = -1
+    for q in range(start, stop):
+        x0 = np.float64(points[q, 0])
+        x1 = np.float64(points[q, 1])
+        x2 = np.float64(points[q, 2])
+        if grid_on:
+            s, d = _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess)
+        else:
+            s, d = _nearest_brute(pos, n, x0, x1, x2)
+        winners[q] = s
+        sq_distances[q] = d
+        guess = s
 
 
 @njit(cache=True)

@@ -19,6 +19,8 @@ Step 0 places the two initial nodes on two random input samples. Growth stops at
 from __future__ import annotations
 
 import json
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -34,6 +36,14 @@ from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_ne
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 _STATE_VERSION = 2  # 2: persistent node ids (``ids``, a fourth counter)
+#: a nearest-node batch is split over the CPUs when each part gets at least this many points
+PARALLEL_MIN_POINTS = 50_000
+
+
+def split_range(n: int, min_part: int) -> list[int]:
+    """Bounds of up to one part per usable CPU over ``range(n)``, each part >= ``min_part``."""
+    parts = max(1, min(len(os.sched_getaffinity(0)), n // max(min_part, 1)))
+    return [n * k // parts for k in range(parts + 1)]
 
 
 def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
@@ -286,13 +296,25 @@ class _GrowingGas:
         if self._dim != 3 or self._MODE != K.MODE_GNGDT:
             _, winners = cKDTree(self.positions_).query(query, k=1)
             return np.asarray(winners, dtype=np.int64)
-        winners = np.empty(query.shape[0], dtype=np.int32)
-        sq_distances = np.empty(query.shape[0])
+        return self._nearest_nodes(np.ascontiguousarray(query))[0].astype(np.int64)
+
+    def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
+        large batches are split over the CPUs (the kernel releases the GIL)."""
+        winners = np.empty(points.shape[0], dtype=np.int32)
+        sq_distances = np.empty(points.shape[0])
         a = self._arrays
-        SK.nearest_nodes(np.ascontiguousarray(query), a["pos"], self.n_nodes_, a["ghead"],
-                         a["gnext"], bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL],
-                         winners, sq_distances)
-        return winners.astype(np.int64)
+        grid = (self.n_nodes_, a["ghead"], a["gnext"], bool(self._istate[K.I_GRID]),
+                self._fstate[K.F_CELL], winners, sq_distances)
+        bounds = split_range(points.shape[0], PARALLEL_MIN_POINTS)
+        if len(bounds) == 2:
+            SK.nearest_nodes(points, 0, points.shape[0], a["pos"], *grid)
+        else:
+            with ThreadPoolExecutor(len(bounds) - 1) as pool:
+                list(pool.map(lambda start, stop: SK.nearest_nodes(points, start, stop,
+                                                                   a["pos"], *grid),
+                              bounds[:-1], bounds[1:]))
+        return winners, sq_distances
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
         """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
