@@ -26,9 +26,42 @@ def test_kernel_matches_reference(make_data):
     np.testing.assert_allclose(fast.colors_, reference.colors, rtol=0, atol=1e-9)
     np.testing.assert_allclose(fast.normals_, reference.normals, rtol=0, atol=1e-9)
     np.testing.assert_allclose(fast.errors_, reference.errors, rtol=1e-9)
+    np.testing.assert_array_equal(fast.node_ids_, reference.ids)
     for prop in fast.properties_:
         expected = {key for key, edge in reference.edges.items() if prop in edge.properties}
         assert _edge_set(fast.edges(prop)) == expected, prop
+
+
+def test_node_ids_survive_deletions_as_in_the_reference():
+    # age_max=3 makes nodes lose all their edges and be deleted (the last node moves into the
+    # hole), so identities differ from indices; ids must follow each node like the reference's
+    positions, colors, _ = make_data1(1.0, n_points=2_000, random_state=0)
+    params = {**SMALL, "age_max": 3}
+    fast = GNGDT(**params).fit(positions, colors, n_steps=6_000)
+    reference = ReferenceGNGDT(**params).partial_fit(positions, colors, n_steps=6_000)
+    np.testing.assert_allclose(fast.positions_, reference.positions, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(fast.node_ids_, reference.ids)
+    assert reference.next_id > fast.n_nodes_ + 20  # many nodes were deleted
+    assert np.unique(fast.node_ids_).size == fast.n_nodes_
+    assert not np.array_equal(fast.node_ids_, np.arange(fast.n_nodes_))
+
+
+def test_node_ids_persist_between_batches_and_are_never_reused():
+    positions, colors, _ = make_data2(n_points=5_000, random_state=0)
+    model = GNGDT(max_nodes=80, lambda_=100, age_max=5, random_state=0)
+    model.partial_fit(positions, colors, n_steps=10_000)
+    seen = set(model.node_ids_.tolist())
+    before = dict(zip(model.node_ids_.tolist(), model.positions_, strict=True))
+    model.partial_fit(positions, colors, n_steps=200)
+    after = dict(zip(model.node_ids_.tolist(), model.positions_, strict=True))
+    kept = before.keys() & after.keys()
+    assert len(kept) >= 0.9 * len(before)
+    # 200 steps move a node far less than the node spacing: a kept id is the same node
+    moves = [np.linalg.norm(after[i] - before[i]) for i in kept]
+    assert max(moves) < 0.5 * np.median(np.linalg.norm(np.diff(model.positions_, axis=0), axis=1))
+    new = after.keys() - before.keys()
+    assert all(i >= max(seen) + 1 for i in new)
+    assert model.node_ids_.dtype == np.int64
 
 
 def test_same_seed_same_result_and_different_seed_differs():

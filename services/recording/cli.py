@@ -15,6 +15,7 @@ logger = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
   gngdt record synth --scene tabletop --frames 30 --out recordings/tabletop.mcap
+  gngdt record synth --scene tabletop_vanish --frames 90 --out vanish.mcap   # a changing scene
   gngdt record images --format redwood ../shared/data/rgbd/rtabmap_rgbd_test --out lab.mcap
   gngdt record synth --help                     # scenes and every option
 """
@@ -60,17 +61,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             "(default: %(default)s)",
         )
 
-    scene_lines = "\n".join(f"  {name:<10} {text}" for name, text in sorted(SCENES.items()))
+    scene_lines = "\n".join(f"  {name:<16} {text}" for name, text in sorted(SCENES.items()))
     synth = kinds.add_parser(
         "synth",
-        help="render a synthetic scene with ground-truth labels",
-        description="Render a synthetic RGB-D scene, as a Kinect would see it, with a "
-        "ground-truth label image per frame.\n\nscenes:\n" + scene_lines,
+        help="render a synthetic scene with ground-truth labels and camera poses",
+        description="Render a synthetic scene with the virtual Kinect: colour, depth, "
+        "ground-truth labels and the camera's pose (/tf) per frame.\n\nscenes:\n" + scene_lines,
         epilog=SYNTH_EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    synth.add_argument("--scene", required=True, choices=sorted(SCENES), metavar="SCENE",
-                       help=f"scene to render: {', '.join(sorted(SCENES))}")
+    synth.add_argument("--scene", required=True, choices=sorted(SCENES), metavar="NAME",
+                       help=f"scene to render: {', '.join(sorted(SCENES))} (described above)")
     synth.add_argument("--frames", type=int, required=True, help="number of frames to render")
     synth.add_argument("--width", type=int, default=640,
                        help="image width in pixels (default: %(default)s)")
@@ -104,14 +105,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_output_options(images)
 
 
-def write_recording(frames: Iterable[Frame], args: argparse.Namespace) -> int:
-    """Write ``frames`` to ``args.out`` with a progress line every ``PROGRESS_EVERY`` frames."""
+def write_recording(
+    frames: Iterable[Frame],
+    args: argparse.Namespace,
+    metadata: dict[str, dict[str, str]] | None = None,
+) -> int:
+    """Write ``frames`` to ``args.out`` with a progress line every ``PROGRESS_EVERY`` frames;
+    ``metadata``: named MCAP metadata records."""
     from services.recording.writer import RecordingWriter
 
     started = time.perf_counter()
     with RecordingWriter(
         args.out, compression=args.compression, color_format=args.color_format
     ) as writer:
+        for name, data in (metadata or {}).items():
+            writer.add_metadata(name, data)
         for frame in frames:
             writer.write_frame(frame)
             if writer.frames_written % PROGRESS_EVERY == 0:
@@ -160,10 +168,19 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     )
 
 
+def _synth_metadata(args: argparse.Namespace) -> dict[str, dict[str, str]]:
+    from services.recording.scenes import build_scene
+    from services.recording.synth import SCENE_METADATA, scene_metadata
+
+    return {SCENE_METADATA: scene_metadata(build_scene(args.scene), args.fps)}
+
+
 def main(args: argparse.Namespace) -> int:
     try:
-        frames = _synth_frames(args) if args.record_kind == "synth" else _image_frames(args)
-        return write_recording(frames, args)
+        if args.record_kind == "synth":
+            frames = _synth_frames(args)
+            return write_recording(frames, args, _synth_metadata(args))
+        return write_recording(_image_frames(args), args)
     except (RecordingError, ValueError) as error:
         logger.error("%s", error)
         return 2
