@@ -48,6 +48,9 @@ EXAMPLES = """examples:
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
 CLUSTERINGS = ("pos", "col", "nor", "col+nor")
+#: the local-convexity topology and the segmentation built on it (`gngdt_core.segmentation`)
+CONVEXITY_PROPERTY = "cvx"
+SEGMENTS = "segments"
 
 
 @dataclass
@@ -97,10 +100,12 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
 
 @dataclass
 class LearnerConfig:
-    """GNG-DT constructor arguments plus learner options."""
+    """GNG-DT constructor arguments, learner options and segmentation parameters."""
 
     model: dict[str, Any] = field(default_factory=dict)
     options: LearnerOptions = field(default_factory=LearnerOptions)
+    #: `SegmentationParams` keys (validated when loaded)
+    segmentation: dict[str, Any] = field(default_factory=dict)
 
 
 def model_parameter_names() -> set[str]:
@@ -113,7 +118,9 @@ def model_parameter_names() -> set[str]:
 
 
 def load_params(path: Path | None) -> LearnerConfig:
-    """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt], [learner]).
+    """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt],
+    [learner]), segmentation parameters ([segmentation]); a sensor profile's [frames] table
+    (for `gngdt segment`) is checked and otherwise not used here.
 
     ``lambda`` is accepted for ``lambda_``. Unknown keys raise ``ValueError`` naming key and file.
     """
@@ -131,6 +138,17 @@ def load_params(path: Path | None) -> LearnerConfig:
     for key, value in document.items():
         if isinstance(value, dict) and key in ("gngdt", "learner"):
             flat.update(value)
+        elif isinstance(value, dict) and key in ("segmentation", "frames"):
+            from gngdt_core.frame_segmenter import FrameSchedule
+            from gngdt_core.segmentation import SegmentationParams
+
+            schema = SegmentationParams if key == "segmentation" else FrameSchedule
+            try:
+                schema.from_dict(value)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"--params {path}: [{key}]: {error}") from error
+            if key == "segmentation":
+                config.segmentation = dict(value)
         else:
             flat[key] = value
     model_names = model_parameter_names()
@@ -246,6 +264,7 @@ class Learner:
     def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
                  counters: Counters | None = None) -> None:
         from gngdt_core import GNGDT
+        from gngdt_core.segmentation import SegmentationParams
 
         self.camera = camera
         self.options = config.options
@@ -253,6 +272,7 @@ class Learner:
             model_args = {"random_state": config.options.seed, **config.model}
             model = GNGDT(**model_args)
         self.model = model
+        self.segmentation = SegmentationParams.from_dict(config.segmentation)
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
         self._rng = np.random.default_rng(config.options.seed)
@@ -278,15 +298,21 @@ class Learner:
 
         model = self.model
         min_size = self.options.min_cluster_size
+        position_edges = model.edges("pos")
+        segmentation = model.segmentation(self.segmentation)
+        edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
+        edges[CONVEXITY_PROPERTY] = position_edges[segmentation.convex]
+        clusterings = {
+            name: model.clusters(*name.split("+"), min_size=min_size) for name in CLUSTERINGS
+        }
+        clusterings[SEGMENTS] = segmentation.labels
         return encode_topology(
             positions=model.positions_,
             colors=model.colors_,
             normals=model.normals_,
             errors=model.errors_,
-            edges={prop: model.edges(prop) for prop in EDGE_PROPERTIES},
-            clusterings={
-                name: model.clusters(*name.split("+"), min_size=min_size) for name in CLUSTERINGS
-            },
+            edges=edges,
+            clusterings=clusterings,
             steps=int(model.n_steps_),
             frame_sequence=stamp.sequence,
             timestamp_ns=stamp.capture_time_ns,
@@ -398,6 +424,7 @@ def warm_up(config: LearnerConfig) -> None:
     """Run every model operation once on random points, so that numba compiles (or loads its
     cache) before the first frame instead of adding seconds to its latency."""
     from gngdt_core import GNGDT
+    from gngdt_core.segmentation import SegmentationParams
 
     rng = np.random.default_rng(0)
     positions = rng.random((500, 3), dtype=np.float32)
@@ -406,6 +433,7 @@ def warm_up(config: LearnerConfig) -> None:
     model.partial_fit(positions, colors, n_steps=2_000)
     for name in CLUSTERINGS:
         model.clusters(*name.split("+"), min_size=config.options.min_cluster_size)
+    model.segmentation(SegmentationParams.from_dict(config.segmentation))
     model.quantization_error(positions, colors)
 
 
