@@ -3,14 +3,15 @@ schedule parameters of `gngdt_core.frame_segmenter.FrameSegmenter`.
 
 Tables: ``[gngdt]`` (GNGDT constructor arguments; ``lambda`` means ``lambda_``; flat keys at the
 top level count as ``[gngdt]`` too, as in ``gngdt learn --params``), ``[segmentation]``
-(`SegmentationParams`), ``[frames]`` (`FrameSchedule`). ``[learner]`` belongs to ``gngdt learn``
-and is ignored here. Anything else is an error naming the file and the key.
+(`SegmentationParams`), ``[frames]`` (`FrameSchedule`). ``[learner]`` and flat learner options
+belong to ``gngdt learn`` (which reads the same profile) and are ignored here. Anything else is
+an error naming the file and the key. Keys left out take the classes' defaults.
 """
 
 from __future__ import annotations
 
 import tomllib
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +50,7 @@ class SegmenterProfile:
 def load_profile(path: str | Path | None = None) -> SegmenterProfile:
     """The profile in ``path``, else `DEFAULT_PROFILE`, else the built-in defaults. ValueError
     naming the file and key for unknown tables or keys and invalid values."""
-    from services.learner import model_parameter_names
+    from services.learner import LearnerOptions, model_parameter_names
 
     path = Path(path) if path is not None else DEFAULT_PROFILE
     if path is None:
@@ -63,6 +64,7 @@ def load_profile(path: str | Path | None = None) -> SegmenterProfile:
     except tomllib.TOMLDecodeError as error:
         raise ValueError(f"{path}: invalid TOML: {error}") from error
     tables: dict[str, dict[str, Any]] = {"gngdt": {}, "segmentation": {}, "frames": {}}
+    learner_options = {item.name for item in fields(LearnerOptions)}
     for key, value in document.items():
         if key in tables and isinstance(value, dict):
             tables[key].update(value)
@@ -71,7 +73,7 @@ def load_profile(path: str | Path | None = None) -> SegmenterProfile:
         elif isinstance(value, dict):
             raise ValueError(f"{path}: unknown table [{key}] (known: [gngdt], [segmentation], "
                              f"[frames]; [learner] is gngdt learn's)")
-        else:
+        elif key not in learner_options:
             tables["gngdt"][key] = value
     model = {("lambda_" if key == "lambda" else key): value
              for key, value in tables["gngdt"].items()}
