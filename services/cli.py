@@ -61,13 +61,29 @@ def build_parser() -> argparse.ArgumentParser:
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
         module.add_arguments(sub)
-        add_common_arguments(sub)
+        for leaf in leaf_parsers(sub):
+            add_common_arguments(leaf)
         sub.set_defaults(_module=module)
     return parser
 
 
+def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """The parsers that take options: ``parser`` itself, or those of its sub-subcommands."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return [leaf for sub in dict.fromkeys(action.choices.values())
+                    for leaf in leaf_parsers(sub)]
+    return [parser]
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    from services import lifecycle
+
+    lifecycle.install()  # first: a signal during the imports below must stop us too
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        return 130
     logging.basicConfig(
         level=getattr(logging, args.log_level),
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
