@@ -20,6 +20,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "log": ("services.logger", "log every gngdt stream to rerun"),
     "router": ("services.router", "run a zenoh router for standalone services"),
     "record": ("services.recording.cli", "make recordings: synthetic scenes or real RGB-D frames"),
+    "segment": ("services.segment", "segment RGB-D frames: a label image per frame"),
     "eval": ("services.evaluation.cli", "evaluate: the paper's tables, recordings, logged runs"),
 }
 
@@ -27,6 +28,7 @@ EPILOG = """examples:
   gngdt run recordings/tabletop.mcap                 # whole pipeline, writes runs/*.rrd
   gngdt record synth --scene tabletop --frames 30 --out my.mcap
   gngdt router & gngdt capture my.mcap --loop & gngdt learn & gngdt log --save out.rrd
+  gngdt segment recordings/tabletop.mcap --out seg/tabletop
   gngdt eval paper --trials 5 --out report/
 """
 
