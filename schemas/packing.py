@@ -75,6 +75,10 @@ CLOUD_POINT_STRIDE = 15
 #: Largest image a decoder accepts (width * height), 64 megapixels.
 MAX_IMAGE_PIXELS = 64 * 1024 * 1024
 
+#: Largest cloud a learner accepts by default and a capture publishes: 30 MB on the wire,
+#: within zenoh's message limit (services.zenoh_session.MAX_MESSAGE_BYTES).
+MAX_CLOUD_POINTS = 2_000_000
+
 #: What a GNG-DT learner can send, enforced before anything is allocated: a node keeps at most
 #: 16 neighbours (``gngdt_core._kernels.MAX_DEGREE``), so an edge set holds at most 8 edges a
 #: node; a learner publishes a handful of named edge sets and clusterings.
