@@ -18,6 +18,11 @@ from gngdt_core.model import GNGDT
 from gngdt_core.parameters import check_integer, check_real
 from gngdt_core.segmentation import SegmentationParams
 
+#: points of a frame checked for a scene change
+SCENE_SAMPLE = 2_000
+#: points drawn per learning step before attention thins out the flat surfaces
+ATTENTION_DRAW = 3
+
 
 @dataclass(frozen=True)
 class FrameSchedule:
@@ -38,6 +43,11 @@ class FrameSchedule:
     flat_surface_share: float = 1.0
     #: a smooth patch is a large flat surface when it holds at least this share of the nodes
     flat_surface_min_nodes: float = 0.1
+    #: online: a frame is a new scene (learned from scratch) when more than
+    #: ``scene_change_share`` of its points lie farther than ``scene_change_distance_m`` from
+    #: every node (a cut, a rearranged table); 1.0 never cuts
+    scene_change_distance_m: float = 0.02
+    scene_change_share: float = 0.03
 
     def __post_init__(self) -> None:
         check_integer("steps_first_frame", self.steps_first_frame, 1)
@@ -47,6 +57,8 @@ class FrameSchedule:
         check_real("max_depth_m", self.max_depth_m, self.min_depth_m, low_open=True)
         check_real("flat_surface_share", self.flat_surface_share, 0.0, 1.0, low_open=True)
         check_real("flat_surface_min_nodes", self.flat_surface_min_nodes, 0.0, 1.0)
+        check_real("scene_change_distance_m", self.scene_change_distance_m, 0.0, low_open=True)
+        check_real("scene_change_share", self.scene_change_share, 0.0, 1.0)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> FrameSchedule:
@@ -66,6 +78,8 @@ class FrameResult:
     n_nodes: int
     n_segments: int
     steps: int
+    #: learned from scratch (independent mode, the first frame, or a scene change)
+    from_scratch: bool
     milliseconds: dict[str, float] = field(default_factory=dict)
 
 
@@ -127,30 +141,32 @@ class FrameSegmenter:
         clock = _Clock()
         height, width, _ = points.shape
         flat_points = points.reshape(-1, 3)
+        flat_colors = colors.reshape(-1, 3)
         valid = np.flatnonzero(np.isfinite(flat_points).all(axis=1))
         learnable = self._learnable(points, valid)
+        labels = np.zeros(height * width, dtype=np.int32)
         clock.lap("prepare")
-        if independent or self.model_ is None:
+        if learnable.size < 2:
+            n_nodes = self.model_.n_nodes_ if self.model_ is not None else 0
+            return FrameResult(labels.reshape(height, width), n_nodes, 0, 0, False, clock.laps)
+        from_scratch = independent or self.model_ is None or self._new_scene(flat_points,
+                                                                             learnable)
+        if from_scratch:
             self.model_ = GNGDT(**self.model_params, random_state=self.random_state)
             self._on_large_surface = None
             steps = self.schedule.steps_first_frame
         else:
             steps = self.schedule.steps_per_frame
-        labels = np.zeros(height * width, dtype=np.int32)
-        if learnable.size < 2:
-            return FrameResult(labels.reshape(height, width), self.model_.n_nodes_, 0, 0,
-                               clock.laps)
-        self._learn(flat_points, colors.reshape(-1, 3), learnable, steps)
+        self._learn(flat_points, flat_colors, learnable, steps)
         clock.lap("learn")
         segmentation = self.model_.segmentation(self.segmentation)
         node_labels = segmentation.labels
         self._on_large_surface = self._large_surfaces(segmentation.patches)
         clock.lap("segment")
-        winners = self.model_.predict(flat_points[valid])
-        labels[valid] = node_labels[winners] + 1
+        labels[valid] = node_labels[self.model_.predict(flat_points[valid])] + 1
         clock.lap("label")
         return FrameResult(labels.reshape(height, width), self.model_.n_nodes_,
-                           int(node_labels.max()) + 1, steps, clock.laps)
+                           int(node_labels.max()) + 1, steps, from_scratch, clock.laps)
 
     def _learnable(self, points: np.ndarray, valid: np.ndarray) -> np.ndarray:
         """Flat indices of the valid pixels learned: in the depth range and not veil points."""
@@ -160,6 +176,17 @@ class FrameSegmenter:
         if schedule.veil_ratio > 0:
             keep &= ~veil_points(points, schedule.veil_ratio).reshape(-1)[valid]
         return valid[keep]
+
+    def _new_scene(self, flat_points: np.ndarray, learnable: np.ndarray) -> bool:
+        """Whether too many of a sample of the frame's points are far from every node."""
+        schedule = self.schedule
+        if schedule.scene_change_share >= 1.0:
+            return False
+        sample = self._rng.choice(learnable, size=min(learnable.size, SCENE_SAMPLE),
+                                  replace=False)
+        _, distances = self.model_.predict(flat_points[sample], return_distance=True)
+        far = np.count_nonzero(distances > schedule.scene_change_distance_m)
+        return far > schedule.scene_change_share * sample.size
 
     def _learn(self, flat_points: np.ndarray, flat_colors: np.ndarray, learnable: np.ndarray,
                steps: int) -> None:
@@ -173,7 +200,7 @@ class FrameSegmenter:
                 model.segmentation(self.segmentation).patches)
             steps -= warm_up
         if share < 1.0:
-            learnable = self._attend(flat_points, learnable, share)
+            learnable = self._attend(flat_points, learnable, share, steps)
         model.partial_fit(flat_points[learnable], flat_colors[learnable], n_steps=steps)
 
     def _large_surfaces(self, patches: np.ndarray) -> np.ndarray:
@@ -181,12 +208,16 @@ class FrameSegmenter:
         sizes = np.bincount(patches)
         return (sizes >= self.schedule.flat_surface_min_nodes * patches.size)[patches]
 
-    def _attend(self, flat_points: np.ndarray, learnable: np.ndarray,
-                share: float) -> np.ndarray:
-        """Keep ``share`` of the points whose nearest node is on a large flat surface."""
+    def _attend(self, flat_points: np.ndarray, learnable: np.ndarray, share: float,
+                steps: int) -> np.ndarray:
+        """Points to learn from: of a random draw of the frame's points (enough for ``steps``
+        after thinning), all those off the large flat surfaces and ``share`` of those on them."""
         on_surface = self._on_large_surface
         if on_surface is None or not on_surface.any() or on_surface.size != self.model_.n_nodes_:
             return learnable
+        draw = min(learnable.size, int(ATTENTION_DRAW * steps))
+        if draw < learnable.size:
+            learnable = self._rng.choice(learnable, size=draw, replace=False)
         on_large = on_surface[self.model_.predict(flat_points[learnable])]
         keep = ~on_large | (self._rng.random(learnable.size) < share)
         return learnable[keep]

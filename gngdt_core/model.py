@@ -278,8 +278,9 @@ class _GrowingGas:
         mask = self._property_mask(props or ("pos",))
         return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
 
-    def predict(self, positions: Any) -> np.ndarray:
-        """(N,) int64 index of the winner node (nearest by position) of each row.
+    def predict(self, positions: Any, return_distance: bool = False) -> Any:
+        """(N,) int64 index of the winner node (nearest by position) of each row; with
+        ``return_distance``, also (N,) float64 the distance to it (input units).
 
         Rows in scan order (a depth image's pixels row by row) are fastest: each search starts
         from the previous row's winner in the learner's own spatial grid.
@@ -294,9 +295,12 @@ class _GrowingGas:
         if not np.isfinite(query).all():
             raise ValueError("positions contain NaN or inf")
         if self._dim != 3 or self._MODE != K.MODE_GNGDT:
-            _, winners = cKDTree(self.positions_).query(query, k=1)
-            return np.asarray(winners, dtype=np.int64)
-        return self._nearest_nodes(np.ascontiguousarray(query))[0].astype(np.int64)
+            distances, winners = cKDTree(self.positions_).query(query, k=1)
+        else:
+            winners, sq_distances = self._nearest_nodes(np.ascontiguousarray(query))
+            distances = np.sqrt(sq_distances)
+        winners = np.asarray(winners, dtype=np.int64)
+        return (winners, np.asarray(distances, dtype=np.float64)) if return_distance else winners
 
     def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
