@@ -17,13 +17,16 @@ Layout (``cap`` = node capacity = ``max_nodes``, ``K`` = ``MAX_DEGREE``):
   Degree overflow: if ``s1`` or ``s2`` already has ``K`` edges when Step 4 must create their edge,
   the edge is not created in that step (everything else proceeds); GNG degrees stay far below
   ``K`` in practice.
+- ``ids`` (cap,) int64 persistent node ids: a node keeps its id while its index changes (deletion
+  moves the last node into the hole); a new node takes ``istate[I_NEXT_ID]``, which then grows, so
+  an id is never reused.
 - Spatial hash grid for the winner search: ``ghead`` (T,) int32 first node of each bucket,
   ``gnext``/``gprev`` (cap,) int32 doubly linked bucket lists, ``gbucket`` (cap,) int64 bucket of
   each node (-1: not in the grid), ``gcell`` (cap, 3) int64 integer cell of each node. A node's
   cell is ``floor(position * (1 / cell_size))`` per axis (the z cell is 0 in 2-D); every node
   in the grid is kept in the bucket of its current cell.
-- ``istate`` int64: [n_nodes, n_steps, grid_active]; ``fstate`` float64: [error_scale, cell_size,
-  spacing_ema].
+- ``istate`` int64: [n_nodes, n_steps, grid_active, next_id]; ``fstate`` float64:
+  [error_scale, cell_size, spacing_ema].
 
 Nodes are deleted by swapping the last node into the hole, so indices stay compact.
 
@@ -62,7 +65,7 @@ ERROR_SCALE_FLOOR = 1e-60
 BOUND_SLACK = 1e-9
 
 # indices into istate / fstate / fparams / iparams
-I_NODES, I_STEPS, I_GRID = 0, 1, 2
+I_NODES, I_STEPS, I_GRID, I_NEXT_ID = 0, 1, 2, 3
 F_ERROR_SCALE, F_CELL, F_SPACING = 0, 1, 2
 P_ETA1, P_ETA2, P_ALPHA, P_BETA, P_TAU_COL, P_TAU_NOR, P_MU = 0, 1, 2, 3, 4, 5, 6
 P_VX, P_VY, P_VZ, P_W_POS, P_W_COL = 7, 8, 9, 10, 11
@@ -644,7 +647,7 @@ def property_bits(col, nor, i, j, has_col, has_nor, tau_col, tau_nor):
 
 
 @njit(cache=True)
-def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg,
+def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
                 ghead, gnext, gprev, gbucket, gcell):
     """Delete isolated node ``i`` by moving the last node ``n-1`` into its slot. Returns n - 1."""
     grid_remove(ghead, gnext, gprev, gbucket, i)
@@ -656,6 +659,7 @@ def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg,
             col[i, a] = col[last, a]
             nor[i, a] = nor[last, a]
         err[i] = err[last]
+        ids[i] = ids[last]
         d = deg[last]
         for k in range(d):
             j = nbr[last, k]
@@ -675,7 +679,7 @@ def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg,
 
 @njit(cache=True)
 def learn(samples, sample_colors, order,
-          pos, col, nor, err, nbr, age, emask, rev, deg,
+          pos, col, nor, err, nbr, age, emask, rev, deg, ids,
           ghead, gnext, gprev, gbucket, gcell,
           istate, fstate, fparams, iparams):
     """Run one learning step (Steps 1-9) per index in ``order`` (rows of ``samples``).
@@ -686,7 +690,7 @@ def learn(samples, sample_colors, order,
     # scratch for Step 7: the neighbours whose edge to s1 just expired
     candidates = np.empty(nbr.shape[1], dtype=np.int64)
     _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids,
                  ghead, gnext, gprev, gbucket, gcell,
                  istate, fstate, fparams, iparams, candidates)
 
@@ -697,7 +701,7 @@ def learn(samples, sample_colors, order,
 # Without the runtime the function cannot allocate; numba refuses to compile it if it tries.
 @njit(cache=True, _nrt=False)
 def _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids,
                  ghead, gnext, gprev, gbucket, gcell,
                  istate, fstate, fparams, iparams, candidates):
     """The body of `learn`; ``candidates`` (MAX_DEGREE,) int64 scratch."""
@@ -725,6 +729,7 @@ def _learn_steps(samples, sample_colors, order,
 
     n = istate[I_NODES]
     t = istate[I_STEPS]
+    next_id = istate[I_NEXT_ID]
     grid_on = istate[I_GRID] != 0
     error_scale = fstate[F_ERROR_SCALE]
     cell_size = fstate[F_CELL]
@@ -812,7 +817,7 @@ def _learn_steps(samples, sample_colors, order,
         for q in range(n_candidates):
             j = candidates[q]
             if deg[j] == 0:
-                last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
                                    ghead, gnext, gprev, gbucket, gcell)
                 n -= 1
                 if s1 == last:
@@ -821,7 +826,7 @@ def _learn_steps(samples, sample_colors, order,
                     if candidates[q2] == last:
                         candidates[q2] = j
         if deg[s1] == 0:
-            delete_node(s1, n, pos, col, nor, err, nbr, age, emask, rev, deg,
+            delete_node(s1, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
                         ghead, gnext, gprev, gbucket, gcell)
             n -= 1
         elif has_nor:
@@ -831,6 +836,8 @@ def _learn_steps(samples, sample_colors, order,
             if n < max_nodes:
                 n = _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
                                  has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz)
+                ids[n - 1] = next_id
+                next_id += 1
                 if grid_on:
                     _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, inv_cell)
             # keep grid cells about GRID_CELL_SPACINGS node spacings wide (amortised O(n) per
@@ -855,6 +862,7 @@ def _learn_steps(samples, sample_colors, order,
     istate[I_NODES] = n
     istate[I_STEPS] = t
     istate[I_GRID] = 1 if grid_on else 0
+    istate[I_NEXT_ID] = next_id
     fstate[F_ERROR_SCALE] = error_scale
     fstate[F_CELL] = cell_size
     fstate[F_SPACING] = spacing

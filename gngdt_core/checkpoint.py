@@ -72,7 +72,7 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     dim = _scalar_int(state, "dim")
     has_col = _scalar_int(state, "has_colors")
     n_invalid = _scalar_int(state, "n_invalid")
-    counters = _array(state, "counters", (3,), "iu").astype(np.int64)
+    counters = _counters(state)
     scalars = _array(state, "scalars", (3,), "f").astype(np.float64)
     if dim not in (0, 2, 3):
         raise ValueError(f"state dim must be 0 (unfitted), 2 or 3, got {dim}")
@@ -104,6 +104,7 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         if not np.isfinite(arrays[key]).all():
             raise ValueError(f"state[{key!r}] contains NaN or inf")
     _check_adjacency(n, arrays)
+    arrays["ids"], counters[K.I_NEXT_ID] = _node_ids(state, n, int(counters[K.I_NEXT_ID]))
 
     model._allocate(dim, bool(has_col))
     for key, value in arrays.items():
@@ -115,6 +116,33 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         K.grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
                        float(scalars[K.F_CELL]))
     return model
+
+
+def _counters(state: dict[str, np.ndarray]) -> np.ndarray:
+    """(4,) int64 [n_nodes, n_steps, grid_active, next_id]; states saved before node ids had
+    three counters, and get next_id = -1 here (fresh ids are assigned by `_node_ids`)."""
+    counters = np.asarray(state["counters"])
+    if counters.shape not in ((3,), (4,)) or counters.dtype.kind not in "iu":
+        raise ValueError(f"state['counters'] has {counters.dtype} {counters.shape}, "
+                         "expected 3 or 4 integers")
+    full = np.full(4, -1, dtype=np.int64)
+    full[: counters.size] = counters
+    return full
+
+
+def _node_ids(state: dict[str, np.ndarray], n: int, next_id: int) -> tuple[np.ndarray, int]:
+    """The persistent node ids and the next free id; a state saved before ids existed gets
+    fresh ids 0..n-1 (identities do not survive such a restore, positions and edges do)."""
+    if "ids" not in state:
+        return np.arange(n, dtype=np.int64), max(n, next_id)
+    ids = _array(state, "ids", (n,), "iu").astype(np.int64)
+    if (ids < 0).any() or np.unique(ids).size != n:
+        raise ValueError("state['ids'] must be distinct non-negative node ids")
+    if next_id < 0:
+        next_id = int(ids.max()) + 1
+    if next_id <= ids.max():
+        raise ValueError(f"state next id {next_id} is not above every node id ({ids.max()})")
+    return ids, next_id
 
 
 def _check_adjacency(n: int, arrays: dict[str, np.ndarray]) -> None:

@@ -31,7 +31,7 @@ from gngdt_core.parameters import validate_parameters
 from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
-_STATE_VERSION = 1
+_STATE_VERSION = 2  # 2: persistent node ids (``ids``, a fourth counter)
 
 
 def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
@@ -61,7 +61,7 @@ class _GrowingGas:
         self._has_col = False
         self.n_invalid_ = 0
         self._arrays: dict[str, np.ndarray] = {}
-        self._istate = np.zeros(3, dtype=np.int64)
+        self._istate = np.zeros(4, dtype=np.int64)
         self._fstate = np.array([1.0, 0.0, 0.0])
 
     def _allocate(self, dim: int, has_col: bool) -> None:
@@ -79,6 +79,7 @@ class _GrowingGas:
             "emask": np.zeros((cap, K.MAX_DEGREE), dtype=np.uint8),
             "rev": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
             "deg": np.zeros(cap, dtype=np.int32),
+            "ids": np.zeros(cap, dtype=np.int64),
             "ghead": np.full(table, -1, dtype=np.int32),
             "gnext": np.full(cap, -1, dtype=np.int32),
             "gprev": np.full(cap, -1, dtype=np.int32),
@@ -149,7 +150,7 @@ class _GrowingGas:
             kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
             K.learn(samples, kernel_colors, order,
                     a["pos"], a["col"], a["nor"], a["err"],
-                    a["nbr"], a["age"], a["emask"], a["rev"], a["deg"],
+                    a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
                     a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
                     self._istate, self._fstate, fparams, iparams)
         return self
@@ -173,6 +174,8 @@ class _GrowingGas:
                 a["col"][node] = sample_colors[node]
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
         K.add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
+        a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
+        self._istate[K.I_NEXT_ID] += 2
         self._istate[K.I_NODES] = 2
 
     # ------------------------------------------------------------------ fitted state
@@ -208,6 +211,17 @@ class _GrowingGas:
     def normals_(self) -> np.ndarray:
         """(n_nodes, 3) float64 unit normals; (0, 0, 0) where undefined or not learned."""
         return self._node_array("nor", 3)
+
+    @property
+    def node_ids_(self) -> np.ndarray:
+        """(n_nodes,) int64 persistent node ids, row for row with the other node arrays.
+
+        A node keeps its id for its whole life although its index changes (a deletion moves the
+        last node into the hole); every new node gets an id never used before in this model.
+        """
+        if not self._arrays:
+            return np.zeros(0, dtype=np.int64)
+        return self._arrays["ids"][: self.n_nodes_].copy()
 
     @property
     def errors_(self) -> np.ndarray:
@@ -294,7 +308,7 @@ class _GrowingGas:
             "counters": self._istate.copy(),
             "scalars": self._fstate.copy(),
         }
-        for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg"):
+        for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids"):
             if a:
                 state[name] = a[name][:n].copy()
         return state

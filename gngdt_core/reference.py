@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gngdt_core._kernels import COL_BIT, MAX_DEGREE, NOR_BIT
+from gngdt_core._kernels import COL_BIT, I_NEXT_ID, MAX_DEGREE, NOR_BIT
 from gngdt_core.model import GNGDT
 from gngdt_core.sampling import as_samples, initial_indices, sample_orders
 
@@ -52,6 +52,8 @@ class ReferenceGNGDT:
         self.colors = np.zeros((0, 3))
         self.normals = np.zeros((0, 3))
         self.errors = np.zeros(0)
+        self.ids = np.zeros(0, dtype=np.int64)  # persistent node ids; never reused
+        self.next_id = 0
         self.edges: dict[tuple[int, int], Edge] = {}
         self.adjacency: list[list[int]] = []  # neighbours of each node, in slot order
         self.n_steps = 0
@@ -66,6 +68,8 @@ class ReferenceGNGDT:
         ref.colors = model.colors_
         ref.normals = model.normals_
         ref.errors = model.errors_
+        ref.ids = model.node_ids_
+        ref.next_id = int(model._istate[I_NEXT_ID])
         ref.has_col = "col" in model.properties_
         ref.n_steps = model.n_steps_
         a = model._arrays
@@ -146,7 +150,7 @@ class ReferenceGNGDT:
         """Remove isolated node ``i``; the last node takes index ``i``. Returns the old last."""
         self.events["deleted_nodes"] += 1
         last = len(self.errors) - 1
-        for array_name in ("positions", "colors", "normals", "errors"):
+        for array_name in ("positions", "colors", "normals", "errors", "ids"):
             array = getattr(self, array_name)
             array[i] = array[last]
             setattr(self, array_name, array[:last])
@@ -174,6 +178,8 @@ class ReferenceGNGDT:
             self.normals = np.zeros((2, 3))
             self.errors = np.zeros(2)
             self.adjacency = [[1], [0]]
+            self.ids = np.array([0, 1], dtype=np.int64)
+            self.next_id = 2
             self.edges = {(0, 1): Edge(0, {"pos", "col", "nor"})}
         for order in sample_orders(self.rng, samples.shape[0], steps):
             for index in order:  # Step 1
@@ -251,3 +257,5 @@ class ReferenceGNGDT:
         self.errors[u] -= alpha * self.errors[u]
         self.errors[f] -= alpha * self.errors[f]
         self.errors = np.append(self.errors, 0.5 * (self.errors[u] + self.errors[f]))
+        self.ids = np.append(self.ids, self.next_id)
+        self.next_id += 1

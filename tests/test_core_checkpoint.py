@@ -36,6 +36,31 @@ def test_checkpoint_restore_continue_equals_uninterrupted(cls, tmp_path):
     _assert_same_state(uninterrupted.get_state(), restored.get_state())
 
 
+def test_node_ids_and_their_counter_survive_a_checkpoint(tmp_path):
+    positions, colors, _ = make_data2(n_points=5_000, random_state=0)
+    model = GNGDT(max_nodes=60, lambda_=100, age_max=5, random_state=0)
+    model.partial_fit(positions, colors, n_steps=20_000)
+    restored = GNGDT.from_state(_roundtrip(model.get_state(), tmp_path / "ids.npz"))
+    np.testing.assert_array_equal(restored.node_ids_, model.node_ids_)
+    for learner in (model, restored):
+        learner.partial_fit(positions, colors, n_steps=20_000)
+    np.testing.assert_array_equal(restored.node_ids_, model.node_ids_)
+
+
+def test_a_state_saved_before_node_ids_gets_fresh_ids():
+    positions, colors, _ = make_data1(n_points=2_000, random_state=0)
+    growing = GNGDT(max_nodes=60, lambda_=50, random_state=0).fit(positions, colors, n_steps=1_000)
+    old = {key: value for key, value in growing.get_state().items() if key != "ids"}
+    old["counters"] = old["counters"][:3]  # the layout before node ids
+    restored = GNGDT.from_state(old)
+    n = restored.n_nodes_
+    np.testing.assert_array_equal(restored.node_ids_, np.arange(n))
+    np.testing.assert_array_equal(restored.positions_, growing.positions_)
+    restored.partial_fit(positions, colors, n_steps=500)
+    assert restored.n_nodes_ > n and restored.node_ids_.max() >= n
+    assert np.unique(restored.node_ids_).size == restored.n_nodes_
+
+
 def test_unfitted_state_roundtrips(tmp_path):
     model = GNGDT(max_nodes=10, random_state=1)
     restored = GNGDT.from_state(_roundtrip(model.get_state(), tmp_path / "s.npz"))
@@ -75,6 +100,9 @@ def _swap_neighbour(nbr):
         ("params", lambda a: np.array(str(a).replace('"max_nodes": ', '"max_nodes": 99999999')),
          "max_nodes must be <="),
         ("counters", lambda a: np.array([10_000, 0, 0]), "nodes"),
+        ("counters", lambda a: np.array([a[0], a[1], a[2], 1]), "next id"),
+        ("ids", lambda a: np.zeros_like(a), "distinct"),
+        ("ids", lambda a: a[:-1], "ids"),
         ("err", lambda a: a.astype(np.int64), "err"),
     ],
 )

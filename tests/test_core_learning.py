@@ -59,6 +59,7 @@ def _assert_same_network(fast: GNGDT, reference: ReferenceGNGDT, step: int) -> N
                                atol=1e-12 * max(reference.errors.max(), 1e-300), err_msg=where)
     np.testing.assert_allclose(fast.normals_, reference.normals, rtol=0, atol=NORMAL_ATOL,
                                err_msg=where)
+    np.testing.assert_array_equal(fast.node_ids_, reference.ids, err_msg=where)
     assert _kernel_edges(fast) == _reference_edges(reference, fast.properties_), where
 
 
@@ -120,6 +121,38 @@ def test_kernel_matches_reference_with_table1_rates(make_data):
         reference.partial_fit(positions, colors, n_steps=1_000)
         _assert_same_network(fast, reference, step)
     assert fast.n_nodes_ == SMALL["max_nodes"]
+
+
+def test_node_ids_survive_deletions_as_in_the_reference():
+    # age_max=3 makes nodes lose all their edges and be deleted (the last node moves into the
+    # hole), so identities differ from indices; ids must follow each node like the reference's
+    positions, colors, _ = make_data1(1.0, n_points=2_000, random_state=0)
+    params = {**SMALL, "age_max": 3}
+    fast = GNGDT(**params).fit(positions, colors, n_steps=6_000)
+    reference = ReferenceGNGDT(**params).partial_fit(positions, colors, n_steps=6_000)
+    np.testing.assert_allclose(fast.positions_, reference.positions, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(fast.node_ids_, reference.ids)
+    assert reference.next_id > fast.n_nodes_ + 20  # many nodes were deleted
+    assert np.unique(fast.node_ids_).size == fast.n_nodes_
+    assert not np.array_equal(fast.node_ids_, np.arange(fast.n_nodes_))
+
+
+def test_node_ids_persist_between_batches_and_are_never_reused():
+    positions, colors, _ = make_data2(n_points=5_000, random_state=0)
+    model = GNGDT(max_nodes=80, lambda_=100, age_max=5, random_state=0)
+    model.partial_fit(positions, colors, n_steps=10_000)
+    seen = set(model.node_ids_.tolist())
+    before = dict(zip(model.node_ids_.tolist(), model.positions_, strict=True))
+    model.partial_fit(positions, colors, n_steps=200)
+    after = dict(zip(model.node_ids_.tolist(), model.positions_, strict=True))
+    kept = before.keys() & after.keys()
+    assert len(kept) >= 0.9 * len(before)
+    # 200 steps move a node far less than the node spacing: a kept id is the same node
+    moves = [np.linalg.norm(after[i] - before[i]) for i in kept]
+    assert max(moves) < 0.5 * np.median(np.linalg.norm(np.diff(model.positions_, axis=0), axis=1))
+    new = after.keys() - before.keys()
+    assert all(i >= max(seen) + 1 for i in new)
+    assert model.node_ids_.dtype == np.int64
 
 
 def test_same_seed_same_result_and_different_seed_differs():
