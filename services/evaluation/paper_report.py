@@ -238,12 +238,15 @@ def _table4_section(levels: dict[float, Any], settings: PaperSettings) -> str:
             rows))
     parts.append(
         "*e_i, every node of the rectangle*: the same error with each rectangle's centre taken "
-        "over all nodes lying in it, clustered or not (mean over C1-C4). It is small: the "
-        "network itself is centred, and e_i is the shift left by the nodes the colour "
-        "clusters leave out — the paper's own explanation (\"as a result of the isolated "
-        "nodes, the centers of clusters shifted\"). How many nodes that is depends on the "
-        "colour noise, on τ_col and on the node spacing, none of which the paper's Table 4 "
-        "fixes beyond τ_col."
+        "over all nodes lying in it, clustered or not (mean over C1-C4). It is a fraction of "
+        "e_i: the network itself is centred, and e_i is the shift left by the nodes no colour "
+        "cluster holds — those on the two inner colour boundaries, whose colour is a mixture "
+        "(the paper's own explanation: \"as a result of the isolated nodes, the centers of "
+        "clusters shifted\"). Leaving out a strip of width w along a rectangle's two inner "
+        "sides moves its centroid by about w / √2, so our e_i corresponds to a strip about "
+        "half a node spacing wide and the paper's smaller e_i to a narrower one; the colour "
+        "noise hardly changes it (compare the levels). The paper gives nothing (node count, "
+        "its exact colours) that would tell why its strip is narrower."
     )
     return "\n\n".join(parts)
 
@@ -306,12 +309,14 @@ def _figure11_section(levels: dict[float, Any], settings: PaperSettings) -> str:
         f"normal edge below τ_nor = {tau:g}.",
         markdown_table(["scl", "surface", "position edges", "median normal distance",
                         "share < τ_nor"], spread_rows),
-        "On the planes most neighbours' normals agree within τ_nor and each plane is one "
-        "normal cluster. On the half cylinder (radius 40) neighbouring nodes a node spacing "
-        "apart have normals that turn by about spacing / radius, far above τ_nor, so its "
-        "nodes keep almost no normal edges and form no cluster of the minimum size: with "
-        "τ_nor = 0.02 the cylinder would need nodes less than 0.8 units apart. The paper's "
-        "fourth normal cluster cannot come from a cylinder of this size at this node density.",
+        "A surface is one normal cluster when enough of its position edges pass eq. 4. On the "
+        "half cylinder (radius 40) two neighbours a node spacing apart have normals that turn "
+        "by about spacing / radius radians — the median above — ten times τ_nor, so almost "
+        "none of its edges pass and its nodes form no cluster of the minimum size: the "
+        "cylinder would need nodes less than 40 × τ_nor = 0.8 units apart. That is why C^nor "
+        "(and with it C^col+nor) falls short of the paper's counts, at every colour level; "
+        "the paper's fourth normal cluster cannot come from a cylinder of this size at this "
+        "node density, and the paper gives neither.",
     ])
 
 
