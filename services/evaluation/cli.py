@@ -17,10 +17,11 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
-  gngdt eval paper --trials 5 --out report/paper           # the paper's Tables 2-4, Figure 10
-  gngdt eval paper --trials 1 --max-nodes 60               # a quick look
-  gngdt eval paper --frames ../shared/data/rgbd/* ../shared/data/labelled/*   # + Tables 5-6
-  gngdt eval paper --trials 10 --color-noise 0 1 2 3 4 6 8 --datasets Data1 Data2   # colour fit
+  gngdt eval paper --trials 5 --out report/paper      # Tables 2-4, Figures 10-11
+  gngdt eval paper --trials 1 --max-nodes 60          # a quick look
+  gngdt eval paper --frames ../shared/data/rgbd/*/ ../shared/data/labelled/*/   # + Tables 5-6
+  gngdt eval paper --trials 10 --color-noise 0 1 2 3 4 5 6 8 10 15 20 30   # the colour fit
+  gngdt eval paper --stop steps --steps 150000        # learn on past the node budget
   gngdt eval recording recordings/tabletop_small.mcap --out report/tabletop
   gngdt eval recording recordings/data2.mcap --method gngdt --trials 3
   gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run
@@ -58,7 +59,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="eval_command", required=True, metavar="WHAT")
 
     paper = sub.add_parser(
-        "paper", help="the paper's simulation (Tables 2-4, Figs. 10-11) and RGB-D (Tables 5-6) runs"
+        "paper",
+        help="the paper's simulation (Tables 2-4, Figs. 10-11) and RGB-D (Tables 5-6) runs",
+        epilog="examples:\n" + "\n".join(ln for ln in EXAMPLES.splitlines() if " paper " in ln),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     paper.add_argument(
         "--trials",

@@ -172,12 +172,16 @@ def _protocol_text(settings: PaperSettings, learning: dict[str, Any]) -> str:
         )
     return (
         "**Stopping rule and node budget (not given in the paper; ours):** " + rule
-        + f" Runs learned {learning['steps_min']:,}-{learning['steps_max']:,} steps and ended "
-        f"with {learning['nodes_min']}-{learning['nodes_max']} nodes. The budget of "
+        + f" Runs learned {_span(learning['steps_min'], learning['steps_max'])} steps and "
+        f"ended with {_span(learning['nodes_min'], learning['nodes_max'])} nodes. The budget of "
         f"{settings.max_nodes} nodes is the one that puts GNG-DT's Data1 position error at "
         "scl = 1 at the paper's 7.341 (GNG-DT's position error does not depend on colour, so "
         "this pins the node count independently of the colour model)."
     )
+
+
+def _span(low: int, high: int) -> str:
+    return f"{low:,}" if low == high else f"{low:,}-{high:,}"
 
 
 def _fit_section(levels: dict[float, Any], settings: PaperSettings) -> str:
