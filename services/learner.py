@@ -388,7 +388,8 @@ class Learner:
     def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
         """Learn the stream's last frame on until the network is settled: the node budget
         reached and eq. 17's position error changing by less than ``SETTLED_CHANGE`` over
-        ``SETTLE_CHUNK`` steps, or ``settle_max_steps`` more steps. Returns how it stopped."""
+        ``SETTLE_CHUNK`` steps, or ``settle_max_steps`` more steps (0: none). Returns how it
+        stopped (the final status says it, and the logger waits for it)."""
         limit = self.options.settle_max_steps
         sample = positions[self._rng.choice(len(positions), min(len(positions), 5_000),
                                             replace=False)]
@@ -784,8 +785,7 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
                     continue
                 latency_ms = publish(stamp, positions, colors)
                 learner.latencies.add(latency_ms)
-                if learner.options.settle_max_steps:
-                    last_frame = (stamp, positions, colors)
+                last_frame = (stamp, positions, colors)
                 learned_sequence = stamp.sequence
                 log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                           stamp.sequence, len(positions), received_ms, latency_ms)
