@@ -70,7 +70,7 @@ class LearnerOptions:
     #: points of the frame sampled to compute the quantization error (eq. 17)
     quantization_sample: int = 2_000
     #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
-    max_points: int = 2_000_000
+    max_points: int = 2_000_000  # schemas.packing.MAX_CLOUD_POINTS (not imported: --help)
     #: when the stream ends, learning goes on with its last frame until the network is settled
     #: (node budget reached, quantization error steady) or this many more steps; 0: never
     settle_max_steps: int = 2_000_000
