@@ -228,13 +228,17 @@ def load_dataset(
     return np.asarray(positions), np.asarray(colors), np.asarray(labels)
 
 
-def make_model(method: str, max_nodes: int, random_state: int):
-    """A fresh estimator for ``method`` with the paper's Table 1 parameters."""
+def make_model(method: str, max_nodes: int, random_state: int, **gngdt_extra: Any):
+    """A fresh estimator for ``method`` with the paper's Table 1 parameters; ``gngdt_extra``:
+    further GNG-DT arguments (forgetting), refused for the other methods."""
     from gngdt_core import GNG, GNGDT, GNGW
 
+    if gngdt_extra and method != "GNG-DT":
+        raise ValueError(f"{method} takes no {sorted(gngdt_extra)}")
     if method == "GNG-DT":
         return GNGDT(
-            max_nodes=max_nodes, random_state=random_state, **PAPER_PARAMETERS, **GNGDT_THRESHOLDS
+            max_nodes=max_nodes, random_state=random_state, **PAPER_PARAMETERS, **GNGDT_THRESHOLDS,
+            **gngdt_extra,
         )
     if method == "GNG-W":
         return GNGW(
