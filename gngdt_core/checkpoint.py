@@ -116,6 +116,8 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         model._arrays[key][:n] = value
     model._istate[:] = counters
     model._fstate[:] = scalars
+    if "camera_pose" in state:  # states saved before camera poses: the camera frame
+        model._camera_pose = model._checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
     if counters[K.I_GRID]:
         a = model._arrays
         K.grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],

@@ -24,7 +24,6 @@ import argparse
 import inspect
 import json
 import logging
-import signal
 import threading
 import time
 import tomllib
@@ -42,6 +41,7 @@ from schemas.wire import (
     FrameStamp,
     topic,
 )
+from services import lifecycle
 from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
 
 if TYPE_CHECKING:
@@ -64,6 +64,9 @@ LEARNER_MODEL_DEFAULTS: dict[str, Any] = {"utility_k": DEFAULT_UTILITY_K}
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
 CLUSTERINGS = ("pos", "col", "nor", "col+nor")
+#: the local-convexity topology and the segmentation built on it (`gngdt_core.segmentation`)
+CONVEXITY_PROPERTY = "cvx"
+SEGMENTS = "segments"
 
 
 @dataclass
@@ -122,10 +125,12 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
 
 @dataclass
 class LearnerConfig:
-    """GNG-DT constructor arguments plus learner options."""
+    """GNG-DT constructor arguments, learner options and segmentation parameters."""
 
     model: dict[str, Any] = field(default_factory=lambda: dict(LEARNER_MODEL_DEFAULTS))
     options: LearnerOptions = field(default_factory=LearnerOptions)
+    #: `SegmentationParams` keys (validated when loaded)
+    segmentation: dict[str, Any] = field(default_factory=dict)
 
 
 def model_parameter_names() -> set[str]:
@@ -138,7 +143,9 @@ def model_parameter_names() -> set[str]:
 
 
 def load_params(path: Path | None) -> LearnerConfig:
-    """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt], [learner]).
+    """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt],
+    [learner]), segmentation parameters ([segmentation]); a sensor profile's [frames] table
+    (for `gngdt segment`) is checked and otherwise not used here.
 
     ``lambda`` is accepted for ``lambda_``. Unknown keys raise ``ValueError`` naming key and file.
     """
@@ -156,6 +163,17 @@ def load_params(path: Path | None) -> LearnerConfig:
     for key, value in document.items():
         if isinstance(value, dict) and key in ("gngdt", "learner"):
             flat.update(value)
+        elif isinstance(value, dict) and key in ("segmentation", "frames"):
+            from gngdt_core.frame_segmenter import FrameSchedule
+            from gngdt_core.segmentation import SegmentationParams
+
+            schema = SegmentationParams if key == "segmentation" else FrameSchedule
+            try:
+                schema.from_dict(value)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"--params {path}: [{key}]: {error}") from error
+            if key == "segmentation":
+                config.segmentation = dict(value)
         else:
             flat[key] = value
     model_names = model_parameter_names()
@@ -181,7 +199,9 @@ def load_params(path: Path | None) -> LearnerConfig:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
     parser.add_argument("--params", type=Path, metavar="FILE.toml",
-                        help="GNG-DT parameters and learner options (see config/learner.toml)")
+                        help="GNG-DT parameters and learner options; config/learner.toml "
+                        "documents every key (installed with gngdt: `python -m gngdt_config` "
+                        "prints where)")
     parser.add_argument("--checkpoint", type=Path, metavar="PATH",
                         help="checkpoint file (.npz): resumed from if present, saved periodically "
                         "and on shutdown")
@@ -229,6 +249,13 @@ class LatencyWindow:
         return float(np.percentile(np.fromiter(self._values, float), q)) if self._values else 0.0
 
 
+#: counters saturate here (the status message's uint64 fields, the checkpoint's int64)
+MAX_COUNTER = 2**63 - 1
+#: frames one can drop between two received frames: a year at 30 fps; a larger jump in the
+#: sequence is a new stream (a restarted or foreign capture), not frames lost
+MAX_SEQUENCE_GAP = 30 * 3600 * 24 * 365
+
+
 @dataclass
 class Counters:
     """What the learner has seen, published in every status (and kept in checkpoints)."""
@@ -243,9 +270,14 @@ class Counters:
     last_sequence: int = -1
 
     def note_sequence(self, sequence: int) -> None:
-        """Count the frames skipped since the last one; a lower sequence is a new stream."""
-        if self.last_sequence >= 0 and sequence > self.last_sequence + 1:
-            self.frames_dropped += sequence - self.last_sequence - 1
+        """Count the frames skipped since the last one; a lower sequence, or a jump no camera
+        could make (``MAX_SEQUENCE_GAP``), is a new stream, not dropped frames."""
+        gap = sequence - self.last_sequence - 1
+        if self.last_sequence >= 0 and 0 < gap <= MAX_SEQUENCE_GAP:
+            self.frames_dropped = min(self.frames_dropped + gap, MAX_COUNTER)
+        elif self.last_sequence >= 0 and gap > MAX_SEQUENCE_GAP:
+            log.warning("frame sequence jumped from %d to %d; taken as a new stream",
+                        self.last_sequence, sequence)
         self.last_sequence = sequence
 
 
@@ -265,6 +297,10 @@ def counters_from_metadata(path: Path, saved: Any) -> Counters:
                 expected is int and not isinstance(value, int)):
             raise CheckpointError(
                 f"checkpoint {path}: counter {item.name} is {value!r}, expected a number")
+        low = -1 if item.name == "last_sequence" else 0
+        if not low <= value <= MAX_COUNTER:
+            raise CheckpointError(
+                f"checkpoint {path}: counter {item.name} is {value!r}, outside {low}..2**63-1")
         values[item.name] = expected(value)
     return Counters(**values)
 
@@ -290,6 +326,7 @@ class Learner:
     def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
                  counters: Counters | None = None, frame_id: str | None = None) -> None:
         from gngdt_core import GNGDT
+        from gngdt_core.segmentation import SegmentationParams
 
         self.camera = camera
         self.options = config.options
@@ -297,6 +334,7 @@ class Learner:
             model_args = {"random_state": config.options.seed, **config.model}
             model = GNGDT(**model_args)
         self.model = model
+        self.segmentation = SegmentationParams.from_dict(config.segmentation)
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
         self.frame_id = frame_id
@@ -353,15 +391,21 @@ class Learner:
 
         model = self.model
         min_size = self.options.min_cluster_size
+        position_edges = model.edges("pos")
+        segmentation = model.segmentation(self.segmentation)
+        edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
+        edges[CONVEXITY_PROPERTY] = position_edges[segmentation.convex]
+        clusterings = {
+            name: model.clusters(*name.split("+"), min_size=min_size) for name in CLUSTERINGS
+        }
+        clusterings[SEGMENTS] = segmentation.labels
         return encode_topology(
             positions=model.positions_,
             colors=model.colors_,
             normals=model.normals_,
             errors=model.errors_,
-            edges={prop: model.edges(prop) for prop in EDGE_PROPERTIES},
-            clusterings={
-                name: model.clusters(*name.split("+"), min_size=min_size) for name in CLUSTERINGS
-            },
+            edges=edges,
+            clusterings=clusterings,
             steps=int(model.n_steps_),
             frame_sequence=stamp.sequence,
             timestamp_ns=stamp.capture_time_ns,
@@ -412,8 +456,8 @@ class Learner:
         except OSError as error:
             log.error("checkpoint %s not written: %s", path, error)
             return False
-        log.info("checkpoint %s: %d nodes, %d steps", path, self.model.n_nodes_,
-                 self.model.n_steps_)
+        log.debug("checkpoint %s: %d nodes, %d steps", path, self.model.n_nodes_,
+                  self.model.n_steps_)
         return True
 
     @classmethod
@@ -423,6 +467,11 @@ class Learner:
         from services.checkpoint import CheckpointError, load_checkpoint
 
         state, metadata = load_checkpoint(path)
+        saved_camera = metadata.get("camera", camera)
+        if saved_camera != camera:
+            raise CheckpointError(
+                f"checkpoint {path} holds what camera {saved_camera!r} learned, not {camera!r}; "
+                f"resume it with --cam {saved_camera} or give this camera its own --checkpoint")
         try:
             model = GNGDT.from_state(state)
         except (KeyError, ValueError, TypeError) as error:
@@ -468,21 +517,24 @@ class PointsMessage(NamedTuple):
 
 
 def decode_points(
-    payload: bytes, attachment: bytes | None, max_points: int = LearnerOptions.max_points
+    payload: bytes, attachment: bytes | None, max_points: int = LearnerOptions.max_points,
+    now_ns: int | None = None,
 ) -> PointsMessage:
     """The learner's decode path for one ``points`` sample.
 
     positions: N >= 1 finite points. Raises ``ValueError`` (``MessageError`` for the payload)
-    for a missing/malformed attachment, an undecodable or oversized cloud (``max_points``,
-    checked before allocation), a cloud without colour fields (DESIGN's points carry red, green,
-    blue: a colourless model could learn nothing else) or without a single finite point, and a
-    pose that is not a rigid transform (non-unit quaternion, NaN), naming the frame.
+    for a missing/malformed attachment, a capture time more than a day from ``now_ns``
+    (default: this clock), an undecodable or oversized cloud (``max_points``, checked before
+    allocation), a cloud without colour fields (DESIGN's points carry red, green, blue: a
+    colourless model could learn nothing else) or without a single finite point, and a pose
+    that is not a rigid transform (non-unit quaternion, NaN), naming the frame.
     """
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
     from schemas.packing import MessageError, cloud_pose, msg_to_cloud, parse_message
 
     stamp = FrameStamp.from_attachment(attachment)
+    stamp.check_clock(time.time_ns() if now_ns is None else now_ns)
     message = parse_message(PointCloud, payload)
     # views into the payload: learning samples only samples_per_frame of its points
     positions, colors = msg_to_cloud(message, max_points=max_points, copy=False)
@@ -500,6 +552,7 @@ def warm_up(config: LearnerConfig) -> None:
     """Run every model operation once on random points, so that numba compiles (or loads its
     cache) before the first frame instead of adding seconds to its latency."""
     from gngdt_core import GNGDT
+    from gngdt_core.segmentation import SegmentationParams
 
     rng = np.random.default_rng(0)
     positions = rng.random((500, 3), dtype=np.float32)
@@ -511,6 +564,7 @@ def warm_up(config: LearnerConfig) -> None:
     model.partial_fit(positions, colors, n_steps=2_000, camera_pose=pose)
     for name in CLUSTERINGS:
         model.clusters(*name.split("+"), min_size=config.options.min_cluster_size)
+    model.segmentation(SegmentationParams.from_dict(config.segmentation))
     model.quantization_error(positions, colors)
     Learner("warm-up", config, model=model).measure_ghosts(positions, pose)
 
@@ -563,26 +617,115 @@ class LatestTopology:
 
 
 def main(args: argparse.Namespace) -> int:
-    import zenoh
+    from services.checkpoint import CheckpointError, CheckpointLock
 
-    from schemas.packing import MessageError, decode_stream_end
-    from services.checkpoint import CheckpointError
-
+    lock = None
     try:
         config = config_from_args(args)
         topic(args.cam, "points")
+        if args.checkpoint is not None:
+            lock = CheckpointLock(args.checkpoint).acquire()
+            clean_checkpoint_directory(args.checkpoint)
         if args.checkpoint is not None and args.checkpoint.exists():
             learner = Learner.resume(args.checkpoint, args.cam, config)
         else:
             learner = Learner(args.cam, config)
+        started = time.monotonic()
+        log.info("preparing the learning kernels (the first run on a machine compiles them "
+                 "with numba, ~20 s; later runs load them from its cache)")
         warm_up(config)
+        log.info("kernels ready in %.1f s", time.monotonic() - started)
+        return serve(args, config, learner)
     except (ValueError, CheckpointError) as error:
         log.error("%s", error)
         return 2
+    finally:
+        if lock is not None:
+            lock.release()
 
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
+
+def clean_checkpoint_directory(path: Path) -> None:
+    """Remove the temporaries a killed learner left beside ``path`` (under its lock)."""
+    from services.checkpoint import remove_stale_temporaries
+
+    removed = remove_stale_temporaries(path)
+    if removed:
+        log.warning("removed %d stale checkpoint temporaries left by an interrupted write: %s",
+                    len(removed), ", ".join(item.name for item in removed))
+
+
+class DuplicateLearnerError(ValueError):
+    """Another learner already learns this camera."""
+
+
+class LearnerInstances:
+    """Every learner announces itself on ``gngdt/<cam>/learner/instance/<zenoh id>``; two on one
+    camera would interleave their topologies, so a second one refuses to start, and of two that
+    start at the same moment the one with the larger id stops."""
+
+    def __init__(self, session: zenoh.Session, camera: str) -> None:
+        self.camera = camera
+        self.own_id = str(session.zid())
+        self._prefix = f"gngdt/{camera}/learner/instance"
+        self.conflict = threading.Event()
+        self.other_id = ""
+        others = [str(reply.ok.key_expr).rsplit("/", 1)[-1]
+                  for reply in session.liveliness().get(f"{self._prefix}/*", timeout=2.0)
+                  if reply.ok is not None]
+        if others:
+            raise DuplicateLearnerError(
+                f"another learner (zenoh id {others[0]}) already learns camera {camera!r}; "
+                "stop it, or give this one another --cam")
+        self._token = session.liveliness().declare_token(f"{self._prefix}/{self.own_id}")
+        self._subscriber = session.liveliness().declare_subscriber(
+            f"{self._prefix}/*", self._on_token, history=True)
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        other = str(sample.key_expr).rsplit("/", 1)[-1]
+        if other == self.own_id or sample.kind != zenoh.SampleKind.PUT:
+            return
+        log.error("a second learner (zenoh id %s) learns camera %r too: their topologies "
+                  "would interleave", other, self.camera)
+        if other < self.own_id:
+            self.other_id = other
+            self.conflict.set()
+
+    def close(self) -> None:
+        self._subscriber.undeclare()
+        self._token.undeclare()
+
+
+def _payload_bytes(sample: zenoh.Sample, limit: int) -> bytes:
+    """The sample's payload, refused (``MessageError``) before any copy when over ``limit``."""
+    from schemas.packing import MessageError
+
+    size = len(sample.payload)
+    if size > limit:
+        raise MessageError(f"{size} bytes, more than the limit of {limit}")
+    return sample.payload.to_bytes()
+
+
+def _attachment_bytes(sample: zenoh.Sample) -> bytes | None:
+    attachment = sample.attachment
+    if attachment is None or len(attachment) > 64:
+        return None
+    return attachment.to_bytes()
+
+
+#: bytes a stream-end message may take (a real one is under 200)
+MAX_EOS_BYTES = 64 * 1024
+#: bytes per point a foreign cloud layout may use (gngdt's own uses 15)
+MAX_POINT_STRIDE_BYTES = 64
+
+
+def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> int:
+    """Subscribe, learn and publish until stopped, the end of the stream (``--exit-on-eos``) or
+    a second learner on the camera; checkpoint on the way out."""
+    import zenoh
+
+    from schemas.packing import MessageError, decode_stream_end
 
     counters = learner.counters
     end = EndOfStream()
@@ -590,7 +733,7 @@ def main(args: argparse.Namespace) -> int:
 
     def on_eos(sample: zenoh.Sample) -> None:
         try:
-            end.set(decode_stream_end(sample.payload.to_bytes()).last_frame_sequence)
+            end.set(decode_stream_end(_payload_bytes(sample, MAX_EOS_BYTES)).last_frame_sequence)
         except MessageError as error:
             counters.malformed_messages += 1
             log.warning("malformed end-of-stream skipped: %s", error)
@@ -600,6 +743,11 @@ def main(args: argparse.Namespace) -> int:
     except ZenohSetupError as error:
         log.error("%s", error)
         return 1
+    try:
+        instances = LearnerInstances(session, args.cam)
+    except DuplicateLearnerError:
+        session.close()
+        raise
     block = zenoh.CongestionControl.BLOCK
     points = session.declare_subscriber(topic(args.cam, "points"), zenoh.handlers.RingChannel(1))
     eos_subscriber = session.declare_subscriber(topic(args.cam, "eos"), on_eos)
@@ -611,58 +759,67 @@ def main(args: argparse.Namespace) -> int:
     token = session.liveliness().declare_token(f"gngdt/{args.cam}/learner/alive")
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
              config.options.samples_per_frame)
+    max_cloud_bytes = config.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
 
     frames_since_checkpoint = 0
     last_checkpoint = time.monotonic()
     learned_sequence = -1
+    exit_code = 0
     try:
-        while not stop.is_set():
-            sample = points.try_recv()
-            if sample is None:
-                if args.exit_on_eos and end.finished(learned_sequence):
+        with lifecycle.graceful() as stop:
+            while not stop.is_set():
+                if instances.conflict.is_set():
+                    log.error("stopping: learner %s came first on camera %r", instances.other_id,
+                              args.cam)
+                    exit_code = 2
                     break
-                time.sleep(0.002)
-                continue
-            counters.frames_received += 1
-            try:
-                stamp, positions, colors, frame_id, pose = decode_points(
-                    sample.payload.to_bytes(),
-                    sample.attachment.to_bytes() if sample.attachment is not None else None,
-                    config.options.max_points)
-                counters.note_sequence(stamp.sequence)
-                received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-                # ValueError: e.g. colours missing mid-stream, or a cloud in another frame
-                learner.learn(positions, colors, frame_id, pose)
-            except OtherFrameError as error:  # counted by the learner, warned once per frame
-                warn_other_frame(error, counters.frames_other_frame)
-                continue
-            except ValueError as error:  # MessageError is a ValueError
-                counters.malformed_messages += 1
-                log.warning("points message skipped: %s", error)
-                continue
-            topology = learner.topology(stamp, learner.quantization_error(positions, colors))
-            payload = topology.SerializeToString()
-            attachment = stamp.to_attachment()
-            latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-            topology_publisher.put(payload, attachment=attachment)
-            latest.set(payload, attachment)
-            learner.latencies.add(latency_ms)
-            status = learner.status(stamp, latency_ms, topology)
-            status_publisher.put(status.SerializeToString(), attachment=attachment)
-            learned_sequence = stamp.sequence
-            log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
-                      stamp.sequence, len(positions), received_ms, latency_ms)
-            frames_since_checkpoint += 1
-            if args.checkpoint is not None and (
-                frames_since_checkpoint >= config.options.checkpoint_every_frames
-                or time.monotonic() - last_checkpoint >= config.options.checkpoint_every_seconds
-            ):
-                learner.save(args.checkpoint)
-                frames_since_checkpoint, last_checkpoint = 0, time.monotonic()
+                sample = points.try_recv()
+                if sample is None:
+                    if args.exit_on_eos and end.finished(learned_sequence):
+                        break
+                    time.sleep(0.002)
+                    continue
+                counters.frames_received += 1
+                try:
+                    stamp, positions, colors, frame_id, pose = decode_points(
+                        _payload_bytes(sample, max_cloud_bytes), _attachment_bytes(sample),
+                        config.options.max_points)
+                    counters.note_sequence(stamp.sequence)
+                    received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+                    # ValueError: e.g. colours missing mid-stream, or a cloud in another frame
+                    learner.learn(positions, colors, frame_id, pose)
+                except OtherFrameError as error:  # counted by the learner, warned sparingly
+                    warn_other_frame(error, counters.frames_other_frame)
+                    continue
+                except ValueError as error:  # MessageError is a ValueError
+                    counters.malformed_messages += 1
+                    log.warning("points message skipped: %s", error)
+                    continue
+                topology = learner.topology(stamp, learner.quantization_error(positions, colors))
+                payload = topology.SerializeToString()
+                attachment = stamp.to_attachment()
+                latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+                topology_publisher.put(payload, attachment=attachment)
+                latest.set(payload, attachment)
+                learner.latencies.add(latency_ms)
+                status = learner.status(stamp, latency_ms, topology)
+                status_publisher.put(status.SerializeToString(), attachment=attachment)
+                learned_sequence = stamp.sequence
+                log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
+                          stamp.sequence, len(positions), received_ms, latency_ms)
+                frames_since_checkpoint += 1
+                if args.checkpoint is not None and (
+                    frames_since_checkpoint >= config.options.checkpoint_every_frames
+                    or time.monotonic() - last_checkpoint
+                    >= config.options.checkpoint_every_seconds
+                ):
+                    learner.save(args.checkpoint)
+                    frames_since_checkpoint, last_checkpoint = 0, time.monotonic()
     finally:
         if args.checkpoint is not None and counters.frames_used > 0:
             learner.save(args.checkpoint)
         token.undeclare()
+        instances.close()
         for entity in (queryable, eos_subscriber, points):
             entity.undeclare()
         time.sleep(0.1)  # let the last BLOCK puts reach the router
@@ -670,4 +827,4 @@ def main(args: argparse.Namespace) -> int:
     log.info("learned %d frames (%d dropped, %d malformed), %d nodes, %d steps",
              counters.frames_used, counters.frames_dropped, counters.malformed_messages,
              learner.model.n_nodes_, learner.model.n_steps_)
-    return 0
+    return exit_code

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import threading
 import time
 from collections import deque
@@ -32,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from schemas.wire import DEFAULT_CAMERA, FrameStamp
+from services import lifecycle
 from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
 
 if TYPE_CHECKING:
@@ -365,13 +365,14 @@ class Dispatcher:
             return
         try:
             stamp = FrameStamp.from_attachment(attachment)
+            stamp.check_clock(time.time_ns())
             if camera not in self.cameras:
                 self.cameras[camera] = CameraProgress()
                 if self._on_new_camera is not None:
                     self._on_new_camera(list(self.cameras))
             self.rerun_log.set_time(stamp)
             handler()
-        except ValueError as error:  # MessageError is a ValueError
+        except (ValueError, OverflowError) as error:  # MessageError is a ValueError
             self.malformed += 1
             log.warning("%s: malformed message skipped: %s", key, error)
 
@@ -444,10 +445,6 @@ def main(args: argparse.Namespace) -> int:
     if not args.stdout:
         print(f"logging to {destination}", flush=True)
 
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-
     inbox = Inbox()
     dispatcher = Dispatcher(rerun_log,
                             on_new_camera=lambda cams: rec.send_blueprint(blueprint(cams)))
@@ -461,15 +458,16 @@ def main(args: argparse.Namespace) -> int:
     token = session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}")
     last_flush = time.monotonic()
     try:
-        while not stop.is_set():
-            inbox.arrived.wait(0.05)
-            for key, payload, attachment in inbox.take():
-                dispatcher.handle(key, payload, attachment)
-            if time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
-                rec.flush()
-                last_flush = time.monotonic()
-            if not args.keep_running and dispatcher.all_finished(args.eos_drain):
-                break
+        with lifecycle.graceful() as stop:
+            while not stop.is_set():
+                inbox.arrived.wait(0.05)
+                for key, payload, attachment in inbox.take():
+                    dispatcher.handle(key, payload, attachment)
+                if time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
+                    rec.flush()
+                    last_flush = time.monotonic()
+                if not args.keep_running and dispatcher.all_finished(args.eos_drain):
+                    break
     finally:
         token.undeclare()
         subscriber.undeclare()

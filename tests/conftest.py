@@ -13,10 +13,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from services.zenoh_session import client_config, free_tcp_port, open_config, router_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+# One Hypothesis profile everywhere: with CI=true Hypothesis would otherwise switch to its "ci"
+# profile (derandomised, no database) while developers ran randomised tests whose failures the
+# .hypothesis/ database then replayed. Derandomised and database-free, every machine runs the
+# same examples; widen the search by hand with `pytest --hypothesis-seed=N`.
+settings.register_profile(
+    "gngdt",
+    derandomize=True,
+    database=None,
+    deadline=None,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+settings.load_profile("gngdt")
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -106,7 +121,8 @@ class CaptureOutput:
 @pytest.fixture
 def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureOutput]:
     """``run_capture(RECORDING, *OPTIONS)`` runs `gngdt capture RECORDING --fast OPTIONS` to its
-    end against ``router_endpoint`` and returns what it published on the default camera."""
+    end against ``router_endpoint`` (expecting exit status ``exit_code``) and returns what it
+    published on the default camera."""
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
     from schemas.packing import cloud_pose, decode_stream_end, msg_to_cloud
@@ -116,7 +132,7 @@ def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureO
         output.clouds.append(msg_to_cloud(message))
         output.poses.append((message.frame_id, cloud_pose(message)))
 
-    def run(recording: Path, *options: str) -> CaptureOutput:
+    def run(recording: Path, *options: str, exit_code: int = 0) -> CaptureOutput:
         output = CaptureOutput()
         session = open_config(client_config([router_endpoint]))
         session.declare_subscriber("gngdt/camera/points", lambda sample: on_points(
@@ -126,7 +142,7 @@ def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureO
         try:
             capture = spawn("capture", str(recording), "--fast",
                             "--zenoh-connect", router_endpoint, *options)
-            assert capture.wait(60) == 0, Path(capture.log_path).read_text()
+            assert capture.wait(60) == exit_code, Path(capture.log_path).read_text()
             deadline = time.monotonic() + 10
             while not output.ends and time.monotonic() < deadline:
                 time.sleep(0.05)

@@ -26,7 +26,7 @@ ROUTER_CONFIG = REPO_ROOT / "config" / "zenoh-router.json5"
 #: 10 frames, 320x240 (recordings/README.md)
 SMALL_RECORDING = REPO_ROOT / "recordings" / "tabletop_small.mcap"
 SMALL_RECORDING_FRAMES = 10
-CLUSTERINGS = {"pos", "col", "nor", "col+nor"}
+CLUSTERINGS = {"pos", "col", "nor", "col+nor", "segments"}
 #: learning steps per frame: enough for a few dozen nodes, little enough to keep the tests fast
 SAMPLES_PER_FRAME = "3000"
 
@@ -150,8 +150,10 @@ def test_a_client_without_its_router_fails_clearly(
     spawn: Callable, free_port: int, tmp_path: Path
 ) -> None:
     nobody = f"tcp/127.0.0.1:{free_port}"  # free: no router listens there
-    learner = spawn("learn", "--zenoh-config", str(client_config_file(tmp_path, nobody)))
+    learner = spawn("learn", "--zenoh-config", str(client_config_file(tmp_path, nobody)),
+                    "--router-wait", "1")
     assert wait_exit(learner, 45) == 1, log_text(learner)
+    assert f"no zenoh router at {nobody} yet" in log_text(learner)  # it waited, and said so
     assert nobody in log_text(learner)
     assert "gngdt router" in log_text(learner)
 

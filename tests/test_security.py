@@ -5,7 +5,6 @@ unpickled or evaluated."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
 import subprocess
 import time
@@ -14,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import bound_sockets
 
 from services.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from services.zenoh_session import (
@@ -45,43 +45,6 @@ def test_default_configs_listen_on_loopback_only_with_scouting_off() -> None:
         assert setting(config, "scouting/gossip/enabled") is False
 
 
-def _sockets_of(pid: int) -> set[str]:
-    """Socket inodes the process holds open."""
-    inodes = set()
-    for descriptor in Path(f"/proc/{pid}/fd").iterdir():
-        try:
-            target = os.readlink(descriptor)
-        except OSError:
-            continue
-        if target.startswith("socket:["):
-            inodes.add(target[len("socket:["):-1])
-    return inodes
-
-
-def _ipv4(hex_address: str) -> str:
-    address, port = hex_address.split(":")
-    octets = bytes.fromhex(address)[::-1]  # /proc/net is in host (little-endian) order
-    return f"{'.'.join(str(octet) for octet in octets)}:{int(port, 16)}"
-
-
-def _bound_sockets(pid: int) -> list[tuple[str, str, str]]:
-    """(protocol, local address, state) of every TCP listener and UDP socket of ``pid``."""
-    inodes = _sockets_of(pid)
-    found = []
-    for protocol in ("tcp", "tcp6", "udp", "udp6"):
-        lines = Path(f"/proc/net/{protocol}").read_text().splitlines()[1:]
-        for line in lines:
-            columns = line.split()
-            local, state, inode = columns[1], columns[3], columns[9]
-            if inode not in inodes:
-                continue
-            listening = state == "0A"  # TCP_LISTEN
-            if protocol.startswith("udp") or listening:
-                shown = _ipv4(local) if protocol in ("tcp", "udp") else local
-                found.append((protocol, shown, "listen" if listening else "bound"))
-    return found
-
-
 @pytest.mark.timeout(90)
 def test_running_router_and_learner_hold_only_loopback_listeners(
     free_port: int, spawn: Callable
@@ -104,9 +67,9 @@ def test_running_router_and_learner_hold_only_loopback_listeners(
         raise AssertionError(Path(learner.log_path).read_text())
     probe.close()
 
-    router_sockets = _bound_sockets(router.pid)
+    router_sockets = bound_sockets(router.pid)
     assert router_sockets == [("tcp", f"127.0.0.1:{free_port}", "listen")], router_sockets
-    learner_sockets = _bound_sockets(learner.pid)
+    learner_sockets = bound_sockets(learner.pid)
     assert learner_sockets == [], learner_sockets  # a client: no listener, no scouting socket
 
 

@@ -51,7 +51,8 @@ from services.recording.errors import RecordingError
 from services.recording.frame import CameraIntrinsics, CameraPose, Frame
 from services.recording.transforms import TransformError, TransformTree
 
-__all__ = ["RecordingError", "read_frames", "recording_info", "recording_metadata"]
+__all__ = ["RecordingError", "check_recording", "read_frames", "recording_info",
+           "recording_metadata"]
 
 logger = logging.getLogger(__name__)
 
@@ -374,6 +375,31 @@ class _FrameAssembler:
         )
         self.next_index += 1
         return frame
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def check_recording(path: str | Path) -> None:
+    """Raise :class:`RecordingError` saying why ``path`` cannot be an MCAP recording (missing,
+    a folder, empty, another kind of file); cheap: reads 8 bytes."""
+    path = Path(path)
+    if path.is_dir():
+        inside = sorted(item.name for item in path.glob("*.mcap"))[:5]
+        hint = f"; inside: {', '.join(inside)}" if inside else "; it holds no .mcap file"
+        raise RecordingError(path, None, f"is a folder, not an MCAP file{hint}")
+    try:
+        with open(path, "rb") as stream:
+            start = stream.read(len(MCAP_MAGIC))
+    except FileNotFoundError:
+        raise RecordingError(path, None, "no such file") from None
+    except OSError as error:
+        raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
+    if not start:
+        raise RecordingError(path, None, "is empty (0 bytes)")
+    if start != MCAP_MAGIC:
+        raise RecordingError(path, None, f"is not an MCAP file (it starts with {start!r}, an "
+                             f"MCAP file with {MCAP_MAGIC!r})")
 
 
 def _transform_samples(
