@@ -423,8 +423,9 @@ class _GrowingGas:
             "n_invalid": np.array(self.n_invalid_, dtype=np.int64),
             "counters": self._istate.copy(),
             "scalars": self._fstate.copy(),
-            "camera_pose": np.eye(4) if self._camera_pose is None else self._camera_pose.copy(),
         }
+        if self._camera_pose is not None:  # the last batch's pose places the viewpoint
+            state["camera_pose"] = self._camera_pose.copy()
         for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
                      "util"):
             if a:
