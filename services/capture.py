@@ -303,8 +303,8 @@ class ReplayClock:
         delay = self._due - time.monotonic()
         if delay > 1.0:
             log.info("waiting %.1f s for frame %d (its recorded time)", delay, frame_index)
-        if delay > 0:
-            stop.wait(delay)
+        while delay > 0 and not stop.wait(min(delay, 0.5)):  # short waits: see lifecycle
+            delay = self._due - time.monotonic()
 
 
 def describe_recording(path: Path, rate: float | None, loop: bool) -> str:

@@ -5,7 +5,8 @@ parent, so that no signal and no crash ever leaves an orphan behind.
 Until a service enters :func:`graceful` (its main loop, which polls :data:`STOP`), a signal
 interrupts start-up where it stands (``KeyboardInterrupt``, exit 130); inside, it only sets
 :data:`STOP` and the loop winds down cleanly. A SIGHUP that ``nohup`` asked to ignore stays
-ignored.
+ignored. Loops must wait with a timeout: a signal that one of zenoh's threads received runs its
+Python handler only once the main thread wakes up.
 """
 
 from __future__ import annotations

@@ -7,8 +7,10 @@ Entities (DESIGN.md "Rerun") for the default camera ``camera``: ``world/camera``
 camera ``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/``. Timelines:
 ``frame`` (sequence) and ``capture_time``.
 
-The logger stops on its own once every camera it heard of has ended its stream (eos) and the
-topology of its last frame has arrived, or ``--eos-drain`` seconds after that eos.
+The logger stops on its own once every camera it knows of (from its first message, or from its
+capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of
+its last frame has arrived, or ``--eos-drain`` seconds after that eos (or after its capture left
+without one).
 
 Crash safety: the ``.rrd`` is flushed every ``FLUSH_EVERY_SECONDS``, so a logger killed outright
 (``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which only makes
@@ -324,12 +326,39 @@ class CameraProgress:
     last_topology_sequence: int = -1
     eos_last_sequence: int | None = None
     eos_at: float = 0.0
+    #: when the camera's capture left without an end of stream (its liveliness token went)
+    capture_gone_at: float | None = None
 
     def finished(self, drain_seconds: float) -> bool:
         if self.eos_last_sequence is None:
-            return False
+            return (self.capture_gone_at is not None
+                    and time.monotonic() - self.capture_gone_at > drain_seconds)
         return (self.last_topology_sequence >= self.eos_last_sequence
                 or time.monotonic() - self.eos_at > drain_seconds)
+
+
+class CaptureWatch:
+    """Captures coming and going (their liveliness tokens ``gngdt/<cam>/capture/alive``): a
+    camera is expected from its capture's start, not only from its first message."""
+
+    KEY = "gngdt/*/capture/alive"
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._events: list[tuple[str, bool]] = []
+
+    def on_token(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        camera = str(sample.key_expr).split("/")[1]
+        with self._lock:
+            self._events.append((camera, sample.kind == zenoh.SampleKind.PUT))
+
+    def take(self) -> list[tuple[str, bool]]:
+        """(camera, capture alive) events since the last call."""
+        with self._lock:
+            events, self._events = self._events, []
+        return events
 
 
 class Dispatcher:
@@ -366,10 +395,7 @@ class Dispatcher:
         try:
             stamp = FrameStamp.from_attachment(attachment)
             stamp.check_clock(time.time_ns())
-            if camera not in self.cameras:
-                self.cameras[camera] = CameraProgress()
-                if self._on_new_camera is not None:
-                    self._on_new_camera(list(self.cameras))
+            self._expect(camera)
             self.rerun_log.set_time(stamp)
             handler()
         except (ValueError, OverflowError) as error:  # MessageError is a ValueError
@@ -387,6 +413,17 @@ class Dispatcher:
         pose = packing.cloud_pose(message)
         self.rerun_log.points(paths, positions, colors,
                               None if np.array_equal(pose, np.eye(4)) else pose)
+
+    def capture_seen(self, camera: str, alive: bool) -> None:
+        """A capture of ``camera`` started (``alive``) or left."""
+        self._expect(camera)
+        self.cameras[camera].capture_gone_at = None if alive else time.monotonic()
+
+    def _expect(self, camera: str) -> None:
+        if camera not in self.cameras:
+            self.cameras[camera] = CameraProgress()
+            if self._on_new_camera is not None:
+                self._on_new_camera(list(self.cameras))
 
     def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
         self.rerun_log.topology(paths, snapshot)
@@ -455,6 +492,9 @@ def main(args: argparse.Namespace) -> int:
         rec.disconnect()
         return 1
     subscriber = session.declare_subscriber("gngdt/**", inbox.put)
+    captures = CaptureWatch()
+    capture_tokens = session.liveliness().declare_subscriber(
+        CaptureWatch.KEY, captures.on_token, history=True)
     token = session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}")
     last_flush = time.monotonic()
     try:
@@ -463,6 +503,8 @@ def main(args: argparse.Namespace) -> int:
                 inbox.arrived.wait(0.05)
                 for key, payload, attachment in inbox.take():
                     dispatcher.handle(key, payload, attachment)
+                for camera, alive in captures.take():
+                    dispatcher.capture_seen(camera, alive)
                 if time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
                     rec.flush()
                     last_flush = time.monotonic()
@@ -470,6 +512,7 @@ def main(args: argparse.Namespace) -> int:
                     break
     finally:
         token.undeclare()
+        capture_tokens.undeclare()
         subscriber.undeclare()
         session.close()
         for key, payload, attachment in inbox.take():

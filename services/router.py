@@ -46,7 +46,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         with lifecycle.graceful() as stop:
             print(f"zenoh router listening on {', '.join(listen)} (Ctrl-C to stop)", flush=True)
-            stop.wait()
+            while not stop.wait(0.5):  # with a timeout: a signal zenoh's threads received
+                pass                       # runs its Python handler only when we wake up
     finally:
         session.close()
     log.info("router stopped (%s)", lifecycle.stop_reason())

@@ -67,17 +67,24 @@ class SegmentedFrame:
     milliseconds: dict[str, float]
 
 
-def segment_frames(source: FrameSource, segmenter: FrameSegmenter, independent: bool
-                   ) -> Iterator[SegmentedFrame]:
-    """Deproject and segment every frame of ``source`` in order (online unless
-    ``independent``). Raises RecordingError naming the file for a frame that cannot be read."""
+def organized_frames(source: FrameSource) -> Iterator[tuple[str, Frame, np.ndarray, float]]:
+    """(name, frame, points, milliseconds) of every frame of ``source``: points (H, W, 3)
+    float32 metres in the camera frame, NaN where the depth is 0; milliseconds of deprojection.
+    Raises RecordingError naming the file for a frame that cannot be read."""
     from services.pointcloud import Deprojector
 
     deproject = Deprojector(min_depth_m=0.0, max_depth_m=math.inf)  # only "no depth" is dropped
     for name, frame in source.frames():
         started = time.perf_counter()
         points = deproject.organized(frame.depth, frame.intrinsics)
-        deproject_ms = (time.perf_counter() - started) * 1000.0
+        yield name, frame, points, (time.perf_counter() - started) * 1000.0
+
+
+def segment_frames(source: FrameSource, segmenter: FrameSegmenter, independent: bool
+                   ) -> Iterator[SegmentedFrame]:
+    """Deproject and segment every frame of ``source`` in order (online unless
+    ``independent``). Raises RecordingError naming the file for a frame that cannot be read."""
+    for name, frame, points, deproject_ms in organized_frames(source):
         result = segmenter.segment_frame(points, frame.color, independent=independent)
         milliseconds = {"deproject": deproject_ms, **result.milliseconds}
         milliseconds["total"] = sum(milliseconds.values())

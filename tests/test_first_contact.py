@@ -82,7 +82,9 @@ def test_the_router_stops_on_the_first_signal_even_while_starting(
                                  start_new_session=True)
         time.sleep(0.3)  # still importing: the signal used to be lost here
         early.send_signal(signum)
-        assert early.wait(20) in (0, 130), (tmp_path / "early.log").read_text()
+        # stopped by our handler (0, 130), or by the signal itself when it came before
+        # gngdt's first line ran (on a loaded machine Python may still be starting)
+        assert early.wait(20) in (0, 130, -signum), (tmp_path / "early.log").read_text()
     # once serving, with zenoh's own log on (RUST_LOG, as zenoh's examples)
     with open(tmp_path / "serving.log", "wb") as output:
         serving = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,
