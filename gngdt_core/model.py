@@ -19,6 +19,7 @@ Step 0 places the two initial nodes on two random input samples. Growth stops at
 from __future__ import annotations
 
 import json
+import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
@@ -126,9 +127,12 @@ class _GrowingGas:
         camera_pose = self._camera_pose if camera_pose is None else camera_pose
         if viewpoint is not None and camera_pose is not None:  # the sensor's place in this batch
             viewpoint = camera_pose[:3, :3] @ np.asarray(viewpoint) + camera_pose[:3, 3]
+        tau_nor = p.get("tau_nor", 1.0)
+        if p.get("normal_angle_deg") is not None:  # the chord between unit vectors that far apart
+            tau_nor = 2.0 * math.sin(math.radians(p["normal_angle_deg"]) / 2.0)
         fparams = np.array([
             p["eta1"], p["eta2"], p["alpha"], p["beta"],
-            p.get("tau_col", 1.0), p.get("tau_nor", 1.0), p.get("normal_mu") or 0.0,
+            p.get("tau_col", 1.0), tau_nor, p.get("normal_mu") or 0.0,
             *(viewpoint if viewpoint is not None else (0.0, 0.0, 0.0)),
             p.get("w_pos", 1.0), p.get("w_col", 1.0), p.get("utility_k") or 0.0,
             p.get("utility_decay", 0.0),
@@ -204,13 +208,39 @@ class _GrowingGas:
             else:
                 samples, sample_colors = whole_batch
             kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
-            K.learn(samples, kernel_colors, order,
-                    a["pos"], a["col"], a["nor"], a["err"],
-                    a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                    a["util"], a["judged"],
-                    a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                    self._istate, self._fstate, fparams, iparams)
+            for part in self._refresh_parts(order):
+                K.learn(samples, kernel_colors, part,
+                        a["pos"], a["col"], a["nor"], a["err"],
+                        a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
+                        a["util"], a["judged"],
+                        a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                        self._istate, self._fstate, fparams, iparams)
+                if self._params.get("normal_refresh_steps"):
+                    self.refresh_normals()
         return self
+
+    def _refresh_parts(self, order: np.ndarray) -> list[np.ndarray]:
+        """``order`` cut into runs of ``normal_refresh_steps`` (whole when refresh is off)."""
+        every = self._params.get("normal_refresh_steps")
+        if not every:
+            return [order]
+        return [order[start:start + every] for start in range(0, order.size, every)]
+
+    def refresh_normals(self) -> None:
+        """Recompute eq. 16 for every node, then eqs. 4/9 for every edge, from the current nodes
+        (``normal_refresh_steps`` does this periodically while learning)."""
+        if not self._arrays:
+            return
+        fparams, iparams = self._kernel_parameters()
+        a = self._arrays
+        n = self.n_nodes_
+        if iparams[K.Q_HAS_NOR]:
+            SK.refresh_normals(n, a["pos"], a["nor"], a["nbr"], a["deg"], fparams[K.P_MU],
+                               bool(iparams[K.Q_ORIENT]), fparams[K.P_VX], fparams[K.P_VY],
+                               fparams[K.P_VZ])
+        SK.refresh_property_bits(n, a["col"], a["nor"], a["nbr"], a["emask"], a["rev"], a["deg"],
+                                 bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
+                                 fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
 
     def _checked_pose(self, camera_pose: Any, dim: int) -> np.ndarray | None:
         """(4, 4) float64 rigid camera-to-world transform, or None; ValueError otherwise."""
@@ -356,8 +386,9 @@ class _GrowingGas:
         mask = self._property_mask(props or ("pos",))
         return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
 
-    def predict(self, positions: Any) -> np.ndarray:
-        """(N,) int64 index of the winner node (nearest by position) of each row.
+    def predict(self, positions: Any, return_distance: bool = False) -> Any:
+        """(N,) int64 index of the winner node (nearest by position) of each row; with
+        ``return_distance``, also (N,) float64 the distance to it (input units).
 
         Rows in scan order (a depth image's pixels row by row) are fastest: each search starts
         from the previous row's winner in the learner's own spatial grid.
@@ -372,9 +403,12 @@ class _GrowingGas:
         if not np.isfinite(query).all():
             raise ValueError("positions contain NaN or inf")
         if self._dim != 3 or self._MODE != K.MODE_GNGDT:
-            _, winners = cKDTree(self.positions_).query(query, k=1)
-            return np.asarray(winners, dtype=np.int64)
-        return self._nearest_nodes(np.ascontiguousarray(query))[0].astype(np.int64)
+            distances, winners = cKDTree(self.positions_).query(query, k=1)
+        else:
+            winners, sq_distances = self._nearest_nodes(np.ascontiguousarray(query))
+            distances = np.sqrt(sq_distances)
+        winners = np.asarray(winners, dtype=np.int64)
+        return (winners, np.asarray(distances, dtype=np.float64)) if return_distance else winners
 
     def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
@@ -447,6 +481,13 @@ class GNGDT(_GrowingGas):
     node, the mean distance to its position neighbours as the eq. 16 coefficient, so normals do not
     depend on the data's scale. ``viewpoint``: normals are flipped to face it (None: no orienting).
 
+    Beyond the paper (off by default): ``normal_angle_deg`` states the normal threshold as what it
+    means — a normal edge is kept while the (sign-invariant) angle between the two normals is
+    below it; it replaces ``tau_nor`` (the chord ``2 sin(angle / 2)``). ``normal_refresh_steps``
+    keeps normals fresh: the paper recomputes eq. 16 only for each step's winner, so a node's
+    normal lags behind its neighbours' moves; with it, eq. 16 is recomputed for every node, and
+    eqs. 4/9 for every edge, every that many steps and at the end of each `partial_fit`.
+
     Forgetting (off by default, as in the paper): with ``utility_k`` set, nodes that stop
     representing data are removed as in GNG-U (Fritzke 1997): each node's utility accumulates,
     for the samples it wins, the squared distance to the second winner minus that to the winner,
@@ -464,8 +505,9 @@ class GNGDT(_GrowingGas):
 
     _MODE = K.MODE_GNGDT
     _PARAM_NAMES = (
-        *_GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint", "utility_k",
-        "utility_decay", "view_depth_margin",
+        *_GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
+        "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
+        "view_depth_margin",
     )
 
     def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
@@ -473,13 +515,15 @@ class GNGDT(_GrowingGas):
                  beta: float = 0.0005, tau_col: float = 10.0, tau_nor: float = 0.02,
                  normal_mu: float | None = None,
                  viewpoint: tuple[float, float, float] | None = (0.0, 0.0, 0.0),
+                 normal_angle_deg: float | None = None, normal_refresh_steps: int | None = None,
                  utility_k: float | None = None, utility_decay: float = 1e-4,
                  view_depth_margin: float = 0.05, random_state: int | None = None) -> None:
         super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
                          age_max=age_max, alpha=alpha, beta=beta, tau_col=tau_col,
                          tau_nor=tau_nor, normal_mu=normal_mu, viewpoint=viewpoint,
-                         utility_k=utility_k, utility_decay=utility_decay,
-                         view_depth_margin=view_depth_margin,
+                         normal_angle_deg=normal_angle_deg,
+                         normal_refresh_steps=normal_refresh_steps, utility_k=utility_k,
+                         utility_decay=utility_decay, view_depth_margin=view_depth_margin,
                          random_state=random_state)
 
     @property

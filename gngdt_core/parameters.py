@@ -57,6 +57,12 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
         checked["tau_col"] = check_real("tau_col", params["tau_col"], 0.0, low_open=True)
     if "tau_nor" in params:
         checked["tau_nor"] = check_real("tau_nor", params["tau_nor"], 0.0, low_open=True)
+    if params.get("normal_angle_deg") is not None:
+        checked["normal_angle_deg"] = check_real("normal_angle_deg", params["normal_angle_deg"],
+                                                 0.0, 90.0, low_open=True)
+    if params.get("normal_refresh_steps") is not None:
+        checked["normal_refresh_steps"] = check_integer("normal_refresh_steps",
+                                                        params["normal_refresh_steps"], 1)
     if "normal_mu" in params and params["normal_mu"] is not None:
         checked["normal_mu"] = check_real("normal_mu", params["normal_mu"], 0.0, low_open=True)
     if "viewpoint" in params and params["viewpoint"] is not None:

@@ -79,6 +79,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres"
     )
     parser.add_argument(
+        "--drop-veil",
+        type=float,
+        default=0.0,
+        metavar="RATIO",
+        help="drop veil points: pixels whose depth jumps from a neighbour's by more than RATIO "
+        "of the nearer depth (mixed pixels along depth edges; 0.03 for a Kinect, see "
+        "config/kinect.toml); default 0: keep every pixel",
+    )
+    parser.add_argument(
         "--max-points",
         type=int,
         default=0,
@@ -131,6 +140,8 @@ class CloudOptions:
     max_depth_m: float = 10.0
     voxel_size_m: float | None = None
     max_points: int | None = None
+    #: drop pixels whose depth jumps by more than this share from a neighbour's (0: keep all)
+    veil_ratio: float = 0.0
 
 
 class FrameToCloud:
@@ -139,6 +150,8 @@ class FrameToCloud:
     def __init__(self, options: CloudOptions, seed: int = 0) -> None:
         if options.voxel_size_m is not None and options.voxel_size_m <= 0:
             raise ValueError(f"--voxel must be positive, got {options.voxel_size_m}")
+        if not options.veil_ratio >= 0:
+            raise ValueError(f"--drop-veil must be >= 0, got {options.veil_ratio}")
         if options.max_points is not None and options.max_points <= 0:
             raise ValueError(
                 f"--max-points must be positive (0 for all points), got {options.max_points}"
@@ -149,7 +162,12 @@ class FrameToCloud:
 
     def __call__(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
         """positions (N, 3) float32 metres and colors (N, 3) uint8 of one frame."""
-        positions, colors = self._deproject(frame.depth, frame.color, frame.intrinsics)
+        depth = frame.depth
+        if self.options.veil_ratio > 0:
+            from gngdt_core.frame_segmenter import veil_pixels
+
+            depth = np.where(veil_pixels(depth, self.options.veil_ratio), 0, depth)
+        positions, colors = self._deproject(depth, frame.color, frame.intrinsics)
         if self.options.voxel_size_m is not None:
             positions, colors = voxel_downsample(positions, colors, self.options.voxel_size_m)
         if self.options.max_points is not None:
@@ -327,7 +345,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         check_recording(args.recording)
         to_cloud = FrameToCloud(
-            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None),
+            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None,
+                         args.drop_veil),
             args.seed,
         )
         clock = ReplayClock(None if args.fast else args.rate, args.max_gap)

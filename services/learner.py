@@ -131,6 +131,10 @@ class LearnerConfig:
     options: LearnerOptions = field(default_factory=LearnerOptions)
     #: `SegmentationParams` keys (validated when loaded)
     segmentation: dict[str, Any] = field(default_factory=dict)
+    #: `FrameSchedule` keys of a sensor profile's [frames] table (validated when loaded); with
+    #: one, frames are learned through `gngdt_core.stream.StreamLearner` (attention, scene cuts,
+    #: ``steps_first_frame``), ``samples_per_frame`` steps per later frame
+    frames: dict[str, Any] | None = None
 
 
 def model_parameter_names() -> set[str]:
@@ -144,8 +148,9 @@ def model_parameter_names() -> set[str]:
 
 def load_params(path: Path | None) -> LearnerConfig:
     """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt],
-    [learner]), segmentation parameters ([segmentation]); a sensor profile's [frames] table
-    (for `gngdt segment`) is checked and otherwise not used here.
+    [learner]), segmentation parameters ([segmentation]) and a sensor profile's frame schedule
+    ([frames]; its ``steps_per_frame`` and ``veil_ratio`` are `gngdt segment`'s and capture's,
+    the learner's steps per frame stay ``samples_per_frame``).
 
     ``lambda`` is accepted for ``lambda_``. Unknown keys raise ``ValueError`` naming key and file.
     """
@@ -164,8 +169,8 @@ def load_params(path: Path | None) -> LearnerConfig:
         if isinstance(value, dict) and key in ("gngdt", "learner"):
             flat.update(value)
         elif isinstance(value, dict) and key in ("segmentation", "frames"):
-            from gngdt_core.frame_segmenter import FrameSchedule
             from gngdt_core.segmentation import SegmentationParams
+            from gngdt_core.stream import FrameSchedule
 
             schema = SegmentationParams if key == "segmentation" else FrameSchedule
             try:
@@ -174,6 +179,8 @@ def load_params(path: Path | None) -> LearnerConfig:
                 raise ValueError(f"--params {path}: [{key}]: {error}") from error
             if key == "segmentation":
                 config.segmentation = dict(value)
+            else:
+                config.frames = dict(value)
         else:
             flat[key] = value
     model_names = model_parameter_names()
@@ -267,6 +274,8 @@ class Counters:
     #: clouds skipped because their frame is not the one the network is learned in
     frames_other_frame: int = 0
     learning_seconds: float = 0.0
+    #: learning steps run in ``learning_seconds`` (frames differ: a new scene learns longer)
+    learning_steps: int = 0
     last_sequence: int = -1
 
     def note_sequence(self, sequence: int) -> None:
@@ -327,6 +336,7 @@ class Learner:
                  counters: Counters | None = None, frame_id: str | None = None) -> None:
         from gngdt_core import GNGDT
         from gngdt_core.segmentation import SegmentationParams
+        from gngdt_core.stream import FrameSchedule, StreamLearner
 
         self.camera = camera
         self.options = config.options
@@ -335,6 +345,17 @@ class Learner:
             model = GNGDT(**model_args)
         self.model = model
         self.segmentation = SegmentationParams.from_dict(config.segmentation)
+        #: with a sensor profile's schedule: attention, scene cuts, a first frame learned longer
+        self.stream: StreamLearner | None = None
+        if config.frames is not None:
+            schedule = FrameSchedule.from_dict(
+                {**config.frames, "steps_per_frame": config.options.samples_per_frame})
+            self.stream = StreamLearner(config.model, self.segmentation, schedule,
+                                        config.options.seed)
+            if model.n_nodes_ > 0:  # resumed: carry the checkpoint's network on
+                self.stream.model_ = model
+        #: the segmentation of the last learned frame (None: compute when publishing)
+        self.last_segmentation: Any = None
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
         self.frame_id = frame_id
@@ -343,8 +364,9 @@ class Learner:
 
     def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
               pose: np.ndarray | None = None) -> None:
-        """Run ``samples_per_frame`` learning steps on one cloud: (N, 3) f32 m, (N, 3) u8, in
-        its own (camera) frame; ``pose`` (4, 4) maps it into ``frame_id``. Raises
+        """Learn one cloud: (N, 3) f32 m, (N, 3) u8, in its own (camera) frame; ``pose``
+        (4, 4) maps it into ``frame_id`` — ``samples_per_frame`` steps, or through the sensor
+        profile's schedule (which may start a new network on a new scene). Raises
         `OtherFrameError` (counted) for a cloud in another frame than the network's."""
         frame_id = frame_id or self.camera
         if self.frame_id is None:
@@ -358,9 +380,24 @@ class Learner:
                 f"(a capture without poses, or with another fixed frame, than the first one; "
                 f"start the learner afresh to learn in {frame_id!r})")
         started = time.perf_counter()
-        self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame,
-                               camera_pose=pose)
+        if self.stream is None:
+            self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame,
+                                   camera_pose=pose)
+            self.last_segmentation = None
+            steps = self.options.samples_per_frame
+        else:
+            in_range = self.stream.in_depth_range(positions)
+            learned = self.stream.learn_frame(positions[in_range],
+                                              None if colors is None else colors[in_range],
+                                              camera_pose=pose)
+            if learned.from_scratch and self.model.n_nodes_:
+                log.info("frame %d shows a new scene: learning a new network",
+                         self.counters.frames_used)
+            self.model = self.stream.model_
+            self.last_segmentation = learned.segmentation
+            steps = learned.steps
         self.counters.learning_seconds += time.perf_counter() - started
+        self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
         self.counters.frames_used += 1
         self.ghosts = self.measure_ghosts(positions, pose)
 
@@ -392,7 +429,7 @@ class Learner:
         model = self.model
         min_size = self.options.min_cluster_size
         position_edges = model.edges("pos")
-        segmentation = model.segmentation(self.segmentation)
+        segmentation = self.last_segmentation or model.segmentation(self.segmentation)
         edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
         edges[CONVEXITY_PROPERTY] = position_edges[segmentation.convex]
         clusterings = {
@@ -424,8 +461,7 @@ class Learner:
             frame_sequence=stamp.sequence,
             frame_id=self.camera,
             steps=int(self.model.n_steps_),
-            steps_per_second=(counters.frames_used * self.options.samples_per_frame / seconds
-                              if seconds > 0 else 0.0),
+            steps_per_second=counters.learning_steps / seconds if seconds > 0 else 0.0,
             nodes=int(self.model.n_nodes_),
             frames_received=counters.frames_received,
             frames_used=counters.frames_used,

@@ -270,13 +270,25 @@ def learner_arguments(args: argparse.Namespace) -> list[str]:
     return arguments
 
 
-def capture_arguments(args: argparse.Namespace) -> list[str]:
+def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None) -> list[str]:
+    """Capture's command line; ``veil_ratio`` from the sensor profile (`sensor_veil_ratio`)."""
     arguments = [str(args.recording), "--cam", args.cam]
     arguments += ["--fast"] if args.fast else ["--rate", str(args.rate)]
-    for flag, value in (("--voxel", args.voxel), ("--max-points", args.max_points)):
+    for flag, value in (("--voxel", args.voxel), ("--max-points", args.max_points),
+                        ("--drop-veil", veil_ratio)):
         if value is not None:
             arguments += [flag, str(value)]
     return arguments
+
+
+def sensor_veil_ratio(params: Path | None) -> float | None:
+    """The veil ratio of a sensor profile's [frames] table (capture drops those pixels)."""
+    if params is None:
+        return None
+    from services.learner import load_params
+
+    frames = load_params(params).frames
+    return None if frames is None else frames.get("veil_ratio")
 
 
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None) -> list[str]:
@@ -337,6 +349,11 @@ def main(args: argparse.Namespace) -> int:
     if args.url and not args.connect:
         log.error("--url needs --connect")
         return 2
+    try:
+        veil_ratio = sensor_veil_ratio(args.params)
+    except ValueError as error:  # a wrong params file: say so before starting anything
+        log.error("%s", error)
+        return 2
     topic(args.cam, "points")  # validates the camera name
     rrd_path = None
     if not (args.connect or args.serve):
@@ -365,7 +382,7 @@ def main(args: argparse.Namespace) -> int:
     early_end = ""
     try:
         with lifecycle.graceful() as stop:
-            early_end = supervise(args, pipeline, observed, stop, rrd_path)
+            early_end = supervise(args, pipeline, observed, stop, rrd_path, veil_ratio)
         failure = pipeline.failed()
     except StartupTimeout:
         return 1
@@ -399,7 +416,8 @@ class StartupTimeout(Exception):
 
 
 def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
-              stop: threading.Event, rrd_path: Path | None) -> str:
+              stop: threading.Event, rrd_path: Path | None,
+              veil_ratio: float | None = None) -> str:
     """Start the services and see the stream through; why it ended early, or ``""``."""
     log.info("starting the learner and the logger (the first run on a machine compiles the "
              "learning kernels, ~20 s)")
@@ -419,7 +437,7 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
         raise StartupTimeout
     if ready:
         log.info("replaying %s", args.recording)
-        capture = pipeline.start("capture", capture_arguments(args))
+        capture = pipeline.start("capture", capture_arguments(args, veil_ratio))
         wait_until(lambda: capture.process.poll() is not None
                    or learner.process.poll() is not None or logger.process.poll() is not None,
                    float("inf"), stop, pipeline)

@@ -276,7 +276,7 @@ def test_run_reports_a_failed_service_with_its_error(
     tabletop_recording: Path, tmp_path: Path
 ) -> None:
     params = tmp_path / "bad.toml"
-    params.write_text("max_nodez = 10\n")
+    params.write_text("max_nodes = 1\n")  # a known key: only the learner's model refuses it
     completed = subprocess.run(
         [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
          str(tmp_path / "x.rrd"), "--params", str(params)],
@@ -284,7 +284,22 @@ def test_run_reports_a_failed_service_with_its_error(
     )
     assert completed.returncode == 1, completed.stdout + completed.stderr
     assert "learn failed" in completed.stderr
+    assert "max_nodes must be >= 2" in completed.stderr
+
+
+def test_run_refuses_a_wrong_params_file_before_starting(
+    tabletop_recording: Path, tmp_path: Path
+) -> None:
+    params = tmp_path / "bad.toml"
+    params.write_text("max_nodez = 10\n")
+    completed = subprocess.run(
+        [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
+         str(tmp_path / "x.rrd"), "--params", str(params)],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=100,
+    )
+    assert completed.returncode == 2, completed.stdout + completed.stderr
     assert "unknown key 'max_nodez'" in completed.stderr
+    assert "learn failed" not in completed.stderr  # nothing was started
 
 
 @pytest.mark.timeout(180)
