@@ -83,6 +83,23 @@ DEFAULT_CAMERAS: dict[str, CameraParameters] = {
 }
 
 
+def detect_format(directory: str | Path) -> str:
+    """The layout of an image folder: ``tum`` (rgb.txt), ``pcl-tiff`` (``frame_*_rgb.tiff``) or
+    ``redwood`` (color/ and depth/). RecordingError when it is none of them."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise RecordingError(directory, None, "not a directory")
+    if (directory / "rgb.txt").is_file():
+        return "tum"
+    if any(_PCL_NAME.match(path.name) for path in directory.iterdir()):
+        return "pcl-tiff"
+    if (directory / "color").is_dir() and (directory / "depth").is_dir():
+        return "redwood"
+    raise RecordingError(
+        directory, None, "no RGB-D layout found (rgb.txt, frame_*_rgb.tiff, or color/ + depth/)"
+    )
+
+
 def _check_format(fmt: str) -> None:
     if fmt not in FORMATS:
         raise ValueError(f"format must be one of {FORMATS}, got {fmt!r}")
