@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from schemas.packing import MAX_CLOUD_POINTS
 from schemas.wire import (
     DEFAULT_CAMERA,
     ENCODING_CALIBRATION,
@@ -36,6 +37,7 @@ from schemas.wire import (
 )
 from services import lifecycle
 from services.pointcloud import Deprojector, cap_points, voxel_downsample
+from services.recording.reader import ReadLimits
 from services.zenoh_session import (
     ZenohSetupError,
     add_zenoh_arguments,
@@ -91,7 +93,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-points",
         type=int,
         default=0,
-        help="publish a random subset of at most this many points per frame (default 0: all)",
+        help="publish a random subset of at most this many points per frame (default 0: all, "
+        f"up to {MAX_CLOUD_POINTS:,}, what a learner accepts and a zenoh message holds)",
     )
     parser.add_argument(
         "--wait-subscribers",
@@ -129,7 +132,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="longest wait between two frames: a longer gap in the recorded stamps is "
         f"shortened to this, with a warning (default {DEFAULT_MAX_GAP_S:g})",
     )
+    limits = parser.add_argument_group(
+        "limits (a recording beyond them is refused, naming the file and the frame)")
+    defaults = ReadLimits()
+    limits.add_argument(
+        "--max-frame-pixels", type=int, default=defaults.max_frame_pixels, metavar="N",
+        help=f"largest image, width x height (default {defaults.max_frame_pixels:,}, 4096x2160); "
+        "a larger one is a bad frame, skipped")
+    limits.add_argument(
+        "--max-chunk-mb", type=int, default=defaults.max_chunk_bytes >> 20, metavar="MB",
+        help="largest MCAP chunk once decompressed, checked before decompressing (default "
+        f"{defaults.max_chunk_bytes >> 20}); a file with a larger one is refused")
+    limits.add_argument(
+        "--max-pending-mb", type=int, default=defaults.max_held_bytes >> 20, metavar="MB",
+        help="images held while waiting for their colour/depth partner or a calibration "
+        f"(default {defaults.max_held_bytes >> 20})")
     add_zenoh_arguments(parser)
+
+
+def read_limits(args: argparse.Namespace) -> ReadLimits:
+    """The reading limits of the command line (``ValueError`` for a non-positive one)."""
+    return ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20, args.max_pending_mb << 20)
 
 
 @dataclass
@@ -157,6 +180,7 @@ class FrameToCloud:
                 f"--max-points must be positive (0 for all points), got {options.max_points}"
             )
         self.options = options
+        self._max_points = min(options.max_points or MAX_CLOUD_POINTS, MAX_CLOUD_POINTS)
         self._deproject = Deprojector(options.min_depth_m, options.max_depth_m)
         self._rng = np.random.default_rng(seed)
 
@@ -170,8 +194,8 @@ class FrameToCloud:
         positions, colors = self._deproject(depth, frame.color, frame.intrinsics)
         if self.options.voxel_size_m is not None:
             positions, colors = voxel_downsample(positions, colors, self.options.voxel_size_m)
-        if self.options.max_points is not None:
-            positions, colors = cap_points(positions, colors, self.options.max_points, self._rng)
+        if len(positions) > self._max_points:
+            positions, colors = cap_points(positions, colors, self._max_points, self._rng)
         assert colors is not None
         return positions, colors
 
@@ -257,8 +281,10 @@ class Replay:
     def __init__(self, path: Path, loop: bool, stop: threading.Event,
                  topic_prefix: str | None = None,
                  max_skew_ms: float = DEFAULT_MAX_SKEW_MS,
+                 limits: ReadLimits | None = None,
                  fixed_frame: str | None = "auto") -> None:
         self.path = path
+        self.limits = limits
         self.fixed_frame = fixed_frame
         self.loop = loop
         self.stop = stop
@@ -274,7 +300,8 @@ class Replay:
             yielded = 0
             try:
                 frames = read_frames(self.path, self.topic_prefix, max_skew_ns=self.max_skew_ns,
-                                     on_bad_frame=log_bad_frame, fixed_frame=self.fixed_frame)
+                                     on_bad_frame=log_bad_frame, limits=self.limits,
+                                     fixed_frame=self.fixed_frame)
                 for frame in frames:
                     yielded += 1
                     self.frames_read += 1
@@ -350,6 +377,7 @@ def main(args: argparse.Namespace) -> int:
             args.seed,
         )
         clock = ReplayClock(None if args.fast else args.rate, args.max_gap)
+        limits = read_limits(args)
         if args.max_skew_ms < 0:
             raise ValueError(f"--max-skew-ms must be >= 0, got {args.max_skew_ms}")
     except (ValueError, RecordingError) as error:
@@ -367,7 +395,7 @@ def main(args: argparse.Namespace) -> int:
         with lifecycle.graceful() as stop:
             fixed_frame = None if args.fixed_frame.lower() == "none" else args.fixed_frame
             replay = Replay(args.recording, args.loop, stop, args.topics, args.max_skew_ms,
-                            fixed_frame)
+                            limits, fixed_frame)
             if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
                 log.warning("no subscriber on %s after %.1f s; publishing anyway",
                             topic(args.cam, "points"), args.wait_subscribers)

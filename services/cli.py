@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 #: subcommand -> (module, one-line help). Order is the order shown by ``gngdt --help``.
@@ -81,6 +82,11 @@ def main(argv: list[str] | None = None) -> int:
 
     lifecycle.install()  # first: a signal during the imports below must stop us too
     try:
+        from schemas.packing import MAX_IMAGE_PIXELS
+
+        # before OpenCV loads: the largest image it may decode, rather than its own 2**30
+        # pixels (3 GB for a few kilobytes of PNG)
+        os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(MAX_IMAGE_PIXELS))
         args = build_parser().parse_args(argv)
     except KeyboardInterrupt:
         return 130

@@ -81,7 +81,7 @@ class LearnerOptions:
     #: points of the frame sampled to compute the quantization error (eq. 17)
     quantization_sample: int = 2_000
     #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
-    max_points: int = 2_000_000
+    max_points: int = 2_000_000  # schemas.packing.MAX_CLOUD_POINTS (not imported: --help)
     seed: int | None = 0
     #: a node the sensor could see farther than this (metres) from the frame is a ghost
     ghost_distance_m: float = 0.05

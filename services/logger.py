@@ -34,7 +34,12 @@ import numpy as np
 
 from schemas.wire import DEFAULT_CAMERA, FrameStamp
 from services import lifecycle
-from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
+from services.zenoh_session import (
+    MAX_MESSAGE_BYTES,
+    ZenohSetupError,
+    add_zenoh_arguments,
+    open_session,
+)
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -59,6 +64,9 @@ RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
 #: how often the .rrd is flushed to disk: what a killed logger can lose at most
 FLUSH_EVERY_SECONDS = 1.0
+DEFAULT_MAX_CAMERAS = 16
+#: 100 times the learner's default node budget
+DEFAULT_MAX_TOPOLOGY_NODES = 100_000
 
 
 def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
@@ -78,15 +86,48 @@ def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
                         help="Log data to standard output, to be piped into a Rerun Viewer")
 
 
+def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
+    """Where ``--serve`` listens (shared with `gngdt run`)."""
+    from services.rerun_output import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT
+
+    group = parser.add_argument_group("serving (--serve)")
+    group.add_argument("--bind", default=DEFAULT_BIND, metavar="ADDRESS",
+                       help=f"address the served viewer listens on (default {DEFAULT_BIND}, this "
+                       "machine only; 0.0.0.0 opens it to the network, with no authentication)")
+    group.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, metavar="PORT",
+                       help=f"port of the gRPC server logs go to (default {DEFAULT_GRPC_PORT})")
+    group.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, metavar="PORT",
+                       help=f"port of the web viewer (default {DEFAULT_WEB_PORT})")
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from services.rerun_output import DEFAULT_MAX_RRD_MB, DEFAULT_MIN_FREE_MB
+
     add_viewer_arguments(parser)
     parser.add_argument("--max-cloud-points", type=int, default=50_000,
-                        help="decimate the logged point cloud to at most this many points")
+                        help="decimate the logged point cloud to at most this many points "
+                        "(default 50000)")
     parser.add_argument("--eos-drain", type=float, default=10.0, metavar="SECONDS",
                         help="after an end-of-stream, wait at most this long for the last "
                         "topology (default 10)")
     parser.add_argument("--keep-running", action="store_true",
                         help="do not stop at end-of-stream (only on SIGINT/SIGTERM)")
+    add_serve_arguments(parser)
+    limits = parser.add_argument_group("limits (what arrives beyond them is refused, counted)")
+    limits.add_argument("--max-rrd-mb", type=int, default=DEFAULT_MAX_RRD_MB, metavar="MB",
+                        help="stop writing the .rrd (a complete file) once it is this large and "
+                        f"go on running (default {DEFAULT_MAX_RRD_MB}; 0: no cap)")
+    limits.add_argument("--min-free-mb", type=int, default=DEFAULT_MIN_FREE_MB, metavar="MB",
+                        help="stop writing the .rrd when less than this is free on its disk "
+                        f"(default {DEFAULT_MIN_FREE_MB}); a failed write stops it too")
+    limits.add_argument("--max-cameras", type=int, default=DEFAULT_MAX_CAMERAS, metavar="N",
+                        help=f"cameras logged at most (default {DEFAULT_MAX_CAMERAS})")
+    limits.add_argument("--max-topology-nodes", type=int, default=DEFAULT_MAX_TOPOLOGY_NODES,
+                        metavar="N", help="largest topology logged, in nodes (default "
+                        f"{DEFAULT_MAX_TOPOLOGY_NODES:,}; a learner sends its --max-nodes)")
+    limits.add_argument("--max-queue-mb", type=int, default=DEFAULT_QUEUE_MB, metavar="MB",
+                        help="messages held while the logger is busy, in MB (default "
+                        f"{DEFAULT_QUEUE_MB}); the oldest make room")
     add_zenoh_arguments(parser)
 
 
@@ -278,43 +319,102 @@ class RerunLog:
         self.rec.log(paths.metric(name), rr.Scalars(float(value)))
 
 
+#: bytes a sample of each stream may take; larger ones are refused before they are copied
+#: (images, clouds and topologies: zenoh's own message limit)
+STREAM_BYTE_LIMITS = {
+    "calibration": 64 * 1024,
+    "learner/status": 64 * 1024,
+    "eos": 64 * 1024,
+    "color": MAX_MESSAGE_BYTES,
+    "depth": MAX_MESSAGE_BYTES,
+    "points": MAX_MESSAGE_BYTES,
+    "topology": MAX_MESSAGE_BYTES,
+}
+#: streams not in STREAM_BYTE_LIMITS
+OTHER_STREAM_BYTE_LIMIT = 4 * 1024 * 1024
+#: bytes the inbox may hold while the logger is busy
+DEFAULT_QUEUE_MB = 256
+
+
+def stream_of(key: str) -> str:
+    """``learner/status`` of ``gngdt/<cam>/learner/status``."""
+    return key.split("/", 2)[2] if key.count("/") >= 2 else ""
+
+
 class Inbox:
     """Samples handed over from zenoh's threads; the callbacks never block.
 
     Images and clouds keep only the newest sample per key (older ones are counted as dropped);
-    the other streams (calibration, topology, status, eos) queue in arrival order, bounded.
+    the other streams (calibration, topology, status) queue in arrival order. What it holds is
+    bounded in bytes (``max_bytes``): a sample over its stream's limit (``STREAM_BYTE_LIMITS``)
+    is refused before it is copied, and when the inbox is full the oldest queued samples make
+    room; each is counted. Ends of stream are kept apart and never evicted (64 at most).
     """
 
-    def __init__(self, max_queued: int = 1024) -> None:
+    def __init__(self, max_bytes: int = DEFAULT_QUEUE_MB * 1024 * 1024) -> None:
         self._lock = threading.Lock()
         self._latest: dict[str, tuple[bytes, bytes | None]] = {}
         self._queued: deque[tuple[str, bytes, bytes | None]] = deque()
-        self._max_queued = max_queued
+        self._ends: list[tuple[str, bytes, bytes | None]] = []
+        self._bytes = 0
+        self.max_bytes = max_bytes
         self.dropped = 0
+        self.oversized = 0
         self.arrived = threading.Event()
 
     def put(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
+        stream = stream_of(key)
+        size = len(sample.payload)
+        if size > STREAM_BYTE_LIMITS.get(stream, OTHER_STREAM_BYTE_LIMIT) or size > self.max_bytes:
+            with self._lock:
+                self.oversized += 1
+            return
         payload = sample.payload.to_bytes()
-        attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
+        attachment = sample.attachment
+        attachment = attachment.to_bytes() if attachment is not None and len(attachment) <= 64 \
+            else None
         with self._lock:
-            if key.rsplit("/", 1)[-1] in LATEST_ONLY_STREAMS:
-                self.dropped += key in self._latest
-                self._latest[key] = (payload, attachment)
-            else:
-                if len(self._queued) >= self._max_queued:
-                    self._queued.popleft()
+            if stream == "eos":
+                if len(self._ends) < 64:
+                    self._ends.append((key, payload, attachment))
+                else:
                     self.dropped += 1
+            elif stream in LATEST_ONLY_STREAMS:
+                previous = self._latest.pop(key, None)
+                if previous is not None:
+                    self.dropped += 1
+                    self._bytes -= len(previous[0])
+                if self._make_room(size):
+                    self._latest[key] = (payload, attachment)
+                    self._bytes += size
+            elif self._make_room(size):
                 self._queued.append((key, payload, attachment))
+                self._bytes += size
         self.arrived.set()
 
+    def _make_room(self, size: int) -> bool:
+        """Evict the oldest queued samples until ``size`` more bytes fit; False (the new sample
+        is dropped) if they cannot."""
+        while self._bytes + size > self.max_bytes and self._queued:
+            self._bytes -= len(self._queued.popleft()[1])
+            self.dropped += 1
+        if self._bytes + size > self.max_bytes:
+            self.dropped += 1
+            return False
+        return True
+
     def take(self) -> list[tuple[str, bytes, bytes | None]]:
-        """Everything waiting: queued messages first (calibration before images), then latest."""
+        """Everything waiting: queued messages first (calibration before images), then latest,
+        then the ends of stream."""
         with self._lock:
             taken = list(self._queued)
             taken += [(key, *value) for key, value in self._latest.items()]
+            taken += self._ends
             self._queued.clear()
             self._latest.clear()
+            self._ends = []
+            self._bytes = 0
             self.arrived.clear()
         return taken
 
@@ -362,12 +462,22 @@ class CaptureWatch:
 
 
 class Dispatcher:
-    """Decodes one sample by stream name and logs it; malformed messages are counted, skipped."""
+    """Decodes one sample by stream name and logs it; malformed messages are counted, skipped.
 
-    def __init__(self, rerun_log: RerunLog, on_new_camera: Any = None) -> None:
+    A camera becomes known with its first valid message (or its capture's token), up to
+    ``max_cameras``; messages of further cameras are refused and counted, so that garbage on
+    made-up camera names cannot grow the recording or its blueprint.
+    """
+
+    def __init__(self, rerun_log: RerunLog, on_new_camera: Any = None,
+                 max_cameras: int = DEFAULT_MAX_CAMERAS,
+                 max_topology_nodes: int = DEFAULT_MAX_TOPOLOGY_NODES) -> None:
         self.rerun_log = rerun_log
         self.cameras: dict[str, CameraProgress] = {}
         self.malformed = 0
+        self.refused = 0
+        self.max_cameras = max_cameras
+        self.max_topology_nodes = max_topology_nodes
         self.last_status: dict[str, LearnerStatusInfo] = {}
         self._on_new_camera = on_new_camera
 
@@ -385,22 +495,42 @@ class Dispatcher:
             "color": lambda: self.rerun_log.color(paths, packing.raw_to_image(payload)),
             "depth": lambda: self.rerun_log.depth(paths, packing.raw_to_image(payload)),
             "points": lambda: self._points(paths, payload),
-            "topology": lambda: self._topology(camera, paths, packing.decode_topology(payload)),
+            "topology": lambda: self._topology(camera, paths, packing.decode_topology(
+                payload, max_nodes=self.max_topology_nodes)),
             "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
             "eos": lambda: self._eos(camera, packing.decode_stream_end(payload)),
         }
         handler = handlers.get(stream)
         if handler is None:
             return
+        new_camera = camera not in self.cameras
+        if new_camera and not self._admit(camera):
+            return
         try:
             stamp = FrameStamp.from_attachment(attachment)
             stamp.check_clock(time.time_ns())
-            self._expect(camera)
+            if new_camera:
+                self.cameras[camera] = CameraProgress()
             self.rerun_log.set_time(stamp)
             handler()
         except (ValueError, OverflowError) as error:  # MessageError is a ValueError
+            if new_camera:  # a camera is made by a valid message, not by garbage
+                self.cameras.pop(camera, None)
             self.malformed += 1
             log.warning("%s: malformed message skipped: %s", key, error)
+            return
+        if new_camera and self._on_new_camera is not None:
+            self._on_new_camera(list(self.cameras))
+
+    def _admit(self, camera: str) -> bool:
+        """Room for one more camera? Refusals are counted, the first one logged."""
+        if len(self.cameras) < self.max_cameras:
+            return True
+        if self.refused == 0:
+            log.warning("more than %d cameras (--max-cameras): messages of %r and further "
+                        "cameras are refused", self.max_cameras, camera)
+        self.refused += 1
+        return False
 
     def _points(self, paths: EntityPaths, payload: bytes) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
@@ -417,10 +547,11 @@ class Dispatcher:
     def capture_seen(self, camera: str, alive: bool) -> None:
         """A capture of ``camera`` started (``alive``) or left."""
         self._expect(camera)
-        self.cameras[camera].capture_gone_at = None if alive else time.monotonic()
+        if camera in self.cameras:
+            self.cameras[camera].capture_gone_at = None if alive else time.monotonic()
 
     def _expect(self, camera: str) -> None:
-        if camera not in self.cameras:
+        if camera not in self.cameras and self._admit(camera):
             self.cameras[camera] = CameraProgress()
             if self._on_new_camera is not None:
                 self._on_new_camera(list(self.cameras))
@@ -446,50 +577,75 @@ class Dispatcher:
             progress.finished(drain_seconds) for progress in self.cameras.values())
 
 
-def open_recording(args: argparse.Namespace, default_name: str = "log") -> tuple[Any, str]:
-    """The rerun stream, its sink chosen by rerun's own options, and where it goes."""
+def open_recording(args: argparse.Namespace, default_name: str = "log"
+                   ) -> tuple[Any, str, Path | None, Any]:
+    """The rerun stream, its sink chosen by rerun's own options, where it goes (a description
+    and, for a file, its path) and the viewer server ``--serve`` started (or None)."""
     import rerun as rr
+
+    from services.rerun_output import ViewerServer
 
     rec = rr.RecordingStream("gngdt")
     rr.set_log_time_enabled(False, recording=rec)  # reproducible files: capture time is logged
     initial = blueprint([DEFAULT_CAMERA])
     if args.stdout:
         rec.stdout(default_blueprint=initial)
-        return rec, "stdout"
+        return rec, "stdout", None, None
     if args.serve:
-        url = rec.serve_grpc(default_blueprint=initial)
-        rr.serve_web_viewer(open_browser=False, connect_to=url)
-        return rec, f"serving {url}"
+        server = ViewerServer(args.bind, args.grpc_port, args.web_port)
+        try:
+            server.wait_ready()
+        except OSError:
+            server.stop()
+            raise
+        rec.connect_grpc(server.grpc_url, default_blueprint=initial)
+        return rec, f"serving a web viewer at {server.web_url} (logs {server.grpc_url})", \
+            None, server
     if args.connect:
         rec.connect_grpc(args.url, default_blueprint=initial)
-        return rec, f"connected to {args.url or 'the default viewer'}"
+        return rec, f"connected to {args.url or 'the default viewer'}", None, None
     requested = Path(args.save) if args.save else default_rrd_path(default_name)
     path = unused_rrd_path(requested)
     if path != requested:
         log.warning("%s exists (an earlier run); writing %s instead", requested, path)
     path.parent.mkdir(parents=True, exist_ok=True)
     rec.save(str(path), default_blueprint=initial)
-    return rec, str(path)
+    return rec, str(path), path, None
 
 
 def main(args: argparse.Namespace) -> int:
+    from services.rerun_output import RrdFile, exit_now_if_stuck
+
+    for name in ("max_rrd_mb", "min_free_mb", "max_queue_mb"):
+        if getattr(args, name) < 0:
+            log.error("--%s must be >= 0, got %s", name.replace("_", "-"), getattr(args, name))
+            return 2
+    for name in ("max_cameras", "max_topology_nodes"):
+        if getattr(args, name) < 1:
+            log.error("--%s must be >= 1, got %s", name.replace("_", "-"), getattr(args, name))
+            return 2
     try:
-        rec, destination = open_recording(args)
+        rec, destination, path, server = open_recording(args)
         rerun_log = RerunLog(rec, args.max_cloud_points)
     except (ValueError, OSError) as error:
         log.error("%s", error)
         return 2
     if not args.stdout:
         print(f"logging to {destination}", flush=True)
+    output = None if path is None else RrdFile(
+        rerun_log, path, args.max_rrd_mb * 10**6, args.min_free_mb * 10**6, FLUSH_EVERY_SECONDS)
 
-    inbox = Inbox()
-    dispatcher = Dispatcher(rerun_log,
-                            on_new_camera=lambda cams: rec.send_blueprint(blueprint(cams)))
+    inbox = Inbox(args.max_queue_mb * 1024 * 1024)
+    dispatcher = Dispatcher(
+        rerun_log, on_new_camera=lambda cams: rerun_log.rec.send_blueprint(blueprint(cams)),
+        max_cameras=args.max_cameras, max_topology_nodes=args.max_topology_nodes)
     try:
         session = open_session(args)
     except ZenohSetupError as error:
         log.error("%s", error)
         rec.disconnect()
+        if server is not None:
+            server.stop()
         return 1
     subscriber = session.declare_subscriber("gngdt/**", inbox.put)
     captures = CaptureWatch()
@@ -505,8 +661,10 @@ def main(args: argparse.Namespace) -> int:
                     dispatcher.handle(key, payload, attachment)
                 for camera, alive in captures.take():
                     dispatcher.capture_seen(camera, alive)
-                if time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
-                    rec.flush()
+                if output is not None:
+                    output.tick()
+                elif time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
+                    rerun_log.rec.flush()
                     last_flush = time.monotonic()
                 if not args.keep_running and dispatcher.all_finished(args.eos_drain):
                     break
@@ -517,7 +675,15 @@ def main(args: argparse.Namespace) -> int:
         session.close()
         for key, payload, attachment in inbox.take():
             dispatcher.handle(key, payload, attachment)
-        rec.flush()
-        rec.disconnect()  # writes the .rrd footer
-    log.info("logger done: %d malformed, %d dropped", dispatcher.malformed, inbox.dropped)
-    return 0
+        if output is not None:
+            output.close()
+        else:
+            rec.flush()
+            rec.disconnect()  # writes the .rrd footer
+        if server is not None:
+            server.stop()
+    log.info("logger done: %d malformed, %d dropped, %d oversized, %d refused (cameras beyond "
+             "--max-cameras)%s", dispatcher.malformed, inbox.dropped, inbox.oversized,
+             dispatcher.refused,
+             f"; the .rrd stopped early: {output.stopped}" if output and output.stopped else "")
+    return exit_now_if_stuck(output, 0)

@@ -30,7 +30,12 @@ from typing import IO, TYPE_CHECKING
 
 from schemas.wire import DEFAULT_CAMERA, topic
 from services import lifecycle
-from services.logger import LIVELINESS_KEY, default_rrd_path, unused_rrd_path
+from services.logger import (
+    LIVELINESS_KEY,
+    add_serve_arguments,
+    default_rrd_path,
+    unused_rrd_path,
+)
 from services.zenoh_session import (
     ZenohSetupError,
     client_settings,
@@ -63,8 +68,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     viewer.add_argument("--save", type=Path, metavar="PATH",
                         help="write the rerun recording here (default runs/<recording>-<time>.rrd)")
     viewer.add_argument("--connect", action="store_true", help="log to a running rerun viewer")
-    viewer.add_argument("--serve", action="store_true", help="serve a web viewer")
+    viewer.add_argument("--serve", action="store_true",
+                        help="serve a web viewer (on this machine only unless --bind says)")
     parser.add_argument("--url", help="rerun viewer URL for --connect")
+    add_serve_arguments(parser)
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -295,7 +302,8 @@ def logger_arguments(args: argparse.Namespace, rrd_path: Path | None) -> list[st
     if args.connect:
         return ["--connect"] + (["--url", args.url] if args.url else [])
     if args.serve:
-        return ["--serve", "--keep-running"]
+        return ["--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
+                str(args.grpc_port), "--web-port", str(args.web_port)]
     return ["--save", str(rrd_path)]
 
 

@@ -82,3 +82,25 @@ def wait_for(condition: Callable[[], bool], timeout_s: float, what: str) -> None
             return
         time.sleep(0.05)
     raise AssertionError(f"timed out waiting for {what}")
+
+
+#: runs a command and prints the peak resident memory of it and its children ("peak_rss_kb N")
+_PEAK_RSS = (
+    "import resource, subprocess, sys\n"
+    "code = subprocess.call(sys.argv[1:])\n"
+    "print('peak_rss_kb', resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, flush=True)\n"
+    "sys.exit(code)\n"
+)
+
+
+def with_peak_rss(command: list[str]) -> list[str]:
+    """``command`` run so that its output ends with its peak RSS (see :func:`peak_rss_mb`)."""
+    import sys
+
+    return [sys.executable, "-c", _PEAK_RSS, *command]
+
+
+def peak_rss_mb(output: str) -> float:
+    """The peak RSS a :func:`with_peak_rss` command printed, in MB."""
+    line = next(line for line in output.splitlines() if line.startswith("peak_rss_kb "))
+    return int(line.split()[1]) / 1024

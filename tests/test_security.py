@@ -6,20 +6,23 @@ from __future__ import annotations
 
 import json
 import shutil
+import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import bound_sockets
+from processes import bound_sockets, children, wait_for
 
 from services.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from services.zenoh_session import (
     DEFAULT_ENDPOINT,
     ZenohSetupError,
     client_config,
+    free_tcp_port,
     open_config,
     router_config,
 )
@@ -71,6 +74,42 @@ def test_running_router_and_learner_hold_only_loopback_listeners(
     assert router_sockets == [("tcp", f"127.0.0.1:{free_port}", "listen")], router_sockets
     learner_sockets = bound_sockets(learner.pid)
     assert learner_sockets == [], learner_sockets  # a client: no listener, no scouting socket
+
+
+def _descendants(pid: int) -> list[int]:
+    found = []
+    for child in children(pid):
+        found += [child, *_descendants(child)]
+    return found
+
+
+@pytest.mark.timeout(150)
+def test_every_listener_of_run_serve_and_its_services_is_on_loopback(
+    tabletop_recording: Path, tmp_path: Path
+) -> None:
+    """`gngdt run --serve`: its router, learner, logger, capture and the rerun viewer server."""
+    grpc_port, web_port = free_tcp_port(), free_tcp_port()
+    log_path = tmp_path / "run.log"
+    with open(log_path, "wb") as output:
+        run = subprocess.Popen(
+            [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--serve",
+             "--rate", "0.01", "--grpc-port", str(grpc_port), "--web-port", str(web_port)],
+            cwd=REPO_ROOT, stdout=output, stderr=output, start_new_session=True)
+    try:
+        wait_for(lambda: "replaying" in log_path.read_text(), 90, "every service to be up")
+        processes = [run.pid, *_descendants(run.pid)]
+        assert len(processes) >= 5, log_path.read_text()  # run, 3 services, the rerun server
+        found = {pid: bound_sockets(pid) for pid in processes}
+    finally:
+        run.send_signal(signal.SIGINT)
+        run.wait(60)
+    listeners = [address for sockets in found.values() for protocol, address, state in sockets
+                 if state == "listen"]
+    assert f"127.0.0.1:{grpc_port}" in listeners and f"127.0.0.1:{web_port}" in listeners
+    for pid, sockets in found.items():
+        for protocol, address, state in sockets:
+            assert protocol == "tcp" and state == "listen", (pid, sockets)  # no UDP: no scouting
+            assert address.startswith("127.0.0.1:"), (pid, sockets)
 
 
 # ------------------------------------------------------------------ TLS + access control

@@ -41,7 +41,7 @@ import logging
 import os
 from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import IO, Any
 
@@ -59,6 +59,26 @@ logger = logging.getLogger(__name__)
 #: Unpaired colour or depth images kept while waiting for their partner.
 MAX_PENDING_IMAGES = 32
 MAX_FRAMES_WITHOUT_CALIBRATION = 64
+
+
+@dataclass(frozen=True)
+class ReadLimits:
+    """What reading a recording may cost, however the file is made: a few kilobytes must not
+    cost gigabytes or minutes. Each is checked before the memory is spent.
+
+    max_frame_pixels: largest image (width x height); default 4096 x 2160.
+    max_chunk_bytes: largest MCAP chunk once decompressed (and largest record).
+    max_held_bytes: images held while they wait for their partner or for a calibration.
+    """
+
+    max_frame_pixels: int = 4096 * 2160
+    max_chunk_bytes: int = 64 * 1024 * 1024
+    max_held_bytes: int = 256 * 1024 * 1024
+
+    def __post_init__(self) -> None:
+        for item in fields(self):
+            if getattr(self, item.name) <= 0:
+                raise ValueError(f"{item.name} must be positive, got {getattr(self, item.name)}")
 
 _COLOR_ENCODINGS = frozenset({"rgb8", "bgr8", "8UC3", "rgba8", "bgra8", "mono8", "8UC1"})
 _DEPTH_ENCODINGS = frozenset({"16UC1", "mono16", "32FC1"})
@@ -115,16 +135,25 @@ def normalize_color(color: np.ndarray) -> np.ndarray:
     return color
 
 
-def decode_compressed(data: bytes, image_format: str) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of a jpeg/png image."""
+def decode_compressed(data: bytes, image_format: str,
+                      max_pixels: int = ReadLimits.max_frame_pixels) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of a jpeg/png image of at most ``max_pixels`` (OpenCV's own ceiling,
+    ``OPENCV_IO_MAX_IMAGE_PIXELS``, which `gngdt` sets, bounds what decoding allocates)."""
     import cv2
 
     if "depth" in image_format.lower():
         raise _DecodeFailure(f"compressed depth ({image_format!r}) is not supported")
     buffer = np.frombuffer(data, dtype=np.uint8)
-    image = cv2.imdecode(buffer, cv2.IMREAD_COLOR) if buffer.size else None
+    try:
+        image = cv2.imdecode(buffer, cv2.IMREAD_COLOR) if buffer.size else None
+    except cv2.error as error:  # e.g. larger than OpenCV's ceiling
+        raise _DecodeFailure(f"OpenCV cannot decode the {image_format or 'compressed'} image: "
+                             f"{str(error).strip().splitlines()[-1]}") from error
     if image is None:
         raise _DecodeFailure(f"OpenCV cannot decode the {image_format or 'compressed'} image")
+    if image.shape[0] * image.shape[1] > max_pixels:
+        raise _DecodeFailure(f"image {image.shape[1]}x{image.shape[0]} exceeds the limit of "
+                             f"{max_pixels} pixels (--max-frame-pixels)")
     return image[..., ::-1].copy()
 
 
@@ -198,12 +227,17 @@ class _MessageDecoder:
         return stamp if stamp else log_time_ns
 
     @staticmethod
-    def pixels(schema_name: str, payload: Any) -> np.ndarray:
-        """Pixels of an image message (see ``schemas.packing.decode_pixels`` for shapes)."""
+    def pixels(schema_name: str, payload: Any,
+               max_pixels: int = ReadLimits.max_frame_pixels) -> np.ndarray:
+        """Pixels of an image message (see ``schemas.packing.decode_pixels`` for shapes), of at
+        most ``max_pixels``, checked before decoding."""
         from schemas.packing import MessageError, decode_pixels
 
         if schema_name.endswith("CompressedImage"):
-            return decode_compressed(bytes(payload.data), payload.format)
+            return decode_compressed(bytes(payload.data), payload.format, max_pixels)
+        if payload.width * payload.height > max_pixels:
+            raise _DecodeFailure(f"image {payload.width}x{payload.height} exceeds the limit of "
+                                 f"{max_pixels} pixels (--max-frame-pixels)")
         try:
             return decode_pixels(
                 bytes(payload.data),
@@ -234,23 +268,72 @@ class _MessageDecoder:
             raise _DecodeFailure(str(error)) from error
 
 
-def _open_messages(stream: IO[bytes]) -> Iterator[tuple[Any, Any, Any]]:
+def _open_messages(
+    stream: IO[bytes], max_record_bytes: int = ReadLimits.max_chunk_bytes
+) -> Iterator[tuple[Any, Any, Any]]:
     """(schema, channel, message) in log-time order when the file has an index, else file order.
 
     An intact file is read through its chunk index; a file without a readable summary (e.g.
     truncated by a crash) is streamed record by record so that everything before the damage is
-    still delivered.
+    still delivered. Records larger than ``max_record_bytes`` are refused (mcap raises).
     """
     from mcap.reader import NonSeekingReader, SeekingReader
 
     try:
-        summary = SeekingReader(stream).get_summary()
+        summary = SeekingReader(stream, record_size_limit=max_record_bytes).get_summary()
     except Exception:  # missing or damaged footer/summary: fall back to streaming
         summary = None
     stream.seek(0)
     if summary is not None and summary.chunk_indexes:
-        return SeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=True)
-    return NonSeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=False)
+        return SeekingReader(stream, validate_crcs=True, record_size_limit=max_record_bytes
+                             ).iter_messages(log_time_order=True)
+    return NonSeekingReader(stream, validate_crcs=True, record_size_limit=max_record_bytes
+                            ).iter_messages(log_time_order=False)
+
+
+def check_chunks(stream: IO[bytes], path: Path, max_chunk_bytes: int) -> None:
+    """Refuse (``RecordingError``) a file holding a chunk that would inflate beyond
+    ``max_chunk_bytes``, by the sizes its record and its compressed frame declare, before any
+    chunk is decompressed (an 8 kB chunk of zeros can declare 256 MB). Reads the file once;
+    damage is left for the reading itself to report, after the frames before it."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    offset = 0
+    try:
+        reader = StreamReader(stream, emit_chunks=True, record_size_limit=max_chunk_bytes)
+        for record in reader.records:
+            if isinstance(record, Chunk):
+                declared = max(record.uncompressed_size, _frame_content_size(record))
+                if declared > max_chunk_bytes:
+                    raise RecordingError(
+                        path, None, f"a {record.compression or 'raw'} chunk of "
+                        f"{len(record.data)} bytes (at log time {record.message_start_time}) "
+                        f"inflates to {declared} bytes, more than the limit of "
+                        f"{max_chunk_bytes} (--max-chunk-mb)")
+            offset += 1
+    except RecordingError:
+        raise
+    except Exception as error:  # damage: the reading itself reports it, with its place
+        logger.debug("%s: chunk check stopped at record %d: %s", path, offset, error)
+    finally:
+        stream.seek(0)
+
+
+def _frame_content_size(chunk: Any) -> int:
+    """What the chunk's compressed frame says it inflates to (0 when it does not say)."""
+    try:
+        if chunk.compression == "zstd":
+            import zstandard
+
+            return max(int(zstandard.frame_content_size(chunk.data)), 0)
+        if chunk.compression == "lz4":
+            import lz4.frame
+
+            return int(lz4.frame.get_frame_info(chunk.data).get("content_size") or 0)
+    except Exception:  # an unreadable frame header fails decompression later
+        return 0
+    return 0
 
 
 #: receives each bad frame's error when the caller chose to skip bad frames
@@ -267,9 +350,11 @@ class _FrameAssembler:
         max_skew_ns: int,
         on_bad_frame: BadFrameHandler | None = None,
         poses: PoseLookup | None = None,
+        max_held_bytes: int = ReadLimits.max_held_bytes,
     ) -> None:
         self.path = path
         self.poses = poses
+        self.max_held_bytes = max_held_bytes
         self.on_bad_frame = on_bad_frame
         self.calibration = intrinsics
         self.max_skew_ns = max_skew_ns
@@ -297,12 +382,34 @@ class _FrameAssembler:
             yield from self._checked_frame(color, depth, labels)
 
     def add_labels(self, image: _Image) -> None:
+        self._make_room(image.pixels.nbytes)
         self.labels.append(image)
+
+    def held_bytes(self) -> int:
+        """Bytes of the images held: unpaired, and frames waiting for a calibration."""
+        waiting = [image for queue in (*self.pending.values(), self.labels) for image in queue]
+        held = sum(image.pixels.nbytes for image in waiting)
+        for color, depth, labels in self.awaiting_calibration:
+            held += color.pixels.nbytes + depth.pixels.nbytes
+            held += 0 if labels is None else labels.nbytes
+        return held
+
+    def _make_room(self, nbytes: int) -> None:
+        """Drop the oldest unpaired images until ``nbytes`` more fit in ``max_held_bytes``."""
+        held = self.held_bytes()
+        queues = [*self.pending.values(), self.labels]
+        while held + nbytes > self.max_held_bytes and any(queues):
+            oldest = min((queue for queue in queues if queue), key=lambda q: q[0].stamp_ns)
+            dropped = oldest.popleft()
+            held -= dropped.pixels.nbytes
+            logger.debug("%s: dropping unpaired image at %d ns (--max-pending-mb)", self.path,
+                         dropped.stamp_ns)
 
     def add_image(self, role: str, image: _Image) -> Iterator[Frame]:
         other = self.pending["depth" if role == "color" else "color"]
         partner = min(other, key=lambda item: abs(item.stamp_ns - image.stamp_ns), default=None)
         if partner is None or abs(partner.stamp_ns - image.stamp_ns) > self.max_skew_ns:
+            self._make_room(image.pixels.nbytes)
             self.pending[role].append(image)
             return
         while other[0] is not partner:  # older unpaired images can no longer pair: drop them
@@ -315,10 +422,15 @@ class _FrameAssembler:
             (item.pixels for item in self.labels if item.stamp_ns == color.stamp_ns), None
         )
         if self.calibration is None:
-            if len(self.awaiting_calibration) >= MAX_FRAMES_WITHOUT_CALIBRATION:
+            frame_bytes = color.pixels.nbytes + depth.pixels.nbytes
+            frame_bytes += 0 if labels is None else labels.nbytes
+            if (len(self.awaiting_calibration) >= MAX_FRAMES_WITHOUT_CALIBRATION
+                    or self.held_bytes() + frame_bytes > self.max_held_bytes):
                 raise self.error(
                     f"no calibration channel (CameraCalibration/CameraInfo) in the first "
-                    f"{MAX_FRAMES_WITHOUT_CALIBRATION} frames"
+                    f"{len(self.awaiting_calibration) + 1} frames (at most "
+                    f"{MAX_FRAMES_WITHOUT_CALIBRATION} frames or {self.max_held_bytes >> 20} "
+                    "MB are held waiting for one, --max-pending-mb)"
                 )
             self.awaiting_calibration.append((color, depth, labels))
             return
@@ -450,7 +562,8 @@ def _may_have_transforms(stream: IO[bytes]) -> bool:
     )
 
 
-def read_transforms(stream: IO[bytes], path: Path) -> TransformTree:
+def read_transforms(stream: IO[bytes], path: Path,
+                    max_record_bytes: int = ReadLimits.max_chunk_bytes) -> TransformTree:
     """Every transform of the recording (first pass). A bad transform message is warned about
     (naming its frames) and skipped; damage to the file ends the pass, the main pass reports it."""
     tree = TransformTree()
@@ -459,7 +572,7 @@ def read_transforms(stream: IO[bytes], path: Path) -> TransformTree:
     decoder = _MessageDecoder()
     bad = 0
     try:
-        for schema, channel, message in _open_messages(stream):
+        for schema, channel, message in _open_messages(stream, max_record_bytes):
             if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
                 continue
             try:
@@ -555,6 +668,7 @@ def read_frames(
     max_skew_ns: int = 0,
     on_bad_frame: BadFrameHandler | None = None,
     fixed_frame: str | None = "auto",
+    limits: ReadLimits | None = None,
 ) -> Iterator[Frame]:
     """Yield the frames of an MCAP recording in log-time order (see the module docstring).
 
@@ -563,33 +677,39 @@ def read_frames(
     difference between a paired colour and depth image. on_bad_frame: called with the
     RecordingError of each bad frame, which is then skipped (default: raise it). fixed_frame:
     the frame poses are given in (``"auto"``: see the module docstring; None: no poses).
+    limits: what reading may cost (:class:`ReadLimits`; an image over the pixel limit is a bad
+    frame, a chunk over the chunk limit refuses the file before anything is decompressed).
     Raises RecordingError naming the file and frame for missing calibration, mismatched sizes,
     undecodable messages and truncated or corrupt files -- after yielding the frames before.
     """
+    limits = limits or ReadLimits()
     path = Path(path)
     try:
         stream = open(path, "rb")
     except OSError as error:
         raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
     with stream:
+        check_chunks(stream, path, limits.max_chunk_bytes)
         poses = None
         if fixed_frame is not None:
-            transforms = read_transforms(stream, path)
+            transforms = read_transforms(stream, path, limits.max_chunk_bytes)
             if len(transforms):
                 poses = PoseLookup(path, transforms, fixed_frame)
             stream.seek(0)
-        assembler = _FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame, poses)
-        yield from _read_stream(path, stream, camera_prefix, assembler)
+        assembler = _FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame, poses,
+                                    limits.max_held_bytes)
+        yield from _read_stream(path, stream, camera_prefix, assembler, limits)
 
 
 def _read_stream(
-    path: Path, stream: IO[bytes], camera_prefix: str | None, assembler: _FrameAssembler
+    path: Path, stream: IO[bytes], camera_prefix: str | None, assembler: _FrameAssembler,
+    limits: ReadLimits,
 ) -> Iterator[Frame]:
     max_skew_ns = assembler.max_skew_ns
     decoder = _MessageDecoder()
     chosen: dict[str, str] = {}  # role -> topic
     try:
-        messages = _open_messages(stream)
+        messages = _open_messages(stream, limits.max_chunk_bytes)
         for schema, channel, message in messages:
             if schema is None or schema.name not in _FOXGLOVE_SCHEMAS | _ROS_SCHEMAS:
                 continue
@@ -605,7 +725,7 @@ def _read_stream(
                     continue
                 image = _Image(
                     decoder.stamp_ns(schema.name, payload, message.log_time),
-                    decoder.pixels(schema.name, payload),
+                    decoder.pixels(schema.name, payload, limits.max_frame_pixels),
                     decoder.frame_id(schema.name, payload),
                 )
             except _DecodeFailure as failure:
