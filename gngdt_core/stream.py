@@ -136,8 +136,7 @@ class StreamLearner:
         if len(positions) < 2:
             raise ValueError(f"a frame needs at least 2 points, got {len(positions)}")
         self._camera_pose = camera_pose
-        placed = positions if camera_pose is None else (
-            np.asarray(positions, dtype=np.float64) @ camera_pose[:3, :3].T + camera_pose[:3, 3])
+        placed = self._placed(positions)
         from_scratch = (independent or self.model_ is None or self.model_.n_nodes_ == 0
                         or self._new_scene(placed))
         if from_scratch:
@@ -152,6 +151,24 @@ class StreamLearner:
         segmentation = self.model_.segmentation(self.segmentation)
         self._on_large_surface = self._large_surfaces(segmentation.patches)
         return LearnedFrame(steps, from_scratch, segmentation)
+
+    def refine(self, positions: np.ndarray, colors: np.ndarray | None, steps: int,
+               camera_pose: np.ndarray | None = None) -> None:
+        """Learn ``steps`` more steps from a frame into the current network (with attention),
+        without a scene check; e.g. to let a static scene settle. ``camera_pose``: as in
+        `learn_frame`."""
+        if self.model_ is None:
+            raise ValueError("no network yet: learn a frame first")
+        self._camera_pose = camera_pose
+        self._learn(positions, colors, steps, self._placed(positions))
+        self._on_large_surface = None  # the surfaces are found again on the next frame
+
+    def _placed(self, positions: np.ndarray) -> np.ndarray:
+        """The frame's points in the network's frame (the camera pose applied, if any)."""
+        pose = self._camera_pose
+        if pose is None:
+            return positions
+        return np.asarray(positions, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
 
     def in_depth_range(self, positions: np.ndarray) -> np.ndarray:
         """(N,) bool: points whose depth (z, metres) is in the schedule's range."""

@@ -60,6 +60,10 @@ DEFAULT_UTILITY_K = 1000.0
 #: the learner's profile over GNGDT's defaults (the paper's): forgetting on, for a camera that
 #: moves and a scene that changes. A params file's ``utility_k = 0`` turns it off.
 LEARNER_MODEL_DEFAULTS: dict[str, Any] = {"utility_k": DEFAULT_UTILITY_K}
+#: settling after the stream ends: steps between checks, and the relative change of the
+#: position error below which the network counts as settled
+SETTLE_CHUNK = 20_000
+SETTLED_CHANGE = 0.01
 
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
@@ -82,6 +86,9 @@ class LearnerOptions:
     quantization_sample: int = 2_000
     #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
     max_points: int = 2_000_000  # schemas.packing.MAX_CLOUD_POINTS (not imported: --help)
+    #: when the stream ends, learning goes on with its last frame until the network is settled
+    #: (node budget reached, quantization error steady) or this many more steps; 0: never
+    settle_max_steps: int = 2_000_000
     seed: int | None = 0
     #: a node the sensor could see farther than this (metres) from the frame is a ghost
     ghost_distance_m: float = 0.05
@@ -105,13 +112,15 @@ class LearnerOptions:
         for name in ("checkpoint_every_seconds", "ghost_distance_m"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"learner option {name} must be positive")
-        if self.ghost_sample < 0:
-            raise ValueError("learner option ghost_sample must be >= 0")
+        for name in ("settle_max_steps", "ghost_sample"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"learner option {name} must be >= 0")
 
 
 #: accepted types of each option (TOML integers are accepted where floats are)
 _OPTION_TYPES: dict[str, tuple[type, ...]] = {
     "samples_per_frame": (int,),
+    "settle_max_steps": (int,),
     "min_cluster_size": (int,),
     "checkpoint_every_frames": (int,),
     "checkpoint_every_seconds": (int, float),
@@ -359,6 +368,8 @@ class Learner:
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
         self.frame_id = frame_id
+        #: the pose of the last cloud learned (None: it was in the network's frame as it is)
+        self.last_pose: np.ndarray | None = None
         self.ghosts = Ghosts()
         self._rng = np.random.default_rng(config.options.seed)
 
@@ -379,6 +390,7 @@ class Learner:
                 f"cloud in frame {frame_id!r}, but this network is learned in {self.frame_id!r} "
                 f"(a capture without poses, or with another fixed frame, than the first one; "
                 f"start the learner afresh to learn in {frame_id!r})")
+        self.last_pose = pose
         started = time.perf_counter()
         if self.stream is None:
             self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame,
@@ -414,12 +426,20 @@ class Learner:
                                   self.options.ghost_distance_m, margin)
         return Ghosts(int(seen.sum()), float(ghost.sum() / seen.sum()) if seen.any() else 0.0)
 
+    def placed(self, positions: np.ndarray) -> np.ndarray:
+        """Points of the last learned cloud (its own frame) in the network's frame."""
+        pose = self.last_pose
+        if pose is None:
+            return positions
+        return np.asarray(positions, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
+
     def quantization_error(self, positions: np.ndarray, colors: np.ndarray | None) -> dict:
+        """Eq. 17 on a sample of the last learned cloud (``positions`` in its own frame)."""
         count = min(len(positions), self.options.quantization_sample)
         if count == 0 or colors is None:
             return {}
         chosen = self._rng.choice(len(positions), size=count, replace=False)
-        errors = self.model.quantization_error(positions[chosen], colors[chosen])
+        errors = self.model.quantization_error(self.placed(positions[chosen]), colors[chosen])
         return {name: float(value) for name, value in errors.items()}
 
     def topology(self, stamp: FrameStamp, quantization_error: dict[str, float]) -> Any:
@@ -450,8 +470,46 @@ class Learner:
             quantization_error=quantization_error,
         )
 
-    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any) -> Any:
-        """The ``gngdt.LearnerStatus`` after publishing ``topology``."""
+    def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
+        """Learn the stream's last frame on until the network is settled: the node budget
+        reached and eq. 17's position error changing by less than ``SETTLED_CHANGE`` over
+        ``SETTLE_CHUNK`` steps, or ``settle_max_steps`` more steps (0: none). Returns how it
+        stopped (the final status says it, and the logger waits for it)."""
+        limit = self.options.settle_max_steps
+        sample = self.placed(positions[self._rng.choice(len(positions),
+                                                        min(len(positions), 5_000),
+                                                        replace=False)])
+        steps = 0
+        previous = self.model.quantization_error(sample)["pos"]
+        started = time.perf_counter()
+        while steps < limit:
+            chunk = min(SETTLE_CHUNK, limit - steps)
+            if self.stream is None:
+                self.model.partial_fit(positions, colors, n_steps=chunk,
+                                       camera_pose=self.last_pose)
+            else:
+                self.stream.refine(positions, colors, chunk, camera_pose=self.last_pose)
+            steps += chunk
+            error = self.model.quantization_error(sample)["pos"]
+            change = abs(previous - error) / previous if previous > 0 else 0.0
+            previous = error
+            if self.model.n_nodes_ >= self.model.max_nodes and change < SETTLED_CHANGE:
+                reason = (f"settled after {steps:,} more steps on the last frame: node budget "
+                          f"reached, position error changed {change:.2%} over the last {chunk:,}")
+                break
+        else:
+            reason = (f"stopped after {steps:,} more steps on the last frame (settle_max_steps): "
+                      f"{self.model.n_nodes_} of {self.model.max_nodes} nodes")
+        self.counters.learning_seconds += time.perf_counter() - started
+        self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
+        self.last_segmentation = None
+        log.info("%s", reason)
+        return reason
+
+    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any,
+               settled: str = "") -> Any:
+        """The ``gngdt.LearnerStatus`` after publishing ``topology``; ``settled``: how learning
+        on the stream's last frame stopped."""
         from schemas.packing import encode_status
 
         counters = self.counters
@@ -477,6 +535,7 @@ class Learner:
             ghost_distance_m=self.options.ghost_distance_m,
             nodes_forgotten=int(getattr(self.model, "n_forgotten_", 0)),
             frames_other_frame=counters.frames_other_frame,
+            settled=settled,
         )
 
     def save(self, path: Path) -> bool:
@@ -797,9 +856,25 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
              config.options.samples_per_frame)
     max_cloud_bytes = config.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
 
+    def publish(stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray | None,
+                settled: str = "") -> float:
+        """Publish the topology and status after learning a frame; the latency in ms."""
+        topology = learner.topology(stamp, learner.quantization_error(positions, colors))
+        payload = topology.SerializeToString()
+        attachment = stamp.to_attachment()
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        topology_publisher.put(payload, attachment=attachment)
+        latest.set(payload, attachment)
+        status = learner.status(stamp, latency_ms, topology, settled)
+        status_publisher.put(status.SerializeToString(), attachment=attachment)
+        return latency_ms
+
     frames_since_checkpoint = 0
     last_checkpoint = time.monotonic()
     learned_sequence = -1
+    #: the last learned frame (stamp, positions, colours), kept to settle on at the stream's end
+    last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
+    settled_end = 0.0  # the end of stream (its arrival time) already settled on
     exit_code = 0
     try:
         with lifecycle.graceful() as stop:
@@ -811,8 +886,13 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
                     break
                 sample = points.try_recv()
                 if sample is None:
-                    if args.exit_on_eos and end.finished(learned_sequence):
-                        break
+                    if end.finished(learned_sequence):
+                        if last_frame is not None and end.received_at != settled_end:
+                            # the stream's last frame: learn it on until the network settles
+                            publish(*last_frame, settled=learner.settle(*last_frame[1:]))
+                            settled_end = end.received_at
+                        if args.exit_on_eos:
+                            break
                     time.sleep(0.002)
                     continue
                 counters.frames_received += 1
@@ -831,15 +911,9 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
                     counters.malformed_messages += 1
                     log.warning("points message skipped: %s", error)
                     continue
-                topology = learner.topology(stamp, learner.quantization_error(positions, colors))
-                payload = topology.SerializeToString()
-                attachment = stamp.to_attachment()
-                latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-                topology_publisher.put(payload, attachment=attachment)
-                latest.set(payload, attachment)
+                latency_ms = publish(stamp, positions, colors)
                 learner.latencies.add(latency_ms)
-                status = learner.status(stamp, latency_ms, topology)
-                status_publisher.put(status.SerializeToString(), attachment=attachment)
+                last_frame = (stamp, positions, colors)
                 learned_sequence = stamp.sequence
                 log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                           stamp.sequence, len(positions), received_ms, latency_ms)
