@@ -73,6 +73,14 @@ def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path:
     assert learner.frame_id == "world"
     # the map spans the three camera positions: x from -0.5 to 1.5 in the world
     assert learner.model.positions_[:, 0].min() < -0.3 < 1.3 < learner.model.positions_[:, 0].max()
+    # the frame's error is measured where the map is: the cloud placed by its pose
+    last = message.positions, message.colors
+    assert learner.quantization_error(*last)["pos"] < 0.2
+    # settling on the last frame learns it where it was, in the world
+    learner.options.settle_max_steps = 2_000
+    learner.settle(*last)
+    assert learner.model.positions_[:, 0].max() > 1.3
+    assert learner.quantization_error(*last)["pos"] < 0.2
     unposed = decode_points(posed_cloud(None, "camera"), attachment(3))
     assert unposed.pose is None and unposed.frame_id == "camera"
     with pytest.raises(OtherFrameError, match=r"frame 'camera'.*learned in 'world'"):
