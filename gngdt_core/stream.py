@@ -146,6 +146,14 @@ class StreamLearner:
         self._on_large_surface = self._large_surfaces(segmentation.patches)
         return LearnedFrame(steps, from_scratch, segmentation)
 
+    def refine(self, positions: np.ndarray, colors: np.ndarray | None, steps: int) -> None:
+        """Learn ``steps`` more steps from a frame into the current network (with attention),
+        without a scene check; e.g. to let a static scene settle."""
+        if self.model_ is None:
+            raise ValueError("no network yet: learn a frame first")
+        self._learn(positions, colors, steps)
+        self._on_large_surface = None  # the surfaces are found again on the next frame
+
     def in_depth_range(self, positions: np.ndarray) -> np.ndarray:
         """(N,) bool: points whose depth (z, metres) is in the schedule's range."""
         depth = positions[:, 2]

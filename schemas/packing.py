@@ -749,6 +749,8 @@ class LearnerStatusInfo:
     latency_p99_ms: float = 0.0
     quantization_error: dict[str, float] = field(default_factory=dict)
     cluster_counts: dict[str, int] = field(default_factory=dict)
+    #: after the stream ended: how learning on its last frame stopped ("" while streaming)
+    settled: str = ""
 
 
 @dataclass

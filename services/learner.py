@@ -45,6 +45,11 @@ EXAMPLES = """examples:
   gngdt learn --cam left --samples-per-frame 20000 --max-nodes 2000
 """
 
+#: settling after the stream ends: steps between checks, and the relative change of the
+#: position error below which the network counts as settled
+SETTLE_CHUNK = 20_000
+SETTLED_CHANGE = 0.01
+
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
 CLUSTERINGS = ("pos", "col", "nor", "col+nor")
@@ -66,6 +71,9 @@ class LearnerOptions:
     quantization_sample: int = 2_000
     #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
     max_points: int = 2_000_000  # schemas.packing.MAX_CLOUD_POINTS (not imported: --help)
+    #: when the stream ends, learning goes on with its last frame until the network is settled
+    #: (node budget reached, quantization error steady) or this many more steps; 0: never
+    settle_max_steps: int = 2_000_000
     seed: int | None = 0
 
     def validate(self) -> None:
@@ -84,11 +92,14 @@ class LearnerOptions:
                 raise ValueError(f"learner option {name} must be positive, got {value}")
         if self.checkpoint_every_seconds <= 0:
             raise ValueError("learner option checkpoint_every_seconds must be positive")
+        if self.settle_max_steps < 0:
+            raise ValueError("learner option settle_max_steps must be >= 0")
 
 
 #: accepted types of each option (TOML integers are accepted where floats are)
 _OPTION_TYPES: dict[str, tuple[type, ...]] = {
     "samples_per_frame": (int,),
+    "settle_max_steps": (int,),
     "min_cluster_size": (int,),
     "checkpoint_every_frames": (int,),
     "checkpoint_every_seconds": (int, float),
@@ -374,8 +385,44 @@ class Learner:
             quantization_error=quantization_error,
         )
 
-    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any) -> Any:
-        """The ``gngdt.LearnerStatus`` after publishing ``topology``."""
+    def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
+        """Learn the stream's last frame on until the network is settled: the node budget
+        reached and eq. 17's position error changing by less than ``SETTLED_CHANGE`` over
+        ``SETTLE_CHUNK`` steps, or ``settle_max_steps`` more steps (0: none). Returns how it
+        stopped (the final status says it, and the logger waits for it)."""
+        limit = self.options.settle_max_steps
+        sample = positions[self._rng.choice(len(positions), min(len(positions), 5_000),
+                                            replace=False)]
+        steps = 0
+        previous = self.model.quantization_error(sample)["pos"]
+        started = time.perf_counter()
+        while steps < limit:
+            chunk = min(SETTLE_CHUNK, limit - steps)
+            if self.stream is None:
+                self.model.partial_fit(positions, colors, n_steps=chunk)
+            else:
+                self.stream.refine(positions, colors, chunk)
+            steps += chunk
+            error = self.model.quantization_error(sample)["pos"]
+            change = abs(previous - error) / previous if previous > 0 else 0.0
+            previous = error
+            if self.model.n_nodes_ >= self.model.max_nodes and change < SETTLED_CHANGE:
+                reason = (f"settled after {steps:,} more steps on the last frame: node budget "
+                          f"reached, position error changed {change:.2%} over the last {chunk:,}")
+                break
+        else:
+            reason = (f"stopped after {steps:,} more steps on the last frame (settle_max_steps): "
+                      f"{self.model.n_nodes_} of {self.model.max_nodes} nodes")
+        self.counters.learning_seconds += time.perf_counter() - started
+        self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
+        self.last_segmentation = None
+        log.info("%s", reason)
+        return reason
+
+    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any,
+               settled: str = "") -> Any:
+        """The ``gngdt.LearnerStatus`` after publishing ``topology``; ``settled``: how learning
+        on the stream's last frame stopped."""
         from schemas.packing import encode_status
 
         counters = self.counters
@@ -396,6 +443,7 @@ class Learner:
             latency_p99_ms=self.latencies.percentile(99),
             quantization_error=dict(topology.quantization_error),
             cluster_counts={c.name: c.cluster_count for c in topology.clusterings},
+            settled=settled,
         )
 
     def save(self, path: Path) -> bool:
@@ -684,9 +732,25 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
              config.options.samples_per_frame)
     max_cloud_bytes = config.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
 
+    def publish(stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray | None,
+                settled: str = "") -> float:
+        """Publish the topology and status after learning a frame; the latency in ms."""
+        topology = learner.topology(stamp, learner.quantization_error(positions, colors))
+        payload = topology.SerializeToString()
+        attachment = stamp.to_attachment()
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        topology_publisher.put(payload, attachment=attachment)
+        latest.set(payload, attachment)
+        status = learner.status(stamp, latency_ms, topology, settled)
+        status_publisher.put(status.SerializeToString(), attachment=attachment)
+        return latency_ms
+
     frames_since_checkpoint = 0
     last_checkpoint = time.monotonic()
     learned_sequence = -1
+    #: the last learned frame (stamp, positions, colours), kept to settle on at the stream's end
+    last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
+    settled_end = 0.0  # the end of stream (its arrival time) already settled on
     exit_code = 0
     try:
         with lifecycle.graceful() as stop:
@@ -698,8 +762,13 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
                     break
                 sample = points.try_recv()
                 if sample is None:
-                    if args.exit_on_eos and end.finished(learned_sequence):
-                        break
+                    if end.finished(learned_sequence):
+                        if last_frame is not None and end.received_at != settled_end:
+                            # the stream's last frame: learn it on until the network settles
+                            publish(*last_frame, settled=learner.settle(*last_frame[1:]))
+                            settled_end = end.received_at
+                        if args.exit_on_eos:
+                            break
                     time.sleep(0.002)
                     continue
                 counters.frames_received += 1
@@ -714,15 +783,9 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
                     counters.malformed_messages += 1
                     log.warning("points message skipped: %s", error)
                     continue
-                topology = learner.topology(stamp, learner.quantization_error(positions, colors))
-                payload = topology.SerializeToString()
-                attachment = stamp.to_attachment()
-                latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-                topology_publisher.put(payload, attachment=attachment)
-                latest.set(payload, attachment)
+                latency_ms = publish(stamp, positions, colors)
                 learner.latencies.add(latency_ms)
-                status = learner.status(stamp, latency_ms, topology)
-                status_publisher.put(status.SerializeToString(), attachment=attachment)
+                last_frame = (stamp, positions, colors)
                 learned_sequence = stamp.sequence
                 log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                           stamp.sequence, len(positions), received_ms, latency_ms)

@@ -415,12 +415,14 @@ class CameraProgress:
     eos_at: float = 0.0
     #: when the camera's capture left without an end of stream (its liveliness token went)
     capture_gone_at: float | None = None
+    #: the learner said how learning on the stream's last frame stopped (its final network)
+    settled: bool = False
 
     def finished(self, drain_seconds: float) -> bool:
         if self.eos_last_sequence is None:
             return (self.capture_gone_at is not None
                     and time.monotonic() - self.capture_gone_at > drain_seconds)
-        return (self.last_topology_sequence >= self.eos_last_sequence
+        return ((self.last_topology_sequence >= self.eos_last_sequence and self.settled)
                 or time.monotonic() - self.eos_at > drain_seconds)
 
 
@@ -542,11 +544,14 @@ class Dispatcher:
     def _status(self, camera: str, paths: EntityPaths, status: LearnerStatusInfo) -> None:
         self.rerun_log.status(paths, status)
         self.last_status[camera] = status
+        if status.settled:
+            self.cameras[camera].settled = True
 
     def _eos(self, camera: str, end: Any) -> None:
         progress = self.cameras[camera]
         progress.eos_last_sequence = end.last_frame_sequence
         progress.eos_at = time.monotonic()
+        progress.settled = False  # the learner settles on this stream's last frame after it
         log.info("%s: end of stream after %d frames", camera, end.frames_sent)
 
     def all_finished(self, drain_seconds: float) -> bool:

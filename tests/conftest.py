@@ -77,6 +77,12 @@ def data2_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def one_frame_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A single 320x240 frame of the tabletop scene: a static input."""
+    return _render_recording(tmp_path_factory.mktemp("one_frame"), "tabletop", 1)
+
+
+@pytest.fixture(scope="session")
 def tabletop_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An 8-frame 320x240 synthetic tabletop recording (rendered once per session)."""
     return _render_recording(tmp_path_factory.mktemp("recordings"), "tabletop", 8)

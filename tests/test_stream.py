@@ -113,3 +113,15 @@ def test_a_profile_with_a_wrong_frames_key_names_it(tmp_path: Path) -> None:
     path.write_text("[frames]\nsteps_per_franme = 10\n")
     with pytest.raises(ValueError, match="steps_per_franme"):
         load_params(path)
+
+
+def test_settling_stops_at_its_step_limit_and_says_so() -> None:
+    config = load_params(None)
+    config.model.update(max_nodes=5000)  # a budget it cannot reach in the steps allowed
+    config.options.settle_max_steps = 30_000
+    learner = Learner("camera", config)
+    positions, colors = frame_clouds("tabletop_small.mcap", 1)[0]
+    learner.learn(positions, colors)
+    reason = learner.settle(positions, colors)
+    assert reason.startswith("stopped after 30,000 more steps"), reason
+    assert learner.model.n_steps_ == config.options.samples_per_frame + 30_000
