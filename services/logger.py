@@ -246,6 +246,7 @@ class RerunLog:
         self.rec = recording
         self.max_cloud_points = max_cloud_points
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
+        self._world_up = False
 
     def set_time(self, stamp: FrameStamp) -> None:
         self.rec.set_time("frame", sequence=stamp.sequence)
@@ -271,13 +272,23 @@ class RerunLog:
 
         self.rec.log(paths.depth, rr.DepthImage(depth_mm, meter=1000.0))
 
-    def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None) -> None:
+    def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None,
+               pose: np.ndarray | None = None) -> None:
+        """The cloud at ``world/points``; with a ``pose`` (camera-to-world, the cloud was taken
+        by a moving camera) the points are put in the world and the camera follows the pose."""
         import rerun as rr
 
         stride = max(1, -(-len(positions) // self.max_cloud_points))
+        shown = positions[::stride]
+        if pose is not None:
+            if not self._world_up:  # a fixed frame (world/map/odom): z up, as ROS and our scenes
+                self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+                self._world_up = True
+            self.rec.log(paths.pinhole, rr.Transform3D(translation=pose[:3, 3],
+                                                       mat3x3=pose[:3, :3]))
+            shown = shown @ pose[:3, :3].T.astype(np.float32) + pose[:3, 3].astype(np.float32)
         self.rec.log(paths.points, rr.Points3D(
-            positions[::stride], colors=None if colors is None else colors[::stride],
-            radii=0.002))
+            shown, colors=None if colors is None else colors[::stride], radii=0.002))
 
     def topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
         import rerun as rr
@@ -299,6 +310,8 @@ class RerunLog:
         self.scalar(paths, "steps_per_second", status.steps_per_second)
         self.scalar(paths, "latency_ms", status.latency_ms)
         self.scalar(paths, "frames_dropped", status.frames_dropped)
+        self.scalar(paths, "ghost_share", status.ghost_share)
+        self.scalar(paths, "nodes_forgotten", status.nodes_forgotten)
 
     def scalar(self, paths: EntityPaths, name: str, value: float) -> None:
         import rerun as rr
@@ -483,9 +496,7 @@ class Dispatcher:
                 paths, packing.calibration_to_intrinsics(payload)),
             "color": lambda: self.rerun_log.color(paths, packing.raw_to_image(payload)),
             "depth": lambda: self.rerun_log.depth(paths, packing.raw_to_image(payload)),
-            # views: the logger decimates, so only the logged points are copied
-            "points": lambda: self.rerun_log.points(
-                paths, *packing.msg_to_cloud(payload, copy=False)),
+            "points": lambda: self._points(paths, payload),
             "topology": lambda: self._topology(camera, paths, packing.decode_topology(
                 payload, max_nodes=self.max_topology_nodes)),
             "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
@@ -522,6 +533,18 @@ class Dispatcher:
                         "cameras are refused", self.max_cameras, camera)
         self.refused += 1
         return False
+
+    def _points(self, paths: EntityPaths, payload: bytes) -> None:
+        from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+        from schemas import packing
+
+        message = packing.parse_message(PointCloud, payload)
+        # views: the logger decimates, so only the logged points are copied
+        positions, colors = packing.msg_to_cloud(message, copy=False)
+        pose = packing.cloud_pose(message)
+        self.rerun_log.points(paths, positions, colors,
+                              None if np.array_equal(pose, np.eye(4)) else pose)
 
     def capture_seen(self, camera: str, alive: bool) -> None:
         """A capture of ``camera`` started (``alive``) or left."""
