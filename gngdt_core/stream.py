@@ -53,16 +53,16 @@ class FrameSchedule:
     min_depth_m: float = 0.0
     max_depth_m: float = 10.0
     #: share of the points on large flat surfaces (tables, floors) that are learned (1.0: all)
-    flat_surface_share: float = 0.2
+    flat_surface_share: float = 0.05
     #: a smooth patch is a large flat surface when it holds at least this share of the nodes
     flat_surface_min_nodes: float = 0.1
     #: a frame learned from scratch learns this share of its steps from every point first, to
     #: find the large flat surfaces
-    warm_up_share: float = 1 / 3
+    warm_up_share: float = 0.5
     #: a frame is a new scene when more than ``scene_change_share`` of its points lie farther
     #: than ``scene_change_distance_m`` from every node; 1.0 never cuts
     scene_change_distance_m: float = 0.02
-    scene_change_share: float = 0.03
+    scene_change_share: float = 0.015
 
     def __post_init__(self) -> None:
         check_integer("steps_first_frame", self.steps_first_frame, 1)
@@ -114,6 +114,7 @@ class StreamLearner:
         self._rng = np.random.default_rng(random_state)
         self.model_: GNGDT | None = None
         self._on_large_surface: np.ndarray | None = None
+        self._camera_pose: np.ndarray | None = None
         #: distance (metres) within which 90 % of the last frame's points lay from the nodes
         self._resolution = 0.0
 
@@ -123,28 +124,51 @@ class StreamLearner:
         self._on_large_surface = None
 
     def learn_frame(self, positions: np.ndarray, colors: np.ndarray | None,
-                    independent: bool = False) -> LearnedFrame:
+                    independent: bool = False,
+                    camera_pose: np.ndarray | None = None) -> LearnedFrame:
         """Learn from one frame and segment the network.
 
         positions: (N, 3) float metres, N >= 2, finite; colors: (N, 3) uint8 RGB or None.
-        independent: learn this frame from scratch.
+        independent: learn this frame from scratch. camera_pose: (4, 4) camera-to-world of the
+        frame (`GNGDT.partial_fit`): the network is then a map in that fixed frame, and the
+        scene-change test and attention compare the frame with it there.
         """
         if len(positions) < 2:
             raise ValueError(f"a frame needs at least 2 points, got {len(positions)}")
+        self._camera_pose = camera_pose
+        placed = self._placed(positions)
         from_scratch = (independent or self.model_ is None or self.model_.n_nodes_ == 0
-                        or self._new_scene(positions))
+                        or self._new_scene(placed))
         if from_scratch:
             self.model_ = GNGDT(**self.model_params, random_state=self.random_state)
             self._on_large_surface = None
             steps = self.schedule.steps_first_frame
         else:
             steps = self.schedule.steps_per_frame
-        self._learn(positions, colors, steps)
+        self._learn(positions, colors, steps, placed)
         if self.schedule.scene_change_share < 1.0:
-            self._resolution = float(np.percentile(self._sample_distances(positions), 90))
+            self._resolution = float(np.percentile(self._sample_distances(placed), 90))
         segmentation = self.model_.segmentation(self.segmentation)
         self._on_large_surface = self._large_surfaces(segmentation.patches)
         return LearnedFrame(steps, from_scratch, segmentation)
+
+    def refine(self, positions: np.ndarray, colors: np.ndarray | None, steps: int,
+               camera_pose: np.ndarray | None = None) -> None:
+        """Learn ``steps`` more steps from a frame into the current network (with attention),
+        without a scene check; e.g. to let a static scene settle. ``camera_pose``: as in
+        `learn_frame`."""
+        if self.model_ is None:
+            raise ValueError("no network yet: learn a frame first")
+        self._camera_pose = camera_pose
+        self._learn(positions, colors, steps, self._placed(positions))
+        self._on_large_surface = None  # the surfaces are found again on the next frame
+
+    def _placed(self, positions: np.ndarray) -> np.ndarray:
+        """The frame's points in the network's frame (the camera pose applied, if any)."""
+        pose = self._camera_pose
+        if pose is None:
+            return positions
+        return np.asarray(positions, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
 
     def in_depth_range(self, positions: np.ndarray) -> np.ndarray:
         """(N,) bool: points whose depth (z, metres) is in the schedule's range."""
@@ -167,21 +191,24 @@ class StreamLearner:
                                   replace=False)
         return self.model_.predict(positions[sample], return_distance=True)[1]
 
-    def _learn(self, positions: np.ndarray, colors: np.ndarray | None, steps: int) -> None:
+    def _learn(self, positions: np.ndarray, colors: np.ndarray | None, steps: int,
+               placed: np.ndarray) -> None:
+        """Learn ``positions`` (camera frame); ``placed``: the same points in the model's frame."""
         model = self.model_
+        pose = self._camera_pose
         share = self.schedule.flat_surface_share
         if share < 1.0 and self._on_large_surface is None:
             warm_up = max(1, int(steps * self.schedule.warm_up_share))
-            model.partial_fit(positions, colors, n_steps=warm_up)
+            model.partial_fit(positions, colors, n_steps=warm_up, camera_pose=pose)
             self._on_large_surface = self._large_surfaces(
                 model.segmentation(self.segmentation).patches)
             steps -= warm_up
-        rows = self._attend(positions, share, steps) if share < 1.0 else None
+        rows = self._attend(placed, share, steps) if share < 1.0 else None
         if rows is None:
-            model.partial_fit(positions, colors, n_steps=steps)
+            model.partial_fit(positions, colors, n_steps=steps, camera_pose=pose)
         else:
             model.partial_fit(positions[rows], None if colors is None else colors[rows],
-                              n_steps=steps)
+                              n_steps=steps, camera_pose=pose)
 
     def _large_surfaces(self, patches: np.ndarray) -> np.ndarray:
         """(n_nodes,) bool: nodes of smooth patches holding a large share of the nodes."""

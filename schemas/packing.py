@@ -749,6 +749,13 @@ class LearnerStatusInfo:
     latency_p99_ms: float = 0.0
     quantization_error: dict[str, float] = field(default_factory=dict)
     cluster_counts: dict[str, int] = field(default_factory=dict)
+    #: after the stream ended: how learning on its last frame stopped ("" while streaming)
+    settled: str = ""
+    seen_nodes: int = 0
+    ghost_share: float = 0.0
+    ghost_distance_m: float = 0.0
+    nodes_forgotten: int = 0
+    frames_other_frame: int = 0
 
 
 @dataclass

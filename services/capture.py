@@ -4,6 +4,12 @@ Each frame is stamped with a monotonically increasing sequence number and the wa
 at which it is replayed (its "capture time" as a live camera would give it), so latency downstream
 is measured against the moment the frame entered the pipeline. After the last frame an
 end-of-stream message (``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
+
+When the recording has camera poses (``/tf``, see ``services.recording.reader``), each cloud is
+published with its pose: points in the camera frame, ``frame_id`` the fixed frame
+(``--fixed-frame``, default the first of world/map/odom found), ``pose`` the camera's pose in
+it. A frame the transforms do not cover (the recording has poses, only not at that time)
+publishes its images but no cloud, warned: a camera-frame cloud would not fit the map.
 """
 
 from __future__ import annotations
@@ -105,6 +111,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="read only the recording's topics under PREFIX (a bag with several cameras)",
     )
     parser.add_argument(
+        "--fixed-frame",
+        default="auto",
+        metavar="FRAME",
+        help="frame the camera poses are given in (e.g. map, odom); 'auto' (default): world, "
+        "map or odom, whichever the recording's transforms connect to the images; 'none': "
+        "ignore the poses, publish camera-frame clouds",
+    )
+    parser.add_argument(
         "--max-skew-ms",
         type=float,
         default=DEFAULT_MAX_SKEW_MS,
@@ -203,8 +217,10 @@ class CapturePublisher:
         self._last_intrinsics: CameraIntrinsics | None = None
 
     def publish_frame(
-        self, frame: Frame, stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray
+        self, frame: Frame, stamp: FrameStamp, positions: np.ndarray | None,
+        colors: np.ndarray | None
     ) -> None:
+        """Calibration (when new), colour, depth, and the cloud unless ``positions`` is None."""
         from schemas.packing import cloud_to_msg, image_to_raw, intrinsics_to_calibration
 
         attachment = stamp.to_attachment()
@@ -219,7 +235,12 @@ class CapturePublisher:
         self.color.put(color.SerializeToString(), attachment=attachment)
         depth = image_to_raw(frame.depth, timestamp_ns=time_ns, frame_id=self.camera)
         self.depth.put(depth.SerializeToString(), attachment=attachment)
-        cloud = cloud_to_msg(positions, colors, timestamp_ns=time_ns, frame_id=self.camera)
+        if positions is None:  # no pose for a frame of a posed recording: images only
+            return
+        pose = frame.pose
+        cloud = cloud_to_msg(positions, colors, timestamp_ns=time_ns,
+                             frame_id=self.camera if pose is None else pose.frame_id,
+                             pose=None if pose is None else pose.matrix)
         self.points.put(cloud.SerializeToString(), attachment=attachment)
 
     def publish_end(self, frames_sent: int, last_sequence: int, recording: str) -> None:
@@ -253,9 +274,11 @@ class Replay:
     def __init__(self, path: Path, loop: bool, stop: threading.Event,
                  topic_prefix: str | None = None,
                  max_skew_ms: float = DEFAULT_MAX_SKEW_MS,
-                 limits: ReadLimits | None = None) -> None:
+                 limits: ReadLimits | None = None,
+                 fixed_frame: str | None = "auto") -> None:
         self.path = path
         self.limits = limits
+        self.fixed_frame = fixed_frame
         self.loop = loop
         self.stop = stop
         self.topic_prefix = topic_prefix
@@ -270,7 +293,8 @@ class Replay:
             yielded = 0
             try:
                 frames = read_frames(self.path, self.topic_prefix, max_skew_ns=self.max_skew_ns,
-                                     on_bad_frame=log_bad_frame, limits=self.limits)
+                                     on_bad_frame=log_bad_frame, limits=self.limits,
+                                     fixed_frame=self.fixed_frame)
                 for frame in frames:
                     yielded += 1
                     self.frames_read += 1
@@ -362,8 +386,9 @@ def main(args: argparse.Namespace) -> int:
         publisher = CapturePublisher(session, args.cam)
         token = session.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive")
         with lifecycle.graceful() as stop:
+            fixed_frame = None if args.fixed_frame.lower() == "none" else args.fixed_frame
             replay = Replay(args.recording, args.loop, stop, args.topics, args.max_skew_ms,
-                            limits)
+                            limits, fixed_frame)
             if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
                 log.warning("no subscriber on %s after %.1f s; publishing anyway",
                             topic(args.cam, "points"), args.wait_subscribers)
@@ -387,6 +412,7 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
             publisher: CapturePublisher, stop: threading.Event) -> int:
     """Publish every frame of the replay at the clock's pace; the number of frames sent."""
     frames_sent = 0  # also the next frame's sequence: only published frames are numbered
+    without_pose = 0
     for frame in replay:
         clock.wait_for(frame.timestamp_ns, stop, frame.index)
         if stop.is_set():
@@ -397,8 +423,14 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         except ValueError as error:
             log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
             continue
+        if "pose_error" in frame.extras:  # the reader warned; the cloud would not fit the map
+            positions = colors = None
+            without_pose += 1
         publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
                                 positions, colors)
-        log.debug("frame %d: %d points", frames_sent, len(positions))
+        log.debug("frame %d: %d points", frames_sent, 0 if positions is None else len(positions))
         frames_sent += 1
+    if without_pose:
+        log.warning("%d frames had no camera pose: their clouds were not published",
+                    without_pose)
     return frames_sent

@@ -2,10 +2,20 @@
 
 Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
-memory stays bounded. After each learned frame the learner publishes the topology (edges per
-property and the clusterings ``pos``, ``col``, ``nor``, ``col+nor``) and a status message; a
-queryable on the topology key answers a late joiner with the latest topology. The model is
-checkpointed periodically and on SIGINT/SIGTERM, and resumed from the checkpoint on start.
+memory stays bounded.
+
+The network lives in the frame of the first cloud it learns (its ``frame_id``): a cloud whose
+pose places it in a fixed frame (``world``, ``map``) is learned there, pose applied, so a moving
+camera builds one map; a cloud without a pose is learned in the camera frame as it is. A later
+cloud in another frame is skipped, counted and warned about, naming both frames. The learner's
+profile turns forgetting on (``LEARNER_MODEL_DEFAULTS``): nodes the camera could see but that no
+longer stand for anything are removed, the out-of-view map is kept. Each status reports the
+ghost share of the frame just learned (seen nodes farther than ``ghost_distance_m`` from it).
+
+After each learned frame the learner publishes the topology (edges per property and the
+clusterings ``pos``, ``col``, ``nor``, ``col+nor``) and a status message; a queryable on the
+topology key answers a late joiner with the latest topology. The model is checkpointed
+periodically and on SIGINT/SIGTERM, and resumed from the checkpoint on start.
 """
 
 from __future__ import annotations
@@ -20,7 +30,7 @@ import tomllib
 from collections import deque
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -50,6 +60,16 @@ EXAMPLES = """examples:
   gngdt learn --cam left --samples-per-frame 20000 --max-nodes 2000
 """
 
+#: GNG-U's removal threshold the learner uses (see `GNGDT`); measured in issue 11's note
+DEFAULT_UTILITY_K = 1000.0
+#: the learner's profile over GNGDT's defaults (the paper's): forgetting on, for a camera that
+#: moves and a scene that changes. A params file's ``utility_k = 0`` turns it off.
+LEARNER_MODEL_DEFAULTS: dict[str, Any] = {"utility_k": DEFAULT_UTILITY_K}
+#: settling after the stream ends: steps between checks, and the relative change of the
+#: position error below which the network counts as settled
+SETTLE_CHUNK = 20_000
+SETTLED_CHANGE = 0.01
+
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
 CLUSTERINGS = ("pos", "col", "nor", "col+nor")
@@ -71,7 +91,14 @@ class LearnerOptions:
     quantization_sample: int = 2_000
     #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
     max_points: int = 2_000_000  # schemas.packing.MAX_CLOUD_POINTS (not imported: --help)
+    #: when the stream ends, learning goes on with its last frame until the network is settled
+    #: (node budget reached, quantization error steady) or this many more steps; 0: never
+    settle_max_steps: int = 2_000_000
     seed: int | None = 0
+    #: a node the sensor could see farther than this (metres) from the frame is a ghost
+    ghost_distance_m: float = 0.05
+    #: points of each frame the ghost share is measured against (0: not measured)
+    ghost_sample: int = 10_000
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the option for a wrong type or a non-positive value."""
@@ -87,19 +114,26 @@ class LearnerOptions:
             value = getattr(self, name)
             if value <= 0:
                 raise ValueError(f"learner option {name} must be positive, got {value}")
-        if self.checkpoint_every_seconds <= 0:
-            raise ValueError("learner option checkpoint_every_seconds must be positive")
+        for name in ("checkpoint_every_seconds", "ghost_distance_m"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"learner option {name} must be positive")
+        for name in ("settle_max_steps", "ghost_sample"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"learner option {name} must be >= 0")
 
 
 #: accepted types of each option (TOML integers are accepted where floats are)
 _OPTION_TYPES: dict[str, tuple[type, ...]] = {
     "samples_per_frame": (int,),
+    "settle_max_steps": (int,),
     "min_cluster_size": (int,),
     "checkpoint_every_frames": (int,),
     "checkpoint_every_seconds": (int, float),
     "quantization_sample": (int,),
     "max_points": (int,),
     "seed": (int, type(None)),
+    "ghost_distance_m": (int, float),
+    "ghost_sample": (int,),
 }
 
 
@@ -107,7 +141,7 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
 class LearnerConfig:
     """GNG-DT constructor arguments, learner options and segmentation parameters."""
 
-    model: dict[str, Any] = field(default_factory=dict)
+    model: dict[str, Any] = field(default_factory=lambda: dict(LEARNER_MODEL_DEFAULTS))
     options: LearnerOptions = field(default_factory=LearnerOptions)
     #: `SegmentationParams` keys (validated when loaded)
     segmentation: dict[str, Any] = field(default_factory=dict)
@@ -167,6 +201,8 @@ def load_params(path: Path | None) -> LearnerConfig:
     option_names = {item.name for item in fields(LearnerOptions)}
     for key, value in flat.items():
         name = "lambda_" if key == "lambda" else key
+        if name == "utility_k" and value == 0:
+            value = None  # forgetting off: the paper's GNG-DT
         if name in model_names:
             config.model[name] = value
         elif name in option_names:
@@ -249,6 +285,8 @@ class Counters:
     frames_used: int = 0
     frames_dropped: int = 0
     malformed_messages: int = 0
+    #: clouds skipped because their frame is not the one the network is learned in
+    frames_other_frame: int = 0
     learning_seconds: float = 0.0
     #: learning steps run in ``learning_seconds`` (frames differ: a new scene learns longer)
     learning_steps: int = 0
@@ -290,11 +328,26 @@ def counters_from_metadata(path: Path, saved: Any) -> Counters:
     return Counters(**values)
 
 
+class OtherFrameError(ValueError):
+    """A cloud is in another frame than the one the network is learned in."""
+
+
+@dataclass
+class Ghosts:
+    """The ghost measure of the last learned frame (see `gngdt_core.metrics.ghost_nodes`)."""
+
+    seen_nodes: int = 0
+    ghost_share: float = 0.0
+
+
 class Learner:
-    """One GNG-DT model fed frame by frame; builds the topology and status messages."""
+    """One GNG-DT model fed frame by frame; builds the topology and status messages.
+
+    ``frame_id``: the frame the network is learned in, set by the first cloud (None before).
+    """
 
     def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
-                 counters: Counters | None = None) -> None:
+                 counters: Counters | None = None, frame_id: str | None = None) -> None:
         from gngdt_core import GNGDT
         from gngdt_core.segmentation import SegmentationParams
         from gngdt_core.stream import FrameSchedule, StreamLearner
@@ -319,20 +372,41 @@ class Learner:
         self.last_segmentation: Any = None
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
+        self.frame_id = frame_id
+        #: the pose of the last cloud learned (None: it was in the network's frame as it is)
+        self.last_pose: np.ndarray | None = None
+        self.ghosts = Ghosts()
         self._rng = np.random.default_rng(config.options.seed)
 
-    def learn(self, positions: np.ndarray, colors: np.ndarray | None) -> None:
-        """Learn one cloud: (N, 3) f32 m, (N, 3) u8 — ``samples_per_frame`` steps, or through
-        the sensor profile's schedule (which may start a new network on a new scene)."""
+    def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
+              pose: np.ndarray | None = None) -> None:
+        """Learn one cloud: (N, 3) f32 m, (N, 3) u8, in its own (camera) frame; ``pose``
+        (4, 4) maps it into ``frame_id`` — ``samples_per_frame`` steps, or through the sensor
+        profile's schedule (which may start a new network on a new scene). Raises
+        `OtherFrameError` (counted) for a cloud in another frame than the network's."""
+        frame_id = frame_id or self.camera
+        if self.frame_id is None:
+            log.info("learning in frame %r%s", frame_id,
+                     " (clouds carry camera poses)" if pose is not None else "")
+            self.frame_id = frame_id
+        elif frame_id != self.frame_id:
+            self.counters.frames_other_frame += 1
+            raise OtherFrameError(
+                f"cloud in frame {frame_id!r}, but this network is learned in {self.frame_id!r} "
+                f"(a capture without poses, or with another fixed frame, than the first one; "
+                f"start the learner afresh to learn in {frame_id!r})")
+        self.last_pose = pose
         started = time.perf_counter()
         if self.stream is None:
-            self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame)
+            self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame,
+                                   camera_pose=pose)
             self.last_segmentation = None
             steps = self.options.samples_per_frame
         else:
             in_range = self.stream.in_depth_range(positions)
             learned = self.stream.learn_frame(positions[in_range],
-                                              None if colors is None else colors[in_range])
+                                              None if colors is None else colors[in_range],
+                                              camera_pose=pose)
             if learned.from_scratch and self.model.n_nodes_:
                 log.info("frame %d shows a new scene: learning a new network",
                          self.counters.frames_used)
@@ -342,13 +416,35 @@ class Learner:
         self.counters.learning_seconds += time.perf_counter() - started
         self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
         self.counters.frames_used += 1
+        self.ghosts = self.measure_ghosts(positions, pose)
+
+    def measure_ghosts(self, positions: np.ndarray, pose: np.ndarray | None) -> Ghosts:
+        """Seen and ghost nodes against ``ghost_sample`` random points of the frame."""
+        from gngdt_core.metrics import ghost_nodes
+
+        count = min(len(positions), self.options.ghost_sample)
+        if count == 0 or self.model.n_nodes_ == 0:
+            return Ghosts()
+        chosen = positions[self._rng.choice(len(positions), size=count, replace=False)]
+        margin = getattr(self.model, "view_depth_margin", 0.05)
+        seen, ghost = ghost_nodes(self.model.positions_, chosen, pose,
+                                  self.options.ghost_distance_m, margin)
+        return Ghosts(int(seen.sum()), float(ghost.sum() / seen.sum()) if seen.any() else 0.0)
+
+    def placed(self, positions: np.ndarray) -> np.ndarray:
+        """Points of the last learned cloud (its own frame) in the network's frame."""
+        pose = self.last_pose
+        if pose is None:
+            return positions
+        return np.asarray(positions, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
 
     def quantization_error(self, positions: np.ndarray, colors: np.ndarray | None) -> dict:
+        """Eq. 17 on a sample of the last learned cloud (``positions`` in its own frame)."""
         count = min(len(positions), self.options.quantization_sample)
         if count == 0 or colors is None:
             return {}
         chosen = self._rng.choice(len(positions), size=count, replace=False)
-        errors = self.model.quantization_error(positions[chosen], colors[chosen])
+        errors = self.model.quantization_error(self.placed(positions[chosen]), colors[chosen])
         return {name: float(value) for name, value in errors.items()}
 
     def topology(self, stamp: FrameStamp, quantization_error: dict[str, float]) -> Any:
@@ -375,12 +471,50 @@ class Learner:
             steps=int(model.n_steps_),
             frame_sequence=stamp.sequence,
             timestamp_ns=stamp.capture_time_ns,
-            frame_id=self.camera,
+            frame_id=self.frame_id or self.camera,
             quantization_error=quantization_error,
         )
 
-    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any) -> Any:
-        """The ``gngdt.LearnerStatus`` after publishing ``topology``."""
+    def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
+        """Learn the stream's last frame on until the network is settled: the node budget
+        reached and eq. 17's position error changing by less than ``SETTLED_CHANGE`` over
+        ``SETTLE_CHUNK`` steps, or ``settle_max_steps`` more steps (0: none). Returns how it
+        stopped (the final status says it, and the logger waits for it)."""
+        limit = self.options.settle_max_steps
+        sample = self.placed(positions[self._rng.choice(len(positions),
+                                                        min(len(positions), 5_000),
+                                                        replace=False)])
+        steps = 0
+        previous = self.model.quantization_error(sample)["pos"]
+        started = time.perf_counter()
+        while steps < limit:
+            chunk = min(SETTLE_CHUNK, limit - steps)
+            if self.stream is None:
+                self.model.partial_fit(positions, colors, n_steps=chunk,
+                                       camera_pose=self.last_pose)
+            else:
+                self.stream.refine(positions, colors, chunk, camera_pose=self.last_pose)
+            steps += chunk
+            error = self.model.quantization_error(sample)["pos"]
+            change = abs(previous - error) / previous if previous > 0 else 0.0
+            previous = error
+            if self.model.n_nodes_ >= self.model.max_nodes and change < SETTLED_CHANGE:
+                reason = (f"settled after {steps:,} more steps on the last frame: node budget "
+                          f"reached, position error changed {change:.2%} over the last {chunk:,}")
+                break
+        else:
+            reason = (f"stopped after {steps:,} more steps on the last frame (settle_max_steps): "
+                      f"{self.model.n_nodes_} of {self.model.max_nodes} nodes")
+        self.counters.learning_seconds += time.perf_counter() - started
+        self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
+        self.last_segmentation = None
+        log.info("%s", reason)
+        return reason
+
+    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any,
+               settled: str = "") -> Any:
+        """The ``gngdt.LearnerStatus`` after publishing ``topology``; ``settled``: how learning
+        on the stream's last frame stopped."""
         from schemas.packing import encode_status
 
         counters = self.counters
@@ -401,6 +535,12 @@ class Learner:
             latency_p99_ms=self.latencies.percentile(99),
             quantization_error=dict(topology.quantization_error),
             cluster_counts={c.name: c.cluster_count for c in topology.clusterings},
+            seen_nodes=self.ghosts.seen_nodes,
+            ghost_share=self.ghosts.ghost_share,
+            ghost_distance_m=self.options.ghost_distance_m,
+            nodes_forgotten=int(getattr(self.model, "n_forgotten_", 0)),
+            frames_other_frame=counters.frames_other_frame,
+            settled=settled,
         )
 
     def save(self, path: Path) -> bool:
@@ -411,7 +551,8 @@ class Learner:
         counters = {item.name: getattr(self.counters, item.name) for item in fields(Counters)}
         try:
             save_checkpoint(path, self.model.get_state(),
-                            {"camera": self.camera, "counters": counters})
+                            {"camera": self.camera, "counters": counters,
+                             "frame_id": self.frame_id})
         except OSError as error:
             log.error("checkpoint %s not written: %s", path, error)
             return False
@@ -443,8 +584,12 @@ class Learner:
         if ignored:  # the learned network carries its parameters; changing them mid-life is not
             log.warning("resuming %s with its own parameters; ignoring the requested %s", path,
                         ", ".join(f"{name}={config.model[name]!r}" for name in ignored))
-        log.info("resumed from %s: %d nodes, %d steps", path, model.n_nodes_, model.n_steps_)
-        return cls(camera, config, model=model, counters=counters)
+        frame_id = metadata.get("frame_id")
+        if frame_id is not None and not isinstance(frame_id, str):
+            raise CheckpointError(f"checkpoint {path}: frame_id is {frame_id!r}, not a name")
+        log.info("resumed from %s: %d nodes, %d steps, in frame %r", path, model.n_nodes_,
+                 model.n_steps_, frame_id)
+        return cls(camera, config, model=model, counters=counters, frame_id=frame_id)
 
 
 def finite_points(
@@ -459,31 +604,48 @@ def finite_points(
     return positions[finite], None if colors is None else colors[finite]
 
 
+class PointsMessage(NamedTuple):
+    """One decoded ``points`` sample: positions (N, 3) float32 metres in the cloud's own
+    (camera) frame, colors (N, 3) uint8, the frame they are placed in and the (4, 4) pose that
+    places them there (None: the identity, the points are in ``frame_id`` as they are)."""
+
+    stamp: FrameStamp
+    positions: np.ndarray
+    colors: np.ndarray
+    frame_id: str
+    pose: np.ndarray | None
+
+
 def decode_points(
     payload: bytes, attachment: bytes | None, max_points: int = LearnerOptions.max_points,
     now_ns: int | None = None,
-) -> tuple[FrameStamp, np.ndarray, np.ndarray]:
-    """The learner's decode path for one ``points`` sample: stamp, finite positions, colours.
+) -> PointsMessage:
+    """The learner's decode path for one ``points`` sample.
 
-    positions: (N, 3) float32 metres, N >= 1; colors: (N, 3) uint8. Raises ``ValueError``
-    (``MessageError`` for the payload) for a missing/malformed attachment, a capture time more
-    than a day from ``now_ns`` (default: this clock), an undecodable or
-    oversized cloud (``max_points``, checked before allocation), a cloud without colour fields
-    (DESIGN's points carry red, green, blue: a colourless model could learn nothing else) or
-    without a single finite point.
+    positions: N >= 1 finite points. Raises ``ValueError`` (``MessageError`` for the payload)
+    for a missing/malformed attachment, a capture time more than a day from ``now_ns``
+    (default: this clock), an undecodable or oversized cloud (``max_points``, checked before
+    allocation), a cloud without colour fields (DESIGN's points carry red, green, blue: a
+    colourless model could learn nothing else) or without a single finite point, and a pose
+    that is not a rigid transform (non-unit quaternion, NaN), naming the frame.
     """
-    from schemas.packing import MessageError, msg_to_cloud
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+    from schemas.packing import MessageError, cloud_pose, msg_to_cloud, parse_message
 
     stamp = FrameStamp.from_attachment(attachment)
     stamp.check_clock(time.time_ns() if now_ns is None else now_ns)
+    message = parse_message(PointCloud, payload)
     # views into the payload: learning samples only samples_per_frame of its points
-    positions, colors = msg_to_cloud(payload, max_points=max_points, copy=False)
+    positions, colors = msg_to_cloud(message, max_points=max_points, copy=False)
     if colors is None:
         raise MessageError("cloud has no red/green/blue fields; the learner needs colour")
     positions, colors = finite_points(positions, colors)
     if len(positions) == 0:
         raise MessageError("no finite points in the cloud")
-    return stamp, positions, colors
+    pose = cloud_pose(message)
+    return PointsMessage(stamp, positions, colors, message.frame_id,
+                         None if np.array_equal(pose, np.eye(4)) else pose)
 
 
 def warm_up(config: LearnerConfig) -> None:
@@ -495,12 +657,22 @@ def warm_up(config: LearnerConfig) -> None:
     rng = np.random.default_rng(0)
     positions = rng.random((500, 3), dtype=np.float32)
     colors = rng.integers(0, 256, (500, 3), dtype=np.uint8)
+    positions[:, 2] += 1.0  # in front of the camera, as a depth camera's points are
     model = GNGDT(**{**config.model, "random_state": 0})
-    model.partial_fit(positions, colors, n_steps=2_000)
+    pose = np.eye(4)
+    pose[:3, 3] = 0.1
+    model.partial_fit(positions, colors, n_steps=2_000, camera_pose=pose)
     for name in CLUSTERINGS:
         model.clusters(*name.split("+"), min_size=config.options.min_cluster_size)
     model.segmentation(SegmentationParams.from_dict(config.segmentation))
     model.quantization_error(positions, colors)
+    Learner("warm-up", config, model=model).measure_ghosts(positions, pose)
+
+
+def warn_other_frame(error: OtherFrameError, count: int) -> None:
+    """Warn about clouds in another frame: the first, then every 100th (counted in status)."""
+    if count == 1 or count % 100 == 0:
+        log.warning("points message skipped (%d so far): %s", count, error)
 
 
 class EndOfStream:
@@ -688,9 +860,25 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
              config.options.samples_per_frame)
     max_cloud_bytes = config.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
 
+    def publish(stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray | None,
+                settled: str = "") -> float:
+        """Publish the topology and status after learning a frame; the latency in ms."""
+        topology = learner.topology(stamp, learner.quantization_error(positions, colors))
+        payload = topology.SerializeToString()
+        attachment = stamp.to_attachment()
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        topology_publisher.put(payload, attachment=attachment)
+        latest.set(payload, attachment)
+        status = learner.status(stamp, latency_ms, topology, settled)
+        status_publisher.put(status.SerializeToString(), attachment=attachment)
+        return latency_ms
+
     frames_since_checkpoint = 0
     last_checkpoint = time.monotonic()
     learned_sequence = -1
+    #: the last learned frame (stamp, positions, colours), kept to settle on at the stream's end
+    last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
+    settled_end = 0.0  # the end of stream (its arrival time) already settled on
     exit_code = 0
     try:
         with lifecycle.graceful() as stop:
@@ -702,31 +890,34 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
                     break
                 sample = points.try_recv()
                 if sample is None:
-                    if args.exit_on_eos and end.finished(learned_sequence):
-                        break
+                    if end.finished(learned_sequence):
+                        if last_frame is not None and end.received_at != settled_end:
+                            # the stream's last frame: learn it on until the network settles
+                            publish(*last_frame, settled=learner.settle(*last_frame[1:]))
+                            settled_end = end.received_at
+                        if args.exit_on_eos:
+                            break
                     time.sleep(0.002)
                     continue
                 counters.frames_received += 1
                 try:
-                    stamp, positions, colors = decode_points(
+                    stamp, positions, colors, frame_id, pose = decode_points(
                         _payload_bytes(sample, max_cloud_bytes), _attachment_bytes(sample),
                         config.options.max_points)
                     counters.note_sequence(stamp.sequence)
                     received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-                    learner.learn(positions, colors)  # ValueError: e.g. colours missing
+                    # ValueError: e.g. colours missing mid-stream, or a cloud in another frame
+                    learner.learn(positions, colors, frame_id, pose)
+                except OtherFrameError as error:  # counted by the learner, warned sparingly
+                    warn_other_frame(error, counters.frames_other_frame)
+                    continue
                 except ValueError as error:  # MessageError is a ValueError
                     counters.malformed_messages += 1
                     log.warning("points message skipped: %s", error)
                     continue
-                topology = learner.topology(stamp, learner.quantization_error(positions, colors))
-                payload = topology.SerializeToString()
-                attachment = stamp.to_attachment()
-                latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-                topology_publisher.put(payload, attachment=attachment)
-                latest.set(payload, attachment)
+                latency_ms = publish(stamp, positions, colors)
                 learner.latencies.add(latency_ms)
-                status = learner.status(stamp, latency_ms, topology)
-                status_publisher.put(status.SerializeToString(), attachment=attachment)
+                last_frame = (stamp, positions, colors)
                 learned_sequence = stamp.sequence
                 log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                           stamp.sequence, len(positions), received_ms, latency_ms)

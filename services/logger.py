@@ -247,6 +247,7 @@ class RerunLog:
         self.rec = recording
         self.max_cloud_points = max_cloud_points
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
+        self._world_up = False
 
     def set_time(self, stamp: FrameStamp) -> None:
         self.rec.set_time("frame", sequence=stamp.sequence)
@@ -272,13 +273,23 @@ class RerunLog:
 
         self.rec.log(paths.depth, rr.DepthImage(depth_mm, meter=1000.0))
 
-    def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None) -> None:
+    def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None,
+               pose: np.ndarray | None = None) -> None:
+        """The cloud at ``world/points``; with a ``pose`` (camera-to-world, the cloud was taken
+        by a moving camera) the points are put in the world and the camera follows the pose."""
         import rerun as rr
 
         stride = max(1, -(-len(positions) // self.max_cloud_points))
+        shown = positions[::stride]
+        if pose is not None:
+            if not self._world_up:  # a fixed frame (world/map/odom): z up, as ROS and our scenes
+                self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+                self._world_up = True
+            self.rec.log(paths.pinhole, rr.Transform3D(translation=pose[:3, 3],
+                                                       mat3x3=pose[:3, :3]))
+            shown = shown @ pose[:3, :3].T.astype(np.float32) + pose[:3, 3].astype(np.float32)
         self.rec.log(paths.points, rr.Points3D(
-            positions[::stride], colors=None if colors is None else colors[::stride],
-            radii=0.002))
+            shown, colors=None if colors is None else colors[::stride], radii=0.002))
 
     def topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
         import rerun as rr
@@ -300,6 +311,8 @@ class RerunLog:
         self.scalar(paths, "steps_per_second", status.steps_per_second)
         self.scalar(paths, "latency_ms", status.latency_ms)
         self.scalar(paths, "frames_dropped", status.frames_dropped)
+        self.scalar(paths, "ghost_share", status.ghost_share)
+        self.scalar(paths, "nodes_forgotten", status.nodes_forgotten)
 
     def scalar(self, paths: EntityPaths, name: str, value: float) -> None:
         import rerun as rr
@@ -416,12 +429,14 @@ class CameraProgress:
     eos_at: float = 0.0
     #: when the camera's capture left without an end of stream (its liveliness token went)
     capture_gone_at: float | None = None
+    #: the learner said how learning on the stream's last frame stopped (its final network)
+    settled: bool = False
 
     def finished(self, drain_seconds: float) -> bool:
         if self.eos_last_sequence is None:
             return (self.capture_gone_at is not None
                     and time.monotonic() - self.capture_gone_at > drain_seconds)
-        return (self.last_topology_sequence >= self.eos_last_sequence
+        return ((self.last_topology_sequence >= self.eos_last_sequence and self.settled)
                 or time.monotonic() - self.eos_at > drain_seconds)
 
 
@@ -482,9 +497,7 @@ class Dispatcher:
                 paths, packing.calibration_to_intrinsics(payload)),
             "color": lambda: self.rerun_log.color(paths, packing.raw_to_image(payload)),
             "depth": lambda: self.rerun_log.depth(paths, packing.raw_to_image(payload)),
-            # views: the logger decimates, so only the logged points are copied
-            "points": lambda: self.rerun_log.points(
-                paths, *packing.msg_to_cloud(payload, copy=False)),
+            "points": lambda: self._points(paths, payload),
             "topology": lambda: self._topology(camera, paths, packing.decode_topology(
                 payload, max_nodes=self.max_topology_nodes)),
             "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
@@ -522,6 +535,18 @@ class Dispatcher:
         self.refused += 1
         return False
 
+    def _points(self, paths: EntityPaths, payload: bytes) -> None:
+        from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+        from schemas import packing
+
+        message = packing.parse_message(PointCloud, payload)
+        # views: the logger decimates, so only the logged points are copied
+        positions, colors = packing.msg_to_cloud(message, copy=False)
+        pose = packing.cloud_pose(message)
+        self.rerun_log.points(paths, positions, colors,
+                              None if np.array_equal(pose, np.eye(4)) else pose)
+
     def capture_seen(self, camera: str, alive: bool) -> None:
         """A capture of ``camera`` started (``alive``) or left."""
         self._expect(camera)
@@ -543,11 +568,14 @@ class Dispatcher:
     def _status(self, camera: str, paths: EntityPaths, status: LearnerStatusInfo) -> None:
         self.rerun_log.status(paths, status)
         self.last_status[camera] = status
+        if status.settled:
+            self.cameras[camera].settled = True
 
     def _eos(self, camera: str, end: Any) -> None:
         progress = self.cameras[camera]
         progress.eos_last_sequence = end.last_frame_sequence
         progress.eos_at = time.monotonic()
+        progress.settled = False  # the learner settles on this stream's last frame after it
         log.info("%s: end of stream after %d frames", camera, end.frames_sent)
 
     def all_finished(self, drain_seconds: float) -> bool:

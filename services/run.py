@@ -328,6 +328,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"{status.malformed_messages} malformed)",
             f"learning steps:     {status.steps} ({status.steps_per_second:,.0f} steps/s)",
             f"nodes:              {status.nodes}",
+            *([f"last frame:         {status.settled}"] if status.settled else []),
             f"clusters:           {clusters}",
             f"latency:            p50 {status.latency_p50_ms:.1f} ms, "
             f"p99 {status.latency_p99_ms:.1f} ms",

@@ -77,6 +77,12 @@ def data2_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def one_frame_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A single 320x240 frame of the tabletop scene: a static input."""
+    return _render_recording(tmp_path_factory.mktemp("one_frame"), "tabletop", 1)
+
+
+@pytest.fixture(scope="session")
 def tabletop_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An 8-frame 320x240 synthetic tabletop recording (rendered once per session)."""
     return _render_recording(tmp_path_factory.mktemp("recordings"), "tabletop", 8)
@@ -109,9 +115,11 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
 
 @dataclass
 class CaptureOutput:
-    """What one capture run published: decoded clouds, end-of-stream messages, its log."""
+    """What one capture run published: decoded clouds (and each one's frame_id and pose),
+    end-of-stream messages, its log."""
 
     clouds: list = field(default_factory=list)
+    poses: list = field(default_factory=list)
     ends: list = field(default_factory=list)
     log: str = ""
 
@@ -121,13 +129,20 @@ def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureO
     """``run_capture(RECORDING, *OPTIONS)`` runs `gngdt capture RECORDING --fast OPTIONS` to its
     end against ``router_endpoint`` (expecting exit status ``exit_code``) and returns what it
     published on the default camera."""
-    from schemas.packing import decode_stream_end, msg_to_cloud
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+    from schemas.packing import cloud_pose, decode_stream_end, msg_to_cloud
+
+    def on_points(output: CaptureOutput, payload: bytes) -> None:
+        message = PointCloud.FromString(payload)
+        output.clouds.append(msg_to_cloud(message))
+        output.poses.append((message.frame_id, cloud_pose(message)))
 
     def run(recording: Path, *options: str, exit_code: int = 0) -> CaptureOutput:
         output = CaptureOutput()
         session = open_config(client_config([router_endpoint]))
-        session.declare_subscriber("gngdt/camera/points", lambda sample: output.clouds.append(
-            msg_to_cloud(sample.payload.to_bytes())))
+        session.declare_subscriber("gngdt/camera/points", lambda sample: on_points(
+            output, sample.payload.to_bytes()))
         session.declare_subscriber("gngdt/camera/eos", lambda sample: output.ends.append(
             decode_stream_end(sample.payload.to_bytes())))
         try:

@@ -30,7 +30,8 @@ COMMANDS = _commands()
 def test_every_command_is_checked() -> None:
     progs = {prog for prog, _ in COMMANDS}
     assert {"gngdt record synth", "gngdt record images", "gngdt eval paper",
-            "gngdt eval recording", "gngdt eval rrd", "gngdt run", "gngdt log"} <= progs
+            "gngdt eval recording", "gngdt eval rrd", "gngdt run", "gngdt log",
+            "gngdt segment", "gngdt eval segmentation"} <= progs
 
 
 @pytest.mark.parametrize(("prog", "parser"), COMMANDS, ids=[prog for prog, _ in COMMANDS])

@@ -126,9 +126,11 @@ def any_payload() -> st.SearchStrategy[bytes]:
 @given(payload=st.one_of(st.binary(max_size=300), hostile_clouds()), attachment=attachments)
 def test_learner_decode_path_raises_only_value_error(payload: bytes, attachment) -> None:
     try:
-        stamp, positions, colors = decode_points(payload, attachment)
+        stamp, positions, colors, frame_id, pose = decode_points(payload, attachment)
     except ValueError:
         return
+    assert isinstance(frame_id, str)
+    assert pose is None or (pose.shape == (4, 4) and np.isfinite(pose).all())
     assert attachment == GOOD_ATTACHMENT and stamp.sequence == 1
     assert positions.dtype == np.float32 and positions.ndim == 2 and positions.shape[1] == 3
     assert len(positions) >= 1 and np.isfinite(positions).all()
@@ -148,7 +150,7 @@ def test_learner_refuses_a_cloud_over_its_point_limit_before_allocating() -> Non
     finally:
         tracemalloc.stop()
     assert peak < len(payload) + 100_000  # the protobuf copy of the data, no point arrays
-    _, decoded, _ = decode_points(payload, GOOD_ATTACHMENT, max_points=50_000)
+    decoded = decode_points(payload, GOOD_ATTACHMENT, max_points=50_000).positions
     np.testing.assert_array_equal(decoded, positions)
 
 
@@ -367,7 +369,7 @@ def test_a_capture_time_a_day_away_from_this_clock_is_refused_by_the_learner() -
         attachment = FrameStamp(3, now + offset_s * 10**9).to_attachment()
         with pytest.raises(ValueError, match="impossible capture time"):
             decode_points(payload, attachment, now_ns=now)
-    stamp, _, _ = decode_points(payload, FrameStamp(3, now - 10**9).to_attachment(), now_ns=now)
+    stamp = decode_points(payload, FrameStamp(3, now - 10**9).to_attachment(), now_ns=now).stamp
     assert stamp.sequence == 3
 
 

@@ -133,6 +133,24 @@ def test_run_learns_the_scene_and_writes_the_rrd(data2_recording: Path, tmp_path
 
 
 @pytest.mark.timeout(180)
+def test_a_one_frame_recording_grows_a_settled_network(one_frame_recording: Path,
+                                                       tmp_path: Path) -> None:
+    completed = subprocess.run(
+        [sys.executable, "-m", "services.cli", "run", str(one_frame_recording), "--save",
+         str(tmp_path / "one.rrd"), "--max-nodes", "200"],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=150,
+    )
+    assert completed.returncode == 0, completed.stdout + completed.stderr
+    # one frame is 10,000 steps; settling on it grows the network to its budget (200 nodes at
+    # one insertion per 500 steps: >= 100,000 steps) and says so
+    assert re.search(r"nodes:\s+200\n", completed.stdout), completed.stdout
+    steps = int(re.search(r"learning steps:\s+(\d+)", completed.stdout).group(1))
+    assert steps >= 100_000, completed.stdout
+    assert re.search(r"last frame:\s+settled after [\d,]+ more steps on the last frame: node "
+                     r"budget reached", completed.stdout), completed.stdout
+
+
+@pytest.mark.timeout(180)
 def test_late_joiner_gets_the_current_topology(
     router_endpoint: str, tabletop_recording: Path, spawn: Callable
 ) -> None:

@@ -52,7 +52,9 @@ def test_attention_moves_nodes_from_the_large_surfaces_to_the_objects() -> None:
     on_object = (np.bincount(truth) < 0.05 * truth.size)[truth]
 
     def node_share_on_objects(share: float) -> float:
-        schedule = FrameSchedule(steps_first_frame=60_000, flat_surface_share=share)
+        # attention acts on the nodes still to grow: most of the budget is left after warm-up
+        schedule = FrameSchedule(steps_first_frame=60_000, flat_surface_share=share,
+                                 warm_up_share=0.15)
         stream = StreamLearner({"max_nodes": 600, "lambda_": 50}, schedule=schedule,
                                random_state=1)
         stream.learn_frame(positions, colors)
@@ -113,3 +115,15 @@ def test_a_profile_with_a_wrong_frames_key_names_it(tmp_path: Path) -> None:
     path.write_text("[frames]\nsteps_per_franme = 10\n")
     with pytest.raises(ValueError, match="steps_per_franme"):
         load_params(path)
+
+
+def test_settling_stops_at_its_step_limit_and_says_so() -> None:
+    config = load_params(None)
+    config.model.update(max_nodes=5000)  # a budget it cannot reach in the steps allowed
+    config.options.settle_max_steps = 30_000
+    learner = Learner("camera", config)
+    positions, colors = frame_clouds("tabletop_small.mcap", 1)[0]
+    learner.learn(positions, colors)
+    reason = learner.settle(positions, colors)
+    assert reason.startswith("stopped after 30,000 more steps"), reason
+    assert learner.model.n_steps_ == config.options.samples_per_frame + 30_000

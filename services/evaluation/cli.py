@@ -24,6 +24,7 @@ EXAMPLES = """examples:
   gngdt eval paper --stop steps --steps 150000        # learn on past the node budget
   gngdt eval recording recordings/tabletop_small.mcap --out report/tabletop
   gngdt eval recording recordings/data2.mcap --method gngdt --trials 3
+  gngdt eval recording vanish.mcap --method gngdt --utility-k 0   # the paper's, no forgetting
   gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run
   gngdt eval segmentation ../shared/data/labelled/mosd_learn --out report/mosd
   gngdt eval segmentation ../shared/data/labelled/ycbv_0000 --independent --online
@@ -236,6 +237,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="DBSCAN radius in metres (default: 1.5 x median distance to the 10th neighbour)",
     )
+    recording.add_argument(
+        "--utility-k",
+        type=float,
+        default=None,
+        help="GNG-DT's forgetting threshold (default: the learner's profile; 0: off, the paper)",
+    )
+    recording.add_argument(
+        "--camera-frame",
+        action="store_true",
+        help="ignore the recording's camera poses: learn in the camera frame",
+    )
+    recording.add_argument(
+        "--ghost-distance",
+        type=_positive_float,
+        default=0.05,
+        help="a seen node farther than this (metres) from the frame is a ghost (default 0.05)",
+    )
+    recording.add_argument(
+        "--world-sample",
+        type=_positive_int,
+        default=40_000,
+        help="with poses, points kept of the world seen so far (k-means is fitted on half, "
+        "both errors measured on the other half; default %(default)s)",
+    )
+    recording.add_argument(
+        "--reference-every",
+        type=int,
+        default=10,
+        help="with poses, k-means on the world seen so far every N frames and on the last "
+        "(default 10; 0: last frame only)",
+    )
     recording.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
     rrd = leaf(
@@ -364,10 +396,22 @@ def _main_recording(args: argparse.Namespace) -> int:
         )
         if getattr(args, name) is not None
     }
+    from services.evaluation.dynamics import DynamicsSettings
+
+    if args.utility_k is not None:
+        if args.utility_k < 0:
+            raise ValueError(f"--utility-k must be >= 0, got {args.utility_k}")
+        overrides["utility_k"] = args.utility_k or None
+    if args.reference_every < 0:
+        raise ValueError(f"--reference-every must be >= 0, got {args.reference_every}")
     settings = RecordingSettings(
         methods=_in_paper_order(args.methods),
         trials=args.trials,
         reference_points=args.reference_points,
+        world_frame=not args.camera_frame,
+        dynamics=DynamicsSettings(ghost_distance_m=args.ghost_distance,
+                                  reference_every=args.reference_every,
+                                  world_sample=args.world_sample),
         **overrides,
     )
     out = args.out or Path("report") / args.path.stem

@@ -289,13 +289,17 @@ def learn(model: Any, positions: np.ndarray, colors: np.ndarray | None, stop: st
         model.partial_fit(positions, colors, n_steps=min(missing, 2 * growth - model.n_steps_))
 
 
-def make_model(method: str, max_nodes: int, random_state: int):
-    """A fresh estimator for ``method`` with the paper's Table 1 parameters."""
+def make_model(method: str, max_nodes: int, random_state: int, **gngdt_extra: Any):
+    """A fresh estimator for ``method`` with the paper's Table 1 parameters; ``gngdt_extra``:
+    further GNG-DT arguments (forgetting), refused for the other methods."""
     from gngdt_core import GNG, GNGDT, GNGW
 
+    if gngdt_extra and method != "GNG-DT":
+        raise ValueError(f"{method} takes no {sorted(gngdt_extra)}")
     if method == "GNG-DT":
         return GNGDT(
-            max_nodes=max_nodes, random_state=random_state, **PAPER_PARAMETERS, **GNGDT_THRESHOLDS
+            max_nodes=max_nodes, random_state=random_state, **PAPER_PARAMETERS, **GNGDT_THRESHOLDS,
+            **gngdt_extra,
         )
     if method == "GNG-W":
         return GNGW(

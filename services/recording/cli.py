@@ -17,6 +17,11 @@ EXAMPLES = """examples:
   gngdt record synth --scene tabletop --frames 30 --out recordings/tabletop.mcap
   gngdt record synth --scene tabletop_vanish --frames 90 --out vanish.mcap   # a changing scene
   gngdt record images --format redwood ../shared/data/rgbd/rtabmap_rgbd_test --out lab.mcap
+  gngdt record images --format tum rgbd_dataset_freiburg1_xyz --out fr1_xyz.mcap \\
+      --poses rgbd_dataset_freiburg1_xyz/groundtruth.txt
+  gngdt record images --format redwood ../shared/data/rgbd/tum_fr1_xyz_dvo_examples \\
+      --poses ../shared/data/rgbd/tum_fr1_xyz_dvo_examples/poses --out tum3.mcap
+  gngdt record images --format pcl-tiff frames/ --out grabber.mcap --fx 525 --fy 525
   gngdt record synth --help                     # scenes and every option
 """
 
@@ -102,6 +107,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     for name in ("fx", "fy", "cx", "cy"):
         images.add_argument(f"--{name}", type=float, help=f"intrinsic {name} in pixels")
     images.add_argument("--depth-scale", type=float, help="depth units per metre (1000 = mm)")
+    images.add_argument(
+        "--poses",
+        type=Path,
+        metavar="FILE",
+        help="camera-to-world poses, written as /tf from 'world': a TUM trajectory (timestamp "
+        "tx ty tz qx qy qz qw per line, interpolated at each frame's time), one 'tx ty tz qx "
+        "qy qz qw' line per frame, or a folder with one file per frame (a 4x4 matrix or such a "
+        "line, e.g. pose/NNNNNN.txt)",
+    )
     add_output_options(images)
 
 
@@ -163,9 +177,17 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     for name, value in overrides.items():
         if name != "cx" and name != "cy" and value <= 0:
             raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value}")
-    return iter_image_frames(
+    frames = iter_image_frames(
         args.directory, args.image_format, fps=args.fps, camera=replace(camera, **overrides)
     )
+    if args.poses is None:
+        return frames
+    from services.recording.images import count_image_frames
+    from services.recording.poses import attach_poses, load_poses
+
+    poses = load_poses(args.poses)  # every pose error before the first frame is written
+    count = count_image_frames(args.directory, args.image_format, fps=args.fps)
+    return attach_poses(frames, poses, count)
 
 
 def _synth_metadata(args: argparse.Namespace) -> dict[str, dict[str, str]]:

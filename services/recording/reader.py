@@ -19,7 +19,8 @@ through any chain of frames, interpolated (:mod:`services.recording.transforms`)
 is ``fixed_frame``, or with ``"auto"`` the first of ``world``, ``map``, ``odom`` connected to the
 camera, else the root of the camera's tree. A recording whose transforms never connect the
 fixed frame and the camera gives frames without a pose, with one warning naming the frames; a
-frame whose time the transforms do not cover has no pose either (warned).
+frame whose time the transforms do not cover has no pose either (warned), and says why in
+``frame.extras["pose_error"]``: the recording has poses, only not for that frame.
 
 Frames: a colour image and a depth image are paired when their stamps (the message's own
 timestamp/header stamp, else the MCAP ``log_time``) differ by at most ``max_skew_ns`` (default
@@ -469,6 +470,11 @@ class _FrameAssembler:
                 f"calibration is for {self.calibration.width}x{self.calibration.height}, "
                 f"colour is {width}x{height}"
             )
+        pose, pose_error = None, None
+        if self.poses is not None:
+            pose, pose_error = self.poses(
+                color.frame_id or depth.frame_id, color.stamp_ns, self.next_index
+            )
         frame = Frame(
             index=self.next_index,
             timestamp_ns=color.stamp_ns,
@@ -476,9 +482,8 @@ class _FrameAssembler:
             depth=normalize_depth(depth.pixels),
             intrinsics=self.calibration,
             labels=None if labels is None else labels.astype(np.uint16, copy=False),
-            pose=None if self.poses is None else self.poses(
-                color.frame_id or depth.frame_id, color.stamp_ns, self.next_index
-            ),
+            pose=pose,
+            extras={} if pose_error is None else {"pose_error": pose_error},
         )
         self.next_index += 1
         return frame
@@ -624,26 +629,28 @@ class PoseLookup:
         self.fixed_frames[camera_frame] = fixed
         return fixed
 
-    def __call__(self, camera_frame: str, stamp_ns: int, index: int) -> CameraPose | None:
-        """The camera's pose at ``stamp_ns``, or None (warned) when there is none."""
+    def __call__(self, camera_frame: str, stamp_ns: int, index: int
+                 ) -> tuple[CameraPose | None, str | None]:
+        """The camera's pose at ``stamp_ns``; or None and, when the recording has poses for
+        this camera but not at this time, why (warned)."""
         if not camera_frame:
             if "" not in self.fixed_frames:
                 self.fixed_frames[""] = None
                 logger.warning("%s: the images carry no frame_id, so no pose can be attached",
                                self.path)
-            return None
+            return None, None
         fixed = self.fixed_frame_for(camera_frame)
         if fixed is None:
-            return None
+            return None, None
         try:
-            return CameraPose(self.transforms.lookup(fixed, camera_frame, stamp_ns), fixed)
+            return CameraPose(self.transforms.lookup(fixed, camera_frame, stamp_ns), fixed), None
         except TransformError as error:
             self.missing += 1
             if self.missing <= MAX_POSE_WARNINGS:
                 logger.warning("%s: frame %d has no pose: %s", self.path, index, error)
             elif self.missing == MAX_POSE_WARNINGS + 1:
                 logger.warning("%s: more frames without a pose; not warned one by one", self.path)
-            return None
+            return None, str(error)
 
 
 def _topic_matches(topic: str, camera_prefix: str | None) -> bool:
