@@ -69,11 +69,14 @@ class ReadLimits:
     max_frame_pixels: largest image (width x height); default 4096 x 2160.
     max_chunk_bytes: largest MCAP chunk once decompressed (and largest record).
     max_held_bytes: images held while they wait for their partner or for a calibration.
+    max_transform_samples: transform samples kept for camera poses (64 bytes each; ~30 s to read
+    a million); the rest are not read.
     """
 
     max_frame_pixels: int = 4096 * 2160
     max_chunk_bytes: int = 64 * 1024 * 1024
     max_held_bytes: int = 256 * 1024 * 1024
+    max_transform_samples: int = 1_000_000
 
     def __post_init__(self) -> None:
         for item in fields(self):
@@ -566,22 +569,30 @@ def _may_have_transforms(stream: IO[bytes]) -> bool:
 
 
 def read_transforms(stream: IO[bytes], path: Path,
-                    max_record_bytes: int = ReadLimits.max_chunk_bytes) -> TransformTree:
-    """Every transform of the recording (first pass). A bad transform message is warned about
-    (naming its frames) and skipped; damage to the file ends the pass, the main pass reports it."""
+                    limits: ReadLimits | None = None) -> TransformTree:
+    """Every transform of the recording (first pass), up to ``limits.max_transform_samples``
+    (warned: later frames may have no pose). A bad transform message is warned about (naming its
+    frames) and skipped; damage to the file ends the pass, the main pass reports it."""
+    limits = limits or ReadLimits()
     tree = TransformTree()
     if not _may_have_transforms(stream):
         return tree
     decoder = _MessageDecoder()
     bad = 0
     try:
-        for schema, channel, message in _open_messages(stream, max_record_bytes):
+        for schema, channel, message in _open_messages(stream, limits.max_chunk_bytes):
             if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
                 continue
             try:
                 for parent, child, stamp, translation, rotation, static in _transform_samples(
                     schema, channel, message, decoder
                 ):
+                    if tree.samples >= limits.max_transform_samples:
+                        logger.warning(
+                            "%s: more than %d transform samples (--max-transforms); the rest "
+                            "(from log time %.3f s) are not read, so later frames may have no "
+                            "pose", path, limits.max_transform_samples, message.log_time / 1e9)
+                        return tree
                     tree.add(parent, child, stamp, translation, rotation, static)
             except (_DecodeFailure, TransformError) as error:
                 bad += 1
@@ -695,7 +706,7 @@ def read_frames(
         check_chunks(stream, path, limits.max_chunk_bytes)
         poses = None
         if fixed_frame is not None:
-            transforms = read_transforms(stream, path, limits.max_chunk_bytes)
+            transforms = read_transforms(stream, path, limits)
             if len(transforms):
                 poses = PoseLookup(path, transforms, fixed_frame)
             stream.seek(0)
