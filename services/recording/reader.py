@@ -22,7 +22,9 @@ fixed frame and the camera gives frames without a pose, with one warning naming 
 frame whose time the transforms do not cover has no pose either (warned), and says why in
 ``frame.extras["pose_error"]``: the recording has poses, only not for that frame.
 
-Frames: a colour image and a depth image are paired when their stamps (the message's own
+Messages are read in file order, one chunk inflated at a time (MCAP writers write in log-time
+order; see ``_open_messages`` for why not mcap's merge by log time). Frames: a colour image and a
+depth image are paired when their stamps (the message's own
 timestamp/header stamp, else the MCAP ``log_time``) differ by at most ``max_skew_ns`` (default
 0: the same stamp, as gngdt writes them). The frame takes the colour stamp, the latest
 calibration (frames wait for the first one, up to ``MAX_FRAMES_WITHOUT_CALIBRATION`` of them),
@@ -684,7 +686,7 @@ def read_frames(
     fixed_frame: str | None = "auto",
     limits: ReadLimits | None = None,
 ) -> Iterator[Frame]:
-    """Yield the frames of an MCAP recording in log-time order (see the module docstring).
+    """Yield the frames of an MCAP recording in file order (see the module docstring).
 
     camera_prefix: only topics under it (``"/camera"``, ``"/kinect"``). intrinsics: used until a
     calibration message arrives (and when the recording has none). max_skew_ns: largest stamp
