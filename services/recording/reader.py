@@ -71,8 +71,8 @@ class ReadLimits:
     max_frame_pixels: largest image (width x height); default 4096 x 2160.
     max_chunk_bytes: largest MCAP chunk once decompressed (and largest record).
     max_held_bytes: images held while they wait for their partner or for a calibration.
-    max_transform_samples: transform samples kept for camera poses (64 bytes each; ~30 s to read
-    a million); the rest are not read.
+    max_transform_samples: transform samples read for camera poses (at most 64 bytes each kept;
+    ~30-45 s to read a million); the rest are not read.
     """
 
     max_frame_pixels: int = 4096 * 2160
@@ -580,7 +580,7 @@ def read_transforms(stream: IO[bytes], path: Path,
     if not _may_have_transforms(stream):
         return tree
     decoder = _MessageDecoder()
-    bad = 0
+    bad = read = 0
     try:
         for schema, channel, message in _open_messages(stream, limits.max_chunk_bytes):
             if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
@@ -589,7 +589,8 @@ def read_transforms(stream: IO[bytes], path: Path,
                 for parent, child, stamp, translation, rotation, static in _transform_samples(
                     schema, channel, message, decoder
                 ):
-                    if tree.samples >= limits.max_transform_samples:
+                    read += 1  # bad and replaced (static) samples cost the time too
+                    if read > limits.max_transform_samples:
                         logger.warning(
                             "%s: more than %d transform samples (--max-transforms); the rest "
                             "(from log time %.3f s) are not read, so later frames may have no "
@@ -598,6 +599,7 @@ def read_transforms(stream: IO[bytes], path: Path,
                     tree.add(parent, child, stamp, translation, rotation, static)
             except (_DecodeFailure, TransformError) as error:
                 bad += 1
+                read += 1
                 if bad <= MAX_POSE_WARNINGS:
                     logger.warning("%s: %s: %s; skipped", path, channel.topic, error)
     except Exception as error:  # damaged file: keep the transforms read so far

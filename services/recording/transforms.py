@@ -105,11 +105,16 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, fraction: float) -> np.ndarray:
     return (np.sin((1.0 - fraction) * angle) * q0 + np.sin(fraction * angle) * q1) / np.sin(angle)
 
 
-def pose_to_matrix(translation: object, quaternion: object, what: str = "pose") -> np.ndarray:
-    """(4, 4) float64 rigid transform from a translation (3,) and a quaternion (x, y, z, w)."""
+def _checked_translation(translation: object, what: str) -> np.ndarray:
     t = np.asarray(translation, dtype=np.float64).reshape(-1)
     if t.shape != (3,) or not np.isfinite(t).all():
         raise TransformError(f"{what}: translation must be 3 finite numbers, got {t}")
+    return t
+
+
+def pose_to_matrix(translation: object, quaternion: object, what: str = "pose") -> np.ndarray:
+    """(4, 4) float64 rigid transform from a translation (3,) and a quaternion (x, y, z, w)."""
+    t = _checked_translation(translation, what)
     matrix = np.eye(4)
     matrix[:3, :3] = _rotation_matrix(unit_quaternion(quaternion, what))
     matrix[:3, 3] = t
@@ -214,7 +219,8 @@ class TransformTree:
             raise TransformError(f"{what}: frame ids must be two different non-empty names")
         if not INT64_MIN <= stamp_ns <= INT64_MAX:
             raise TransformError(f"{what}: stamp {stamp_ns} ns is beyond 64 bits")
-        matrix = pose_to_matrix(translation, quaternion, what)  # validates both
+        t = _checked_translation(translation, what)
+        q = unit_quaternion(quaternion, what)
         link = self._links.get(child)
         if link is None:
             if len(self._links) >= self.max_links:
@@ -227,7 +233,7 @@ class TransformTree:
             raise TransformError(f"{what}: {child!r} already has the parent {link.parent!r}")
         elif link.static != static:
             raise TransformError(f"{what}: published both as static and as dynamic")
-        t, q = matrix_to_pose(matrix)
+        q = -q if q[3] < 0 else q  # one sign for each rotation, as matrix_to_pose gives
         self.samples += 0 if link.static and len(link) else 1  # a static one replaces
         link.add(int(stamp_ns), t, q)
 
