@@ -93,21 +93,19 @@ class FrameSegmenter:
         clock = _Clock()
         height, width, _ = points.shape
         flat_points = points.reshape(-1, 3)
-        valid = np.flatnonzero(np.isfinite(flat_points).all(axis=1))
+        valid = np.flatnonzero(np.isfinite(flat_points.sum(axis=1)))
         learnable = self._learnable(points, valid)
-        labels = np.zeros(height * width, dtype=np.int32)
         clock.lap("prepare")
         if learnable.size < 2:
             model = self.model_
-            return FrameResult(labels.reshape(height, width), model.n_nodes_ if model else 0, 0,
-                               0, False, clock.laps)
+            return FrameResult(np.zeros((height, width), dtype=np.int32),
+                               model.n_nodes_ if model else 0, 0, 0, False, clock.laps)
         learned = self.stream.learn_frame(flat_points[learnable],
                                           colors.reshape(-1, 3)[learnable], independent)
         clock.lap("learn")
-        node_labels = learned.segmentation.labels
-        labels[valid] = node_labels[self.model_.predict(flat_points[valid])] + 1
+        labels = self.model_.label_pixels(points, learned.segmentation.labels)
         clock.lap("label")
-        return FrameResult(labels.reshape(height, width), self.model_.n_nodes_,
+        return FrameResult(labels, self.model_.n_nodes_,
                            learned.segmentation.n_segments, learned.steps, learned.from_scratch,
                            clock.laps)
 

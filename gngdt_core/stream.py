@@ -225,7 +225,8 @@ class StreamLearner:
         rows = np.arange(len(positions))
         draw = min(len(positions), int(ATTENTION_DRAW * steps))
         if draw < len(positions):
-            rows = self._rng.choice(len(positions), size=draw, replace=False)
+            # in scan order: each nearest-node search starts from the previous row's node
+            rows = np.sort(self._rng.choice(len(positions), size=draw, replace=False))
         on_large = on_surface[self.model_.predict(positions[rows])]
         keep = ~on_large | (self._rng.random(rows.size) < share)
         return rows[keep]
