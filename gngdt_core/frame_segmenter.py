@@ -93,8 +93,7 @@ class FrameSegmenter:
         clock = _Clock()
         height, width, _ = points.shape
         flat_points = points.reshape(-1, 3)
-        valid = np.flatnonzero(np.isfinite(flat_points.sum(axis=1)))
-        learnable = self._learnable(points, valid)
+        learnable = np.flatnonzero(self._learnable(points))
         clock.lap("prepare")
         if learnable.size < 2:
             model = self.model_
@@ -109,13 +108,14 @@ class FrameSegmenter:
                            learned.segmentation.n_segments, learned.steps, learned.from_scratch,
                            clock.laps)
 
-    def _learnable(self, points: np.ndarray, valid: np.ndarray) -> np.ndarray:
-        """Flat indices of the valid pixels learned: in the depth range and not veil points."""
-        keep = self.stream.in_depth_range(points.reshape(-1, 3)[valid])
+    def _learnable(self, points: np.ndarray) -> np.ndarray:
+        """(H, W) bool: the pixels learned: a point in the depth range, not a veil point."""
+        keep = np.isfinite(points.sum(axis=2))
+        keep &= self.stream.in_depth_range(points.reshape(-1, 3)).reshape(keep.shape)
         ratio = self.stream.schedule.veil_ratio
         if ratio > 0:
-            keep &= ~veil_pixels(points[..., 2], ratio).reshape(-1)[valid]
-        return valid[keep]
+            keep &= ~veil_pixels(points[..., 2], ratio)
+        return keep
 
 
 class _Clock:
