@@ -92,15 +92,15 @@ class FrameSegmenter:
             raise ValueError(f"colors {colors.shape} do not match points {points.shape}")
         clock = _Clock()
         height, width, _ = points.shape
-        flat_points = points.reshape(-1, 3)
-        learnable = np.flatnonzero(self._learnable(points))
+        learnable = self._learnable(points).reshape(-1)
+        positions = np.compress(learnable, points.reshape(-1, 3), axis=0)
         clock.lap("prepare")
-        if learnable.size < 2:
+        if len(positions) < 2:
             model = self.model_
             return FrameResult(np.zeros((height, width), dtype=np.int32),
                                model.n_nodes_ if model else 0, 0, 0, False, clock.laps)
-        learned = self.stream.learn_frame(flat_points[learnable],
-                                          colors.reshape(-1, 3)[learnable], independent)
+        learned = self.stream.learn_frame(
+            positions, np.compress(learnable, colors.reshape(-1, 3), axis=0), independent)
         clock.lap("learn")
         labels = self.model_.label_pixels(points, learned.segmentation.labels)
         clock.lap("label")
@@ -109,9 +109,9 @@ class FrameSegmenter:
                            clock.laps)
 
     def _learnable(self, points: np.ndarray) -> np.ndarray:
-        """(H, W) bool: the pixels learned: a point in the depth range, not a veil point."""
-        keep = np.isfinite(points.sum(axis=2))
-        keep &= self.stream.in_depth_range(points.reshape(-1, 3)).reshape(keep.shape)
+        """(H, W) bool: the pixels learned: a point in the depth range (so not NaN), not a veil
+        point."""
+        keep = self.stream.in_depth_range(points.reshape(-1, 3)).reshape(points.shape[:2])
         ratio = self.stream.schedule.veil_ratio
         if ratio > 0:
             keep &= ~veil_pixels(points[..., 2], ratio)

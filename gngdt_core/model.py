@@ -412,14 +412,15 @@ class _GrowingGas:
 
     def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
         """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1; 0 where the
-        pixel has no point (NaN) or its node has label -1.
+        pixel has no point (NaN depth) or its node has label -1.
 
-        points: (H, W, 3) float32/float64 metres, an organized cloud (one point per pixel, in
-        the network's frame); node_labels: (n_nodes,) int, e.g. ``segment()``. The nearest node
-        is searched at every second pixel of every second row; a pixel between such pixels that
-        all agree takes their label without a search (a label region narrower than two pixels
-        can be missed there), every other pixel is searched exactly. ~3x faster than
-        ``node_labels[predict(...)]`` on a 640x480 Kinect frame.
+        points: (H, W, 3) float32/float64 metres, an organized cloud: one point per pixel, in
+        the network's frame, x and y finite wherever z is (as deprojection gives them);
+        node_labels: (n_nodes,) int, e.g. ``segment()``. The nearest node is searched at every
+        second pixel of every second row; a pixel between such pixels that all agree takes their
+        label without a search (a label region narrower than two pixels can be missed there),
+        every other pixel is searched exactly. On a 640x480 Kinect frame 0.02-0.05 % of the
+        pixels differ from ``node_labels[predict(...)]``, at a third of its CPU time.
         """
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
@@ -434,7 +435,7 @@ class _GrowingGas:
         if points.dtype not in (np.float32, np.float64):
             points = points.astype(np.float64)
         points = np.ascontiguousarray(points)
-        valid = np.isfinite(points.sum(axis=2))
+        valid = np.isfinite(points[..., 2])
         out = np.empty(valid.shape, dtype=np.int32)
         grid = self._grid_arrays()
         min_rows = PARALLEL_MIN_POINTS // max(points.shape[1], 1)
