@@ -439,10 +439,10 @@ class _GrowingGas:
         out = np.empty(valid.shape, dtype=np.int32)
         grid = self._grid_arrays()
         min_rows = PARALLEL_MIN_POINTS // max(points.shape[1], 1)
-        for kernel in (SK.label_anchor_pixels, SK.label_other_pixels):  # every anchor first
+        for anchors in (True, False):  # every anchor first: the second pass reads them
             self._in_parallel(points.shape[0], min_rows,
-                              lambda start, stop, kernel=kernel: kernel(
-                                  points, valid, node_labels, start, stop, *grid, out))
+                              lambda start, stop, anchors=anchors: SK.label_pixels(
+                                  points, valid, node_labels, anchors, start, stop, *grid, out))
         return out
 
     def _grid_arrays(self) -> tuple:
