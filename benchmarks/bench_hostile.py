@@ -38,6 +38,13 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
+sys.path.insert(0, str(REPO_ROOT / "tests"))
+
+from hostile_recordings import (  # noqa: E402  (tests/: the tests make the same files)
+    lz4_chunk_hiding_its_size,
+    overlapping_chunks,
+    zstd_bomb,
+)
 from procstat import status_mb  # noqa: E402  (benchmarks/, beside this script)
 
 from schemas.packing import (  # noqa: E402
@@ -162,7 +169,6 @@ def feed(session, rng: np.random.Generator) -> dict[str, int]:
 
 
 def hostile_recordings(folder: Path) -> dict[str, Path]:
-    from mcap.writer import CompressionType, Writer
     from mcap_protobuf.writer import Writer as ProtobufWriter
 
     from schemas.packing import intrinsics_to_calibration
@@ -183,67 +189,21 @@ def hostile_recordings(folder: Path) -> dict[str, Path]:
                 writer.write_message("/camera/depth", depth, log_time=ns, publish_time=ns)
         return path
 
-    bomb = folder / "zstd-bomb.mcap"
-    with open(bomb, "wb") as file:
-        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=512 * MB)
-        writer.start()
-        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
-        channel = writer.register_channel("/camera/color", "protobuf", schema)
-        writer.add_message(channel, log_time=1, data=bytes(256 * MB), publish_time=1)
-        writer.finish()
     return {
         "one 4000x4000 frame": images(folder / "huge-frame.mcap", (4000, 4000), 1, True),
         "64 uncalibrated 2000x2000": images(folder / "uncalibrated.mcap", (2000, 2000), 64,
                                             False),
-        "zstd chunk of 256 MB": bomb,
-        "lz4 chunk hiding 256 MB": lz4_chunk_hiding_its_size(folder / "lz4-bomb.mcap"),
-        "16 chunks overlapping in time": overlapping_chunks(folder / "overlap.mcap"),
+        "zstd chunk of 256 MB": zstd_bomb(folder / "zstd-bomb.mcap", 256 * MB),
+        "lz4 chunk hiding 256 MB": lz4_chunk_hiding_its_size(folder / "lz4-bomb.mcap",
+                                                             256 * MB),
+        "16 chunks of 40 MB overlapping": overlapping_chunks(folder / "overlap.mcap", 16,
+                                                              40 * MB),
         f"{TRANSFORM_FLOOD:,} transforms": transform_flood(folder / "tf-flood.mcap"),
     }
 
 
 #: transform samples in the flooded recording (capture reads 1,000,000 by default)
 TRANSFORM_FLOOD = 1_500_000
-
-
-def lz4_chunk_hiding_its_size(path: Path) -> Path:
-    """One lz4 chunk of 256 MB of zeros (1.1 MB) whose frame states no size and whose record
-    claims 100 bytes: mcap inflates an lz4 frame whole."""
-    import lz4.frame
-    from mcap.writer import CompressionType, Writer
-
-    real_compress = lz4.frame.compress
-    lz4.frame.compress = lambda data, **_: real_compress(data, store_size=False)
-    try:
-        with open(path, "wb") as file:
-            writer = Writer(file, compression=CompressionType.LZ4, chunk_size=512 * MB)
-            writer.start()
-            schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
-            channel = writer.register_channel("/camera/color", "protobuf", schema)
-            writer.add_message(channel, log_time=1, data=bytes(256 * MB), publish_time=1)
-            writer.finish()
-    finally:
-        lz4.frame.compress = real_compress
-    stated = struct.pack("<Q", 256 * MB + 125)  # the chunk record's uncompressed_size
-    path.write_bytes(path.read_bytes().replace(stated, struct.pack("<Q", 100), 1))
-    return path
-
-
-def overlapping_chunks(path: Path) -> Path:
-    """16 zstd chunks of 40 MB that each start early and end late: a merge by log time holds
-    them all inflated."""
-    from mcap.writer import CompressionType, Writer
-
-    with open(path, "wb") as file:
-        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=40 * MB)
-        writer.start()
-        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
-        channel = writer.register_channel("/camera/color", "protobuf", schema)
-        for index in range(16):
-            writer.add_message(channel, log_time=index + 1, data=b"", publish_time=1)
-            writer.add_message(channel, log_time=10**12, data=bytes(40 * MB), publish_time=1)
-        writer.finish()
-    return path
 
 
 def transform_flood(path: Path) -> Path:

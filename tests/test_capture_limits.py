@@ -9,6 +9,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from hostile_recordings import lz4_chunk_hiding_its_size, overlapping_chunks, zstd_bomb
 
 
 def _log(process) -> str:
@@ -129,16 +130,7 @@ def test_frames_that_never_get_a_calibration_are_held_within_a_budget(
 def test_a_chunk_that_inflates_beyond_the_limit_is_refused_before_decompression(
     router_endpoint: str, tmp_path: Path
 ) -> None:
-    from mcap.writer import CompressionType, Writer
-
-    path = tmp_path / "bomb.mcap"
-    with open(path, "wb") as file:
-        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=200 * 1024 * 1024)
-        writer.start()
-        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
-        channel = writer.register_channel("/camera/color", "protobuf", schema)
-        writer.add_message(channel, log_time=1, data=bytes(96 * 1024 * 1024), publish_time=1)
-        writer.finish()
+    path = zstd_bomb(tmp_path / "bomb.mcap", 96 * 1024 * 1024)
     assert path.stat().st_size < 100_000
     started = time.monotonic()
     code, output, peak_mb = _capture(router_endpoint, path, "--max-chunk-mb", "64")
@@ -148,37 +140,11 @@ def test_a_chunk_that_inflates_beyond_the_limit_is_refused_before_decompression(
     assert peak_mb < 300, f"{peak_mb:.0f} MB"
 
 
-def _write_lz4_chunk_hiding_its_size(path: Path, inflated_bytes: int) -> None:
-    """One lz4 chunk of zeros whose frame states no size and whose record claims 100 bytes."""
-    import struct
-
-    import lz4.frame
-    from mcap.writer import CompressionType, Writer
-
-    real_compress = lz4.frame.compress
-    lz4.frame.compress = lambda data, **_: real_compress(data, store_size=False)
-    try:
-        with open(path, "wb") as file:
-            writer = Writer(file, compression=CompressionType.LZ4, chunk_size=2 * inflated_bytes)
-            writer.start()
-            schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
-            channel = writer.register_channel("/camera/color", "protobuf", schema)
-            writer.add_message(channel, log_time=1, data=bytes(inflated_bytes), publish_time=1)
-            writer.finish()
-    finally:
-        lz4.frame.compress = real_compress
-    data = path.read_bytes()
-    stated = struct.pack("<Q", inflated_bytes + 125)  # the message record and its header
-    assert stated in data
-    path.write_bytes(data.replace(stated, struct.pack("<Q", 100), 1))  # the chunk record's
-
-
 @pytest.mark.timeout(120)
 def test_an_lz4_chunk_that_hides_its_size_is_refused_before_it_is_inflated(
     router_endpoint: str, tmp_path: Path
 ) -> None:
-    path = tmp_path / "lz4-bomb.mcap"
-    _write_lz4_chunk_hiding_its_size(path, 256 * 1024 * 1024)
+    path = lz4_chunk_hiding_its_size(tmp_path / "lz4-bomb.mcap", 256 * 1024 * 1024)
     assert path.stat().st_size < 1_200_000  # 1.1 MB of lz4 for 256 MB of zeros
     code, output, peak_mb = _capture(router_endpoint, path)
     assert code == 2, output
@@ -191,19 +157,8 @@ def test_an_lz4_chunk_that_hides_its_size_is_refused_before_it_is_inflated(
 def test_chunks_that_overlap_in_time_are_inflated_one_at_a_time(
     router_endpoint: str, tmp_path: Path
 ) -> None:
-    from mcap.writer import CompressionType, Writer
-
-    path = tmp_path / "overlap.mcap"
-    chunk_bytes = 40 * 1024 * 1024
-    with open(path, "wb") as file:
-        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=chunk_bytes)
-        writer.start()
-        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
-        channel = writer.register_channel("/camera/color", "protobuf", schema)
-        for index in range(16):  # each chunk starts early and ends late: all overlap
-            writer.add_message(channel, log_time=index + 1, data=b"", publish_time=1)
-            writer.add_message(channel, log_time=10**12, data=bytes(chunk_bytes), publish_time=1)
-        writer.finish()
+    # 16 chunks of 40 MB, each starting early and ending late: all overlap in time
+    path = overlapping_chunks(tmp_path / "overlap.mcap", 16, 40 * 1024 * 1024)
     assert path.stat().st_size < 100_000
     code, output, peak_mb = _capture(router_endpoint, path)
     assert code == 2, output  # 40 MB of zeros is no image: every message is a bad frame
