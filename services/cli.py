@@ -80,21 +80,21 @@ def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParse
 def main(argv: list[str] | None = None) -> int:
     from services import lifecycle
 
-    lifecycle.install()  # first: a signal during the imports below must stop us too
+    # One try from the handlers' installation on: a stop signal raises KeyboardInterrupt
+    # wherever start-up stands (inside install() once its first handler is set, or while logging
+    # is configured), and one escaping main() made Python kill itself with SIGINT (exit -2).
     try:
+        lifecycle.install()  # first: a signal during the imports below must stop us too
         from schemas.packing import MAX_IMAGE_PIXELS
 
         # before OpenCV loads: the largest image it may decode, rather than its own 2**30
         # pixels (3 GB for a few kilobytes of PNG)
         os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(MAX_IMAGE_PIXELS))
         args = build_parser().parse_args(argv)
-    except KeyboardInterrupt:
-        return 130
-    logging.basicConfig(
-        level=getattr(logging, args.log_level),
-        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
-    )
-    try:
+        logging.basicConfig(
+            level=getattr(logging, args.log_level),
+            format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+        )
         return int(args._module.main(args) or 0)
     except KeyboardInterrupt:
         return 130

@@ -83,8 +83,13 @@ def test_the_router_stops_on_the_first_signal_even_while_starting(
         time.sleep(0.3)  # still importing: the signal used to be lost here
         early.send_signal(signum)
         # stopped by our handler (0, 130), or by the signal itself when it came before
-        # gngdt's first line ran (on a loaded machine Python may still be starting)
-        assert early.wait(20) in (0, 130, -signum), (tmp_path / "early.log").read_text()
+        # gngdt's first line ran (on a loaded machine Python may still be starting), or by
+        # SIGINT: with the signal landing in the imports (seen at 0.3-0.6 s), main() caught the
+        # KeyboardInterrupt (no traceback) yet Python exited by killing itself with SIGINT
+        # (strace) -- CPython's "unhandled KeyboardInterrupt" flag, which code an extension runs
+        # through PyRun_* while importing can set; shells report it as 130 all the same
+        assert early.wait(20) in (0, 130, -signum, -signal.SIGINT), (
+            tmp_path / "early.log").read_text()
     # once serving, with zenoh's own log on (RUST_LOG, as zenoh's examples)
     with open(tmp_path / "serving.log", "wb") as output:
         serving = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,

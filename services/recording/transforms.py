@@ -137,8 +137,9 @@ def _inverse(matrix: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Link:
-    """The samples of one parent -> child transform: 64 bytes each (a recording may hold
-    millions), appended in any order and sorted by time when first looked up."""
+    """The samples of one parent -> child transform: 64 bytes each, twice that once looked up
+    (a recording may hold millions), appended in any order and sorted by time when first looked
+    up."""
 
     parent: str
     static: bool
