@@ -25,7 +25,7 @@ _sym_db = _symbol_database.Default()
 from google.protobuf import timestamp_pb2 as google_dot_protobuf_dot_timestamp__pb2
 
 
-DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x0bgngdt.proto\x12\x05gngdt\x1a\x1fgoogle/protobuf/timestamp.proto\"9\n\x0bPackedArray\x12\r\n\x05\x64type\x18\x01 \x01(\t\x12\r\n\x05shape\x18\x02 \x03(\r\x12\x0c\n\x04\x64\x61ta\x18\x03 \x01(\x0c\">\n\x07\x45\x64geSet\x12\x10\n\x08property\x18\x01 \x01(\t\x12!\n\x05pairs\x18\x02 \x01(\x0b\x32\x12.gngdt.PackedArray\"U\n\nClustering\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\"\n\x06labels\x18\x02 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\x15\n\rcluster_count\x18\x03 \x01(\r\"\xcb\x03\n\x08Topology\x12-\n\ttimestamp\x18\x01 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x16\n\x0e\x66rame_sequence\x18\x02 \x01(\x04\x12\r\n\x05steps\x18\x03 \x01(\x04\x12\x10\n\x08\x66rame_id\x18\x04 \x01(\t\x12%\n\tpositions\x18\x05 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\"\n\x06\x63olors\x18\x06 \x01(\x0b\x32\x12.gngdt.PackedArray\x12#\n\x07normals\x18\x07 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\"\n\x06\x65rrors\x18\x08 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\x1d\n\x05\x65\x64ges\x18\t \x03(\x0b\x32\x0e.gngdt.EdgeSet\x12&\n\x0b\x63lusterings\x18\n \x03(\x0b\x32\x11.gngdt.Clustering\x12\x42\n\x12quantization_error\x18\x0b \x03(\x0b\x32&.gngdt.Topology.QuantizationErrorEntry\x1a\x38\n\x16QuantizationErrorEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\"\xc0\x04\n\rLearnerStatus\x12-\n\ttimestamp\x18\x01 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x16\n\x0e\x66rame_sequence\x18\x02 \x01(\x04\x12\x10\n\x08\x66rame_id\x18\x03 \x01(\t\x12\r\n\x05steps\x18\x04 \x01(\x04\x12\x18\n\x10steps_per_second\x18\x05 \x01(\x01\x12\r\n\x05nodes\x18\x06 \x01(\r\x12\x17\n\x0f\x66rames_received\x18\x07 \x01(\x04\x12\x13\n\x0b\x66rames_used\x18\x08 \x01(\x04\x12\x16\n\x0e\x66rames_dropped\x18\t \x01(\x04\x12\x1a\n\x12malformed_messages\x18\n \x01(\x04\x12\x12\n\nlatency_ms\x18\x0b \x01(\x01\x12\x16\n\x0elatency_p50_ms\x18\x0c \x01(\x01\x12\x16\n\x0elatency_p99_ms\x18\r \x01(\x01\x12G\n\x12quantization_error\x18\x0e \x03(\x0b\x32+.gngdt.LearnerStatus.QuantizationErrorEntry\x12?\n\x0e\x63luster_counts\x18\x0f \x03(\x0b\x32\'.gngdt.LearnerStatus.ClusterCountsEntry\x1a\x38\n\x16QuantizationErrorEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\x1a\x34\n\x12\x43lusterCountsEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\r:\x02\x38\x01\"\x91\x01\n\tStreamEnd\x12-\n\ttimestamp\x18\x01 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x13\n\x0b\x66rames_sent\x18\x02 \x01(\x04\x12\x1b\n\x13last_frame_sequence\x18\x03 \x01(\x04\x12\x11\n\trecording\x18\x04 \x01(\t\x12\x10\n\x08\x66rame_id\x18\x05 \x01(\tb\x06proto3')
+DESCRIPTOR = _descriptor_pool.Default().AddSerializedFile(b'\n\x0bgngdt.proto\x12\x05gngdt\x1a\x1fgoogle/protobuf/timestamp.proto\"9\n\x0bPackedArray\x12\r\n\x05\x64type\x18\x01 \x01(\t\x12\r\n\x05shape\x18\x02 \x03(\r\x12\x0c\n\x04\x64\x61ta\x18\x03 \x01(\x0c\">\n\x07\x45\x64geSet\x12\x10\n\x08property\x18\x01 \x01(\t\x12!\n\x05pairs\x18\x02 \x01(\x0b\x32\x12.gngdt.PackedArray\"~\n\nClustering\x12\x0c\n\x04name\x18\x01 \x01(\t\x12\"\n\x06labels\x18\x02 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\x15\n\rcluster_count\x18\x03 \x01(\r\x12\'\n\x0b\x63luster_ids\x18\x04 \x01(\x0b\x32\x12.gngdt.PackedArray\"\xf1\x03\n\x08Topology\x12-\n\ttimestamp\x18\x01 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x16\n\x0e\x66rame_sequence\x18\x02 \x01(\x04\x12\r\n\x05steps\x18\x03 \x01(\x04\x12\x10\n\x08\x66rame_id\x18\x04 \x01(\t\x12%\n\tpositions\x18\x05 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\"\n\x06\x63olors\x18\x06 \x01(\x0b\x32\x12.gngdt.PackedArray\x12#\n\x07normals\x18\x07 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\"\n\x06\x65rrors\x18\x08 \x01(\x0b\x32\x12.gngdt.PackedArray\x12\x1d\n\x05\x65\x64ges\x18\t \x03(\x0b\x32\x0e.gngdt.EdgeSet\x12&\n\x0b\x63lusterings\x18\n \x03(\x0b\x32\x11.gngdt.Clustering\x12\x42\n\x12quantization_error\x18\x0b \x03(\x0b\x32&.gngdt.Topology.QuantizationErrorEntry\x12$\n\x08node_ids\x18\x0c \x01(\x0b\x32\x12.gngdt.PackedArray\x1a\x38\n\x16QuantizationErrorEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\"\xc0\x04\n\rLearnerStatus\x12-\n\ttimestamp\x18\x01 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x16\n\x0e\x66rame_sequence\x18\x02 \x01(\x04\x12\x10\n\x08\x66rame_id\x18\x03 \x01(\t\x12\r\n\x05steps\x18\x04 \x01(\x04\x12\x18\n\x10steps_per_second\x18\x05 \x01(\x01\x12\r\n\x05nodes\x18\x06 \x01(\r\x12\x17\n\x0f\x66rames_received\x18\x07 \x01(\x04\x12\x13\n\x0b\x66rames_used\x18\x08 \x01(\x04\x12\x16\n\x0e\x66rames_dropped\x18\t \x01(\x04\x12\x1a\n\x12malformed_messages\x18\n \x01(\x04\x12\x12\n\nlatency_ms\x18\x0b \x01(\x01\x12\x16\n\x0elatency_p50_ms\x18\x0c \x01(\x01\x12\x16\n\x0elatency_p99_ms\x18\r \x01(\x01\x12G\n\x12quantization_error\x18\x0e \x03(\x0b\x32+.gngdt.LearnerStatus.QuantizationErrorEntry\x12?\n\x0e\x63luster_counts\x18\x0f \x03(\x0b\x32\'.gngdt.LearnerStatus.ClusterCountsEntry\x1a\x38\n\x16QuantizationErrorEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\x01:\x02\x38\x01\x1a\x34\n\x12\x43lusterCountsEntry\x12\x0b\n\x03key\x18\x01 \x01(\t\x12\r\n\x05value\x18\x02 \x01(\r:\x02\x38\x01\"\x91\x01\n\tStreamEnd\x12-\n\ttimestamp\x18\x01 \x01(\x0b\x32\x1a.google.protobuf.Timestamp\x12\x13\n\x0b\x66rames_sent\x18\x02 \x01(\x04\x12\x1b\n\x13last_frame_sequence\x18\x03 \x01(\x04\x12\x11\n\trecording\x18\x04 \x01(\t\x12\x10\n\x08\x66rame_id\x18\x05 \x01(\tb\x06proto3')
 
 _globals = globals()
 _builder.BuildMessageAndEnumDescriptors(DESCRIPTOR, _globals)
@@ -43,17 +43,17 @@ if not _descriptor._USE_C_DESCRIPTORS:
   _globals['_EDGESET']._serialized_start=114
   _globals['_EDGESET']._serialized_end=176
   _globals['_CLUSTERING']._serialized_start=178
-  _globals['_CLUSTERING']._serialized_end=263
-  _globals['_TOPOLOGY']._serialized_start=266
-  _globals['_TOPOLOGY']._serialized_end=725
-  _globals['_TOPOLOGY_QUANTIZATIONERRORENTRY']._serialized_start=669
-  _globals['_TOPOLOGY_QUANTIZATIONERRORENTRY']._serialized_end=725
-  _globals['_LEARNERSTATUS']._serialized_start=728
-  _globals['_LEARNERSTATUS']._serialized_end=1304
-  _globals['_LEARNERSTATUS_QUANTIZATIONERRORENTRY']._serialized_start=669
-  _globals['_LEARNERSTATUS_QUANTIZATIONERRORENTRY']._serialized_end=725
-  _globals['_LEARNERSTATUS_CLUSTERCOUNTSENTRY']._serialized_start=1252
-  _globals['_LEARNERSTATUS_CLUSTERCOUNTSENTRY']._serialized_end=1304
-  _globals['_STREAMEND']._serialized_start=1307
-  _globals['_STREAMEND']._serialized_end=1452
+  _globals['_CLUSTERING']._serialized_end=304
+  _globals['_TOPOLOGY']._serialized_start=307
+  _globals['_TOPOLOGY']._serialized_end=804
+  _globals['_TOPOLOGY_QUANTIZATIONERRORENTRY']._serialized_start=748
+  _globals['_TOPOLOGY_QUANTIZATIONERRORENTRY']._serialized_end=804
+  _globals['_LEARNERSTATUS']._serialized_start=807
+  _globals['_LEARNERSTATUS']._serialized_end=1383
+  _globals['_LEARNERSTATUS_QUANTIZATIONERRORENTRY']._serialized_start=748
+  _globals['_LEARNERSTATUS_QUANTIZATIONERRORENTRY']._serialized_end=804
+  _globals['_LEARNERSTATUS_CLUSTERCOUNTSENTRY']._serialized_start=1331
+  _globals['_LEARNERSTATUS_CLUSTERCOUNTSENTRY']._serialized_end=1383
+  _globals['_STREAMEND']._serialized_start=1386
+  _globals['_STREAMEND']._serialized_end=1531
 # @@protoc_insertion_point(module_scope)

@@ -18,6 +18,7 @@ ENCODING_POINT_CLOUD = "application/protobuf;foxglove.PointCloud"
 ENCODING_TOPOLOGY = "application/protobuf;gngdt.Topology"
 ENCODING_STATUS = "application/protobuf;gngdt.LearnerStatus"
 ENCODING_STREAM_END = "application/protobuf;gngdt.StreamEnd"
+ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
 
 _ATTACHMENT = struct.Struct("<Qq")
 

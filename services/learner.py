@@ -3,8 +3,12 @@
 Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
 memory stays bounded. After each learned frame the learner publishes the topology (edges per
-property and the clusterings ``pos``, ``col``, ``nor``, ``col+nor``) and a status message; a
-queryable on the topology key answers a late joiner with the latest topology. The model is
+property, the clusterings ``pos``, ``col``, ``nor``, ``col+nor`` with persistent cluster ids, and
+persistent node ids), the objects (one per cluster of ``objects_from``, as a foxglove
+SceneUpdate) and a status message, and every ``scene_every_frames`` frames the whole scene as a
+foxglove SceneUpdate; a queryable on the topology key answers a late joiner with the latest
+topology. Objects and scene are published latest-wins (congestion control DROP): a consumer that
+cannot keep up misses updates, and never slows the learner down. The model is
 checkpointed periodically and on SIGINT/SIGTERM, and resumed from the checkpoint on start.
 """
 
@@ -27,6 +31,7 @@ import numpy as np
 
 from schemas.wire import (
     DEFAULT_CAMERA,
+    ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
     ENCODING_TOPOLOGY,
     FrameStamp,
@@ -36,6 +41,9 @@ from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_se
 
 if TYPE_CHECKING:
     import zenoh
+
+    from gngdt_core.objects import ObjectSet
+    from gngdt_core.tracking import ClusterTracker
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +56,8 @@ EXAMPLES = """examples:
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
 CLUSTERINGS = ("pos", "col", "nor", "col+nor")
+#: clustering the objects come from when ``objects_from`` names one the learner does not publish
+FALLBACK_OBJECTS_FROM = "pos"
 
 
 @dataclass
@@ -64,6 +74,10 @@ class LearnerOptions:
     #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
     max_points: int = 2_000_000
     seed: int | None = 0
+    #: clustering whose clusters are published as objects ("pos" when it is not published)
+    objects_from: str = "segments"
+    #: publish the scene (nodes, edges, clusters) every this many learned frames; 0: never
+    scene_every_frames: int = 3
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the option for a wrong type or a non-positive value."""
@@ -81,6 +95,10 @@ class LearnerOptions:
                 raise ValueError(f"learner option {name} must be positive, got {value}")
         if self.checkpoint_every_seconds <= 0:
             raise ValueError("learner option checkpoint_every_seconds must be positive")
+        if self.scene_every_frames < 0:
+            raise ValueError("learner option scene_every_frames must be >= 0 (0: never)")
+        if not self.objects_from:
+            raise ValueError("learner option objects_from must name a clustering")
 
 
 #: accepted types of each option (TOML integers are accepted where floats are)
@@ -92,6 +110,8 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
     "quantization_sample": (int,),
     "max_points": (int,),
     "seed": (int, type(None)),
+    "objects_from": (str,),
+    "scene_every_frames": (int,),
 }
 
 
@@ -166,6 +186,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint-every", type=int, metavar="FRAMES",
                         help="checkpoint every this many learned frames (default 30)")
     parser.add_argument("--seed", type=int, help="random seed of the model (default 0)")
+    parser.add_argument("--objects-from", metavar="CLUSTERING",
+                        help="clustering published as objects on gngdt/<cam>/objects (default "
+                        "segments; pos when segments are not published; any of "
+                        f"{', '.join(CLUSTERINGS)})")
+    parser.add_argument("--scene-every", type=int, metavar="FRAMES",
+                        help="publish the foxglove scene on gngdt/<cam>/scene every this many "
+                        "learned frames (default 3; 0: never)")
     parser.add_argument("--exit-on-eos", action="store_true",
                         help="exit after learning the last frame of a stream (used by `gngdt run`)")
     add_zenoh_arguments(parser)
@@ -179,6 +206,8 @@ def config_from_args(args: argparse.Namespace) -> LearnerConfig:
         "min_cluster_size": args.min_cluster_size,
         "checkpoint_every_frames": args.checkpoint_every,
         "seed": args.seed,
+        "objects_from": args.objects_from,
+        "scene_every_frames": args.scene_every,
     }
     for name, value in overrides.items():
         if value is not None:
@@ -240,8 +269,18 @@ def counters_from_metadata(path: Path, saved: Any) -> Counters:
     return Counters(**values)
 
 
+@dataclass
+class LearnedFrame:
+    """What one learned frame shows: edges (E, 2) int64 per property, cluster labels (N,) int32
+    per clustering, and the persistent id (K,) int64 of each label of each clustering."""
+
+    edges: dict[str, np.ndarray]
+    labels: dict[str, np.ndarray]
+    cluster_ids: dict[str, np.ndarray]
+
+
 class Learner:
-    """One GNG-DT model fed frame by frame; builds the topology and status messages."""
+    """One GNG-DT model fed frame by frame; builds the topology, objects, scene and status."""
 
     def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
                  counters: Counters | None = None) -> None:
@@ -256,6 +295,7 @@ class Learner:
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
         self._rng = np.random.default_rng(config.options.seed)
+        self._trackers: dict[str, ClusterTracker] = {}
 
     def learn(self, positions: np.ndarray, colors: np.ndarray | None) -> None:
         """Run ``samples_per_frame`` learning steps on one cloud: (N, 3) f32 m, (N, 3) u8."""
@@ -272,27 +312,90 @@ class Learner:
         errors = self.model.quantization_error(positions[chosen], colors[chosen])
         return {name: float(value) for name, value in errors.items()}
 
-    def topology(self, stamp: FrameStamp, quantization_error: dict[str, float]) -> Any:
+    def learned_frame(self) -> LearnedFrame:
+        """Edges and clusterings of the model now, each cluster with its persistent id (kept from
+        the previous call by node membership)."""
+        from gngdt_core.tracking import ClusterTracker
+
+        model = self.model
+        min_size = self.options.min_cluster_size
+        labels = {name: model.clusters(*name.split("+"), min_size=min_size)
+                  for name in CLUSTERINGS}
+        node_ids = model.node_ids_
+        cluster_ids = {}
+        for name, values in labels.items():
+            tracker = self._trackers.setdefault(name, ClusterTracker())
+            cluster_ids[name] = tracker.update(node_ids, values)
+        edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
+        return LearnedFrame(edges=edges, labels=labels, cluster_ids=cluster_ids)
+
+    def topology(self, stamp: FrameStamp, quantization_error: dict[str, float],
+                 learned: LearnedFrame | None = None) -> Any:
         """The current ``gngdt.Topology`` (protobuf message)."""
         from schemas.packing import encode_topology
 
         model = self.model
-        min_size = self.options.min_cluster_size
+        learned = learned or self.learned_frame()
         return encode_topology(
             positions=model.positions_,
             colors=model.colors_,
             normals=model.normals_,
             errors=model.errors_,
-            edges={prop: model.edges(prop) for prop in EDGE_PROPERTIES},
-            clusterings={
-                name: model.clusters(*name.split("+"), min_size=min_size) for name in CLUSTERINGS
-            },
+            edges=learned.edges,
+            clusterings=learned.labels,
             steps=int(model.n_steps_),
             frame_sequence=stamp.sequence,
             timestamp_ns=stamp.capture_time_ns,
             frame_id=self.camera,
             quantization_error=quantization_error,
+            node_ids=model.node_ids_,
+            cluster_ids=learned.cluster_ids,
         )
+
+    def objects_clustering(self, learned: LearnedFrame) -> str:
+        """The clustering the objects come from: ``objects_from``, or "pos" without it."""
+        wanted = self.options.objects_from
+        return wanted if wanted in learned.labels else FALLBACK_OBJECTS_FROM
+
+    def objects(self, learned: LearnedFrame) -> ObjectSet:
+        """One object per cluster of the objects clustering, ids persistent."""
+        from gngdt_core.objects import describe_objects
+
+        name = self.objects_clustering(learned)
+        model = self.model
+        return describe_objects(model.positions_, model.colors_, model.normals_,
+                                learned.labels[name], learned.cluster_ids[name])
+
+    def objects_update(self, stamp: FrameStamp, objects: ObjectSet) -> Any:
+        """The objects as a ``foxglove.SceneUpdate``, coloured as the logger colours clusters."""
+        from schemas.scene import objects_to_scene_update
+        from services.display import id_colors
+
+        return objects_to_scene_update(
+            ids=objects.ids, centers=objects.centers, quaternions_xyzw=objects.quaternions_xyzw,
+            sizes=objects.sizes, colors=id_colors(objects.ids), node_counts=objects.node_counts,
+            centroids=objects.centroids, mean_colors=objects.colors, normals=objects.normals,
+            timestamp_ns=stamp.capture_time_ns, frame_id=self.camera)
+
+    def scene_update(self, stamp: FrameStamp, learned: LearnedFrame) -> Any:
+        """Nodes in their learned colours and every clustering's edges coloured by cluster, as a
+        ``foxglove.SceneUpdate``."""
+        from schemas.scene import topology_to_scene_update
+        from services.display import clustering_edges, node_colors
+
+        positions = self.model.positions_
+        layers = {}
+        for name, labels in learned.labels.items():
+            pairs = clustering_edges(name, learned.edges, labels)
+            layers[name] = (pairs, node_colors(labels, learned.cluster_ids[name]))
+        pos_edges = learned.edges["pos"]
+        spacing = (float(np.median(np.linalg.norm(
+            positions[pos_edges[:, 0]] - positions[pos_edges[:, 1]], axis=1)))
+            if len(pos_edges) else 0.02)
+        return topology_to_scene_update(
+            positions=positions, colors=np.clip(np.rint(self.model.colors_), 0, 255),
+            node_size=0.5 * spacing, edge_layers=layers, timestamp_ns=stamp.capture_time_ns,
+            frame_id=self.camera)
 
     def status(self, stamp: FrameStamp, latency_ms: float, topology: Any) -> Any:
         """The ``gngdt.LearnerStatus`` after publishing ``topology``."""
@@ -395,8 +498,8 @@ def decode_points(
 
 
 def warm_up(config: LearnerConfig) -> None:
-    """Run every model operation once on random points, so that numba compiles (or loads its
-    cache) before the first frame instead of adding seconds to its latency."""
+    """Run every model and message operation once on random points, so that numba compiles (or
+    loads its cache) and modules load before the first frame instead of adding to its latency."""
     from gngdt_core import GNGDT
 
     rng = np.random.default_rng(0)
@@ -404,9 +507,13 @@ def warm_up(config: LearnerConfig) -> None:
     colors = rng.integers(0, 256, (500, 3), dtype=np.uint8)
     model = GNGDT(**{**config.model, "random_state": 0})
     model.partial_fit(positions, colors, n_steps=2_000)
-    for name in CLUSTERINGS:
-        model.clusters(*name.split("+"), min_size=config.options.min_cluster_size)
     model.quantization_error(positions, colors)
+    learner = Learner(DEFAULT_CAMERA, config, model=model)
+    learned = learner.learned_frame()
+    stamp = FrameStamp(0, 0)
+    learner.topology(stamp, {}, learned)
+    learner.objects_update(stamp, learner.objects(learned))
+    learner.scene_update(stamp, learned)
 
 
 class EndOfStream:
@@ -495,6 +602,12 @@ def main(args: argparse.Namespace) -> int:
         topic(args.cam, "topology"), encoding=ENCODING_TOPOLOGY, congestion_control=block)
     status_publisher = session.declare_publisher(
         topic(args.cam, "learner/status"), encoding=ENCODING_STATUS, congestion_control=block)
+    # latest-wins views: a consumer that never reads must not hold the learner back
+    drop = zenoh.CongestionControl.DROP
+    objects_publisher = session.declare_publisher(
+        topic(args.cam, "objects"), encoding=ENCODING_SCENE_UPDATE, congestion_control=drop)
+    scene_publisher = session.declare_publisher(
+        topic(args.cam, "scene"), encoding=ENCODING_SCENE_UPDATE, congestion_control=drop)
     queryable = session.declare_queryable(topic(args.cam, "topology"), latest.reply)
     token = session.liveliness().declare_token(f"gngdt/{args.cam}/learner/alive")
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
@@ -524,7 +637,9 @@ def main(args: argparse.Namespace) -> int:
                 counters.malformed_messages += 1
                 log.warning("points message skipped: %s", error)
                 continue
-            topology = learner.topology(stamp, learner.quantization_error(positions, colors))
+            learned = learner.learned_frame()
+            topology = learner.topology(stamp, learner.quantization_error(positions, colors),
+                                        learned)
             payload = topology.SerializeToString()
             attachment = stamp.to_attachment()
             latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
@@ -533,6 +648,12 @@ def main(args: argparse.Namespace) -> int:
             learner.latencies.add(latency_ms)
             status = learner.status(stamp, latency_ms, topology)
             status_publisher.put(status.SerializeToString(), attachment=attachment)
+            objects = learner.objects_update(stamp, learner.objects(learned))
+            objects_publisher.put(objects.SerializeToString(), attachment=attachment)
+            scene_every = config.options.scene_every_frames
+            if scene_every and counters.frames_used % scene_every == 1 % scene_every:
+                scene = learner.scene_update(stamp, learned)
+                scene_publisher.put(scene.SerializeToString(), attachment=attachment)
             learned_sequence = stamp.sequence
             log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                       stamp.sequence, len(positions), received_ms, latency_ms)
@@ -547,7 +668,7 @@ def main(args: argparse.Namespace) -> int:
         if args.checkpoint is not None and counters.frames_used > 0:
             learner.save(args.checkpoint)
         token.undeclare()
-        for entity in (queryable, eos_subscriber, points):
+        for entity in (queryable, eos_subscriber, points, objects_publisher, scene_publisher):
             entity.undeclare()
         time.sleep(0.1)  # let the last BLOCK puts reach the router
         session.close()

@@ -1,11 +1,21 @@
-"""Log every gngdt stream (``gngdt/**``) to rerun: images, cloud, topologies, clusters, metrics.
+"""Log every gngdt stream (``gngdt/**``) to rerun: images, cloud, topologies, clusters, objects,
+metrics; optionally record every stream as it is into an MCAP file (``--mcap``).
 
 Entities (DESIGN.md "Rerun") for the default camera ``camera``: ``world/camera`` (Pinhole),
-``world/camera/image/rgb``, ``world/camera/image/depth``, ``world/points`` (at most
-``--max-cloud-points``), ``world/gng/nodes`` (learned colours), ``world/gng/edges/<prop>``,
-``world/gng/clusters/<clustering>`` (nodes coloured by cluster) and ``metrics/<name>``. Any other
-camera ``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/``. Timelines:
-``frame`` (sequence) and ``capture_time``.
+``world/camera/image/rgb`` (JPEG), ``world/camera/image/depth``, ``world/points``,
+``world/gng/nodes`` (learned colours), ``world/gng/edges/<clustering>`` and
+``world/gng/clusters/<clustering>`` (the clustering's edges and its nodes, coloured by cluster:
+one colour per persistent cluster id, grey for nodes in no cluster), ``world/objects`` (Boxes3D,
+one per object, labelled with its persistent id) and ``metrics/<name>``. Any other camera
+``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/``. Timelines: ``frame``
+(sequence) and ``capture_time``. The blueprint: the images, a 3D view per clustering plus one of
+the cloud and the learned colours, all starting from the camera's viewpoint, and one plot per
+metric.
+
+What goes into the .rrd is thinned by default (`DisplayRates`): a 30 fps camera would otherwise
+write ~1 GB a minute. Metrics and objects are logged for every frame; images, topologies and
+clouds for every Nth frame (by frame sequence), colour as JPEG, clouds capped in points.
+``--keep-everything`` logs every frame in full.
 
 The logger stops on its own once every camera it heard of has ended its stream (eos) and the
 topology of its last frame has arrived, or ``--eos-drain`` seconds after that eos.
@@ -39,6 +49,7 @@ if TYPE_CHECKING:
     import zenoh
 
     from schemas.packing import LearnerStatusInfo, TopologySnapshot
+    from schemas.scene import ObjectBoxes
     from services.recording.frame import CameraIntrinsics
 
 log = logging.getLogger(__name__)
@@ -50,9 +61,12 @@ EXAMPLES = """examples:
   gngdt log --stdout | rerun -
 """
 
-TOPOLOGY_VIEWS = ("pos", "col", "nor", "col+nor")
+#: clusterings with a 3D view, in view order; "segments" is the segmentation, when published
+CLUSTERING_VIEWS = ("segments", "pos", "col", "nor", "col+nor")
 #: streams where only the newest sample matters when the logger falls behind
-LATEST_ONLY_STREAMS = ("color", "depth", "points")
+LATEST_ONLY_STREAMS = ("color", "depth", "points", "objects")
+#: streams the .rrd does not show (the scene is the topology again, drawn for Foxglove)
+NOT_LOGGED_STREAMS = ("scene",)
 RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
 #: how often the .rrd is flushed to disk: what a killed logger can lose at most
@@ -78,14 +92,103 @@ def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_viewer_arguments(parser)
-    parser.add_argument("--max-cloud-points", type=int, default=50_000,
-                        help="decimate the logged point cloud to at most this many points")
+    add_rate_arguments(parser)
+    parser.add_argument("--mcap", type=Path, metavar="PATH",
+                        help="also record every gngdt stream as it is (images, clouds, topology, "
+                        "scene, objects, status) into this MCAP file, which Foxglove and rerun "
+                        "open directly; <name>.1.mcap if it exists")
     parser.add_argument("--eos-drain", type=float, default=10.0, metavar="SECONDS",
                         help="after an end-of-stream, wait at most this long for the last "
                         "topology (default 10)")
     parser.add_argument("--keep-running", action="store_true",
                         help="do not stop at end-of-stream (only on SIGINT/SIGTERM)")
     add_zenoh_arguments(parser)
+
+
+@dataclass(frozen=True)
+class DisplayRates:
+    """What goes into the .rrd: every ``*_every``-th frame (by sequence) of each stream.
+
+    Metrics and objects are logged for every frame. ``jpeg_quality`` 0 logs raw colour images;
+    ``max_cloud_points`` None logs whole clouds. Defaults keep a 30 fps 640x480 camera under
+    ~200 MB of .rrd a minute (README "Performance").
+    """
+
+    image_every: int = 3
+    depth_every: int = 15
+    topology_every: int = 3
+    cloud_every: int = 15
+    max_cloud_points: int | None = 20_000
+    jpeg_quality: int = 80
+
+    def __post_init__(self) -> None:
+        for name in ("image_every", "depth_every", "topology_every", "cloud_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got "
+                                 f"{getattr(self, name)}")
+        if self.max_cloud_points is not None and self.max_cloud_points <= 0:
+            raise ValueError("--max-cloud-points must be positive (0: whole clouds)")
+        if not 0 <= self.jpeg_quality <= 100:
+            raise ValueError(f"--jpeg-quality must be 0..100, got {self.jpeg_quality}")
+
+    @classmethod
+    def everything(cls) -> DisplayRates:
+        return cls(1, 1, 1, 1, None, 0)
+
+    def describe(self) -> str:
+        """One line for the run summary."""
+        if self == DisplayRates.everything():
+            return "every frame in full (--keep-everything)"
+
+        def every(n: int) -> str:
+            return "every frame" if n == 1 else f"1 frame in {n}"
+
+        colour = f"JPEG q{self.jpeg_quality}" if self.jpeg_quality else "raw"
+        cap = (f", at most {self.max_cloud_points:,} points" if self.max_cloud_points else "")
+        return (f"colour {every(self.image_every)} ({colour}), depth {every(self.depth_every)}, "
+                f"topology {every(self.topology_every)}, cloud {every(self.cloud_every)}{cap}, "
+                "metrics and objects every frame (--keep-everything: all in full)")
+
+
+def add_rate_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `DisplayRates` (shared by ``gngdt log`` and ``gngdt run``)."""
+    defaults = DisplayRates()
+    rates = parser.add_argument_group(
+        "what goes into the .rrd (metrics and objects: every frame)")
+    rates.add_argument("--image-every", type=int, default=defaults.image_every, metavar="N",
+                       help="log the colour image of every Nth frame (default %(default)s)")
+    rates.add_argument("--depth-every", type=int, default=defaults.depth_every, metavar="N",
+                       help="log the depth image of every Nth frame (default %(default)s)")
+    rates.add_argument("--topology-every", type=int, default=defaults.topology_every,
+                       metavar="N", help="log nodes, edges and clusters of every Nth frame "
+                       "(default %(default)s)")
+    rates.add_argument("--cloud-every", type=int, default=defaults.cloud_every, metavar="N",
+                       help="log the point cloud of every Nth frame (default %(default)s)")
+    rates.add_argument("--max-cloud-points", type=int, default=defaults.max_cloud_points,
+                       metavar="N", help="decimate each logged cloud to at most N points "
+                       "(default %(default)s; 0: whole clouds)")
+    rates.add_argument("--jpeg-quality", type=int, default=defaults.jpeg_quality, metavar="Q",
+                       help="log colour as JPEG of this quality (default %(default)s; 0: raw)")
+    rates.add_argument("--keep-everything", action="store_true",
+                       help="log every frame in full: raw images, whole clouds (~1 GB/min at "
+                       "30 fps 640x480)")
+
+
+def rates_from_args(args: argparse.Namespace) -> DisplayRates:
+    if args.keep_everything:
+        return DisplayRates.everything()
+    return DisplayRates(args.image_every, args.depth_every, args.topology_every,
+                        args.cloud_every, args.max_cloud_points or None, args.jpeg_quality)
+
+
+def rate_arguments(args: argparse.Namespace) -> list[str]:
+    """The `DisplayRates` options of ``args`` as command-line arguments (for ``gngdt run``)."""
+    if args.keep_everything:
+        return ["--keep-everything"]
+    return ["--image-every", str(args.image_every), "--depth-every", str(args.depth_every),
+            "--topology-every", str(args.topology_every), "--cloud-every", str(args.cloud_every),
+            "--max-cloud-points", str(args.max_cloud_points),
+            "--jpeg-quality", str(args.jpeg_quality)]
 
 
 def default_rrd_path(name: str) -> Path:
@@ -135,8 +238,12 @@ class EntityPaths:
     def nodes(self) -> str:
         return f"{self.world}/gng/nodes"
 
-    def edges(self, prop: str) -> str:
-        return f"{self.world}/gng/edges/{prop}"
+    @property
+    def objects(self) -> str:
+        return f"{self.world}/objects"
+
+    def edges(self, clustering: str) -> str:
+        return f"{self.world}/gng/edges/{clustering}"
 
     def clusters(self, clustering: str) -> str:
         return f"{self.world}/gng/clusters/{clustering}"
@@ -147,62 +254,93 @@ class EntityPaths:
         return f"metrics/{self.camera}/{name}"
 
 
-def cluster_colors(labels: np.ndarray) -> np.ndarray:
-    """(N, 3) uint8 colour per cluster label (N,) int32; -1 (too small a cluster) is grey."""
-    hue = (labels.astype(np.float64) * 0.618033988749895) % 1.0
-    sector = hue * 6.0
-    channel = np.clip(np.abs((sector[:, None] - np.array([3.0, 1.0, 5.0])) % 6.0 - 3.0) - 1.0, 0, 1)
-    colors = (64 + 191 * channel).astype(np.uint8)  # saturated, never black
-    colors[labels < 0] = 128
-    return colors
+#: the metric plots: title (with unit) and the metric names each shows
+METRIC_PLOTS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("nodes (count)", ("nodes",)),
+    ("clusters per clustering (count)", tuple(f"clusters/{name}" for name in CLUSTERING_VIEWS)),
+    ("objects (count)", ("objects",)),
+    ("quantization error, position (m)", ("quantization_error/pos",)),
+    ("quantization error, colour (RGB 0-255)", ("quantization_error/col",)),
+    ("learning speed (steps/s)", ("steps_per_second",)),
+    ("latency, capture to topology (ms)", ("latency_ms",)),
+    ("frames dropped (count)", ("frames_dropped",)),
+)
+#: where the 3D views start: just behind the camera, looking along its optical axis (+z, RDF)
+EYE_POSITION = (0.0, -0.15, -0.6)
+EYE_LOOK_TARGET = (0.0, 0.0, 1.5)
+EYE_UP = (0.0, -1.0, 0.0)
+
+
+def _spatial_view(name: str, origin: str, contents: list[str]) -> Any:
+    """A 3D view starting from the camera's viewpoint, on a dark background."""
+    import rerun.blueprint as rrb
+
+    return rrb.Spatial3DView(
+        name=name, origin=origin, contents=contents,
+        eye_controls=rrb.EyeControls3D(position=EYE_POSITION, look_target=EYE_LOOK_TARGET,
+                                       eye_up=EYE_UP),
+        background=rrb.Background(color=[22, 24, 28]))
+
+
+def _camera_row(camera: str) -> Any:
+    """The images beside a grid of six 3D views: objects and segments, one per clustering of
+    properties, and the cloud with the nodes in their learned colours."""
+    import rerun.blueprint as rrb
+
+    paths = EntityPaths(camera)
+    suffix = "" if camera == DEFAULT_CAMERA else f" ({camera})"
+    frustum = paths.pinhole
+    views = [_spatial_view(f"objects and segments{suffix}", paths.world, [
+        paths.objects, paths.clusters("segments"), paths.edges("segments"), frustum])]
+    views += [_spatial_view(f"{name} clusters{suffix}", paths.world,
+                            [paths.clusters(name), paths.edges(name), frustum])
+              for name in CLUSTERING_VIEWS if name != "segments"]
+    views.append(_spatial_view(f"cloud and learned colours{suffix}", paths.world,
+                               [paths.points, paths.nodes, frustum, paths.rgb]))
+    images = rrb.Vertical(
+        rrb.Spatial2DView(name=f"rgb{suffix}", origin=paths.pinhole, contents=[paths.rgb]),
+        rrb.Spatial2DView(name=f"depth{suffix}", origin=paths.pinhole, contents=[paths.depth]),
+    )
+    return rrb.Horizontal(images, rrb.Grid(*views, grid_columns=3), column_shares=[1, 3])
 
 
 def blueprint(cameras: list[str]) -> Any:
-    """One 3D view per topology (pos, col, nor, col+nor) beside the images, metrics below."""
+    """Per camera a row (`_camera_row`), then one plot per metric (all cameras in each)."""
     import rerun.blueprint as rrb
 
-    columns = []
-    for camera in cameras:
-        paths = EntityPaths(camera)
-        suffix = "" if camera == DEFAULT_CAMERA else f" ({camera})"
-        topology_views = [
-            rrb.Spatial3DView(
-                name=f"{clustering}{suffix}",
-                origin=paths.world,
-                contents=[paths.clusters(clustering)]
-                + [paths.edges(prop) for prop in clustering.split("+")],
-            )
-            for clustering in TOPOLOGY_VIEWS
-        ]
-        learned = rrb.Spatial3DView(
-            name=f"nodes and cloud{suffix}",
-            origin=paths.world,
-            contents=[paths.points, paths.nodes, paths.edges("pos")],
-        )
-        images = rrb.Vertical(
-            rrb.Spatial2DView(name=f"rgb{suffix}", origin=paths.pinhole,
-                              contents=[paths.rgb]),
-            rrb.Spatial2DView(name=f"depth{suffix}", origin=paths.pinhole,
-                              contents=[paths.depth]),
-        )
-        columns.append(rrb.Horizontal(images, rrb.Grid(*topology_views, learned),
-                                      column_shares=[1, 3]))
-    metrics = rrb.TimeSeriesView(name="metrics", origin="metrics")
-    return rrb.Blueprint(rrb.Vertical(*columns, metrics, row_shares=[3] * len(columns) + [1]),
-                         collapse_panels=True)
+    rows = [_camera_row(camera) for camera in cameras]
+    plots = [
+        rrb.TimeSeriesView(name=title, origin="/",
+                           contents=[EntityPaths(camera).metric(name)
+                                     for camera in cameras for name in names])
+        for title, names in METRIC_PLOTS
+    ]
+    return rrb.Blueprint(
+        rrb.Vertical(*rows, rrb.Grid(*plots, grid_columns=4),
+                     row_shares=[3] * len(rows) + [1.4]),
+        collapse_panels=True)
 
 
 class RerunLog:
-    """Writes decoded gngdt messages into one ``rr.RecordingStream``."""
+    """Writes decoded gngdt messages into one ``rr.RecordingStream``, thinned by `DisplayRates`."""
 
-    def __init__(self, recording: rr.RecordingStream, max_cloud_points: int = 50_000) -> None:
+    def __init__(self, recording: rr.RecordingStream, rates: DisplayRates | None = None) -> None:
         import rerun as rr
 
-        if max_cloud_points <= 0:
-            raise ValueError(f"--max-cloud-points must be positive, got {max_cloud_points}")
         self.rec = recording
-        self.max_cloud_points = max_cloud_points
+        self.rates = rates or DisplayRates()
+        self._last_logged: dict[tuple[str, str], int] = {}
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
+
+    def due(self, paths: EntityPaths, stream: str, sequence: int, every: int) -> bool:
+        """Whether frame ``sequence`` of ``stream`` is logged: ``every`` frames after the last
+        one logged (so frames the learner skipped do not starve a stream), or a new stream."""
+        key = (paths.camera, stream)
+        last = self._last_logged.get(key)
+        if last is not None and last <= sequence < last + every:
+            return False
+        self._last_logged[key] = sequence
+        return True
 
     def set_time(self, stamp: FrameStamp) -> None:
         self.rec.set_time("frame", sequence=stamp.sequence)
@@ -216,12 +354,24 @@ class RerunLog:
             principal_point=[intrinsics.cx, intrinsics.cy],
             resolution=[intrinsics.width, intrinsics.height],
             camera_xyz=rr.ViewCoordinates.RDF,
+            image_plane_distance=0.3,
         ))
 
     def color(self, paths: EntityPaths, image: np.ndarray) -> None:
         import rerun as rr
 
-        self.rec.log(paths.rgb, rr.Image(image))
+        quality = self.rates.jpeg_quality
+        if not quality:
+            self.rec.log(paths.rgb, rr.Image(image))
+            return
+        import cv2
+
+        ok, encoded = cv2.imencode(".jpg", np.ascontiguousarray(image[..., ::-1]),
+                                   [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if not ok:
+            raise ValueError(f"colour image {image.shape} could not be JPEG-encoded")
+        self.rec.log(paths.rgb, rr.EncodedImage(contents=encoded.tobytes(),
+                                                media_type="image/jpeg"))
 
     def depth(self, paths: EntityPaths, depth_mm: np.ndarray) -> None:
         import rerun as rr
@@ -231,26 +381,49 @@ class RerunLog:
     def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None) -> None:
         import rerun as rr
 
-        stride = max(1, -(-len(positions) // self.max_cloud_points))
+        cap = self.rates.max_cloud_points or len(positions)
+        stride = max(1, -(-len(positions) // cap))
         self.rec.log(paths.points, rr.Points3D(
             positions[::stride], colors=None if colors is None else colors[::stride],
-            radii=0.002))
+            radii=rr.Radius.ui_points(1.5)))
 
-    def topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
-        import rerun as rr
-
-        positions = snapshot.positions
-        self.rec.log(paths.nodes, rr.Points3D(positions, colors=snapshot.colors, radii=0.006))
-        for prop, pairs in snapshot.edges.items():
-            segments = positions[pairs.astype(np.int64)] if len(pairs) else np.zeros((0, 2, 3))
-            self.rec.log(paths.edges(prop), rr.LineStrips3D(segments, radii=0.0015))
-        for clustering, labels in snapshot.clusterings.items():
-            self.rec.log(paths.clusters(clustering),
-                         rr.Points3D(positions, colors=cluster_colors(labels), radii=0.008))
+    def topology(self, paths: EntityPaths, snapshot: TopologySnapshot, draw: bool) -> None:
+        """Metrics of every topology; nodes, edges and clusters when ``draw``."""
+        for clustering in snapshot.clusterings:
             self.scalar(paths, f"clusters/{clustering}", snapshot.cluster_counts[clustering])
         for prop, value in snapshot.quantization_error.items():
             self.scalar(paths, f"quantization_error/{prop}", value)
         self.scalar(paths, "nodes", snapshot.node_count)
+        if draw:
+            self._draw_topology(paths, snapshot)
+
+    def _draw_topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
+        import rerun as rr
+
+        from services.display import clustering_edges, edge_colors, node_colors
+
+        positions = snapshot.positions
+        self.rec.log(paths.nodes, rr.Points3D(positions, colors=snapshot.colors,
+                                              radii=rr.Radius.ui_points(4.0)))
+        for clustering, labels in snapshot.clusterings.items():
+            colors = node_colors(labels, snapshot.cluster_ids.get(clustering))
+            self.rec.log(paths.clusters(clustering), rr.Points3D(
+                positions, colors=colors, radii=rr.Radius.ui_points(4.0)))
+            pairs = clustering_edges(clustering, snapshot.edges, labels)
+            self.rec.log(paths.edges(clustering), rr.LineStrips3D(
+                positions[pairs] if len(pairs) else np.zeros((0, 2, 3)),
+                colors=edge_colors(pairs, colors, labels), radii=rr.Radius.ui_points(1.5)))
+
+    def objects(self, paths: EntityPaths, boxes: ObjectBoxes) -> None:
+        """Boxes3D, one per object: colour and label by its persistent id (``object_id``)."""
+        import rerun as rr
+
+        self.rec.log(paths.objects, rr.Boxes3D(
+            centers=boxes.centers, half_sizes=boxes.half_sizes,
+            quaternions=boxes.quaternions_xyzw, colors=boxes.colors, labels=boxes.labels,
+            radii=rr.Radius.ui_points(2.0), fill_mode="majorwireframe"),
+            rr.AnyValues(object_id=boxes.ids, node_count=boxes.node_counts))
+        self.scalar(paths, "objects", len(boxes.ids))
 
     def status(self, paths: EntityPaths, status: LearnerStatusInfo) -> None:
         self.scalar(paths, "steps_per_second", status.steps_per_second)
@@ -280,6 +453,8 @@ class Inbox:
 
     def put(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
+        if key.rsplit("/", 1)[-1] in NOT_LOGGED_STREAMS:
+            return
         payload = sample.payload.to_bytes()
         attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
         with self._lock:
@@ -331,41 +506,53 @@ class Dispatcher:
 
     def handle(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         from schemas import packing
+        from schemas.scene import decode_object_boxes
 
         parts = key.split("/")
         if len(parts) < 3 or parts[0] != "gngdt":
             return
         camera, stream = parts[1], "/".join(parts[2:])
         paths = EntityPaths(camera)
+        rerun_log, rates = self.rerun_log, self.rerun_log.rates
         handlers = {
-            "calibration": lambda: self.rerun_log.calibration(
+            "calibration": lambda: rerun_log.calibration(
                 paths, packing.calibration_to_intrinsics(payload)),
-            "color": lambda: self.rerun_log.color(paths, packing.raw_to_image(payload)),
-            "depth": lambda: self.rerun_log.depth(paths, packing.raw_to_image(payload)),
+            "color": lambda: rerun_log.color(paths, packing.raw_to_image(payload)),
+            "depth": lambda: rerun_log.depth(paths, packing.raw_to_image(payload)),
             # views: the logger decimates, so only the logged points are copied
-            "points": lambda: self.rerun_log.points(
-                paths, *packing.msg_to_cloud(payload, copy=False)),
-            "topology": lambda: self._topology(camera, paths, packing.decode_topology(payload)),
+            "points": lambda: rerun_log.points(paths, *packing.msg_to_cloud(payload, copy=False)),
+            "topology": lambda: self._topology(camera, paths, packing.decode_topology(payload),
+                                               stamp),
+            "objects": lambda: rerun_log.objects(paths, decode_object_boxes(payload)),
             "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
             "eos": lambda: self._eos(camera, packing.decode_stream_end(payload)),
         }
+        #: streams thinned for the .rrd, and how (topologies always give their metrics)
+        thinned = {"color": rates.image_every, "depth": rates.depth_every,
+                   "points": rates.cloud_every}
         handler = handlers.get(stream)
         if handler is None:
             return
         try:
             stamp = FrameStamp.from_attachment(attachment)
+            if stream in thinned and not rerun_log.due(paths, stream, stamp.sequence,
+                                                       thinned[stream]):
+                return
             if camera not in self.cameras:
                 self.cameras[camera] = CameraProgress()
                 if self._on_new_camera is not None:
                     self._on_new_camera(list(self.cameras))
-            self.rerun_log.set_time(stamp)
+            rerun_log.set_time(stamp)
             handler()
         except ValueError as error:  # MessageError is a ValueError
             self.malformed += 1
             log.warning("%s: malformed message skipped: %s", key, error)
 
-    def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
-        self.rerun_log.topology(paths, snapshot)
+    def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot,
+                  stamp: FrameStamp) -> None:
+        rerun_log = self.rerun_log
+        draw = rerun_log.due(paths, "topology", stamp.sequence, rerun_log.rates.topology_every)
+        rerun_log.topology(paths, snapshot, draw)
         progress = self.cameras[camera]
         progress.last_topology_sequence = max(progress.last_topology_sequence,
                                               snapshot.frame_sequence)
@@ -412,14 +599,20 @@ def open_recording(args: argparse.Namespace, default_name: str = "log") -> tuple
 
 
 def main(args: argparse.Namespace) -> int:
+    from services.mcap_recorder import McapRecorder
+
     try:
+        rates = rates_from_args(args)
         rec, destination = open_recording(args)
-        rerun_log = RerunLog(rec, args.max_cloud_points)
+        rerun_log = RerunLog(rec, rates)
+        recorder = McapRecorder(unused_rrd_path(args.mcap)) if args.mcap else None
     except (ValueError, OSError) as error:
         log.error("%s", error)
         return 2
     if not args.stdout:
         print(f"logging to {destination}", flush=True)
+        if recorder is not None:
+            print(f"recording to {recorder.path}", flush=True)
 
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -433,8 +626,12 @@ def main(args: argparse.Namespace) -> int:
     except ZenohSetupError as error:
         log.error("%s", error)
         rec.disconnect()
+        if recorder is not None:
+            recorder.close()
         return 1
     subscriber = session.declare_subscriber("gngdt/**", inbox.put)
+    recording = (session.declare_subscriber("gngdt/**", recorder.put)
+                 if recorder is not None else None)
     token = session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}")
     last_flush = time.monotonic()
     try:
@@ -450,10 +647,14 @@ def main(args: argparse.Namespace) -> int:
     finally:
         token.undeclare()
         subscriber.undeclare()
+        if recording is not None:
+            recording.undeclare()
         session.close()
         for key, payload, attachment in inbox.take():
             dispatcher.handle(key, payload, attachment)
         rec.flush()
         rec.disconnect()  # writes the .rrd footer
+        if recorder is not None:
+            recorder.close()  # writes the MCAP index and footer
     log.info("logger done: %d malformed, %d dropped", dispatcher.malformed, inbox.dropped)
     return 0

@@ -24,7 +24,14 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from schemas.wire import DEFAULT_CAMERA, topic
-from services.logger import LIVELINESS_KEY, default_rrd_path, unused_rrd_path
+from services.logger import (
+    LIVELINESS_KEY,
+    add_rate_arguments,
+    default_rrd_path,
+    rate_arguments,
+    rates_from_args,
+    unused_rrd_path,
+)
 from services.zenoh_session import ZenohSetupError, free_tcp_port, open_config, router_config
 
 if TYPE_CHECKING:
@@ -38,6 +45,8 @@ EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap                 # writes runs/tabletop-<time>.rrd
   gngdt run recordings/tabletop.mcap --fast --save out.rrd   # out.1.rrd if out.rrd exists
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
+  gngdt run recordings/tabletop.mcap --mcap runs/tabletop.mcap   # + every stream for Foxglove
+  gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
 """
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -53,6 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     viewer.add_argument("--connect", action="store_true", help="log to a running rerun viewer")
     viewer.add_argument("--serve", action="store_true", help="serve a web viewer")
     parser.add_argument("--url", help="rerun viewer URL for --connect")
+    parser.add_argument("--mcap", type=Path, metavar="PATH",
+                        help="also record every gngdt stream (images, clouds, topology, scene, "
+                        "objects, status) into this MCAP file for Foxglove or rerun")
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -73,6 +85,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drain-timeout", type=float, default=30.0, metavar="SECONDS",
                         help="after the stream ends, how long learner and logger may take to "
                         "finish before they are interrupted (default 30)")
+    add_rate_arguments(parser)
 
 
 @dataclass
@@ -226,16 +239,27 @@ def capture_arguments(args: argparse.Namespace) -> list[str]:
     return arguments
 
 
-def logger_arguments(args: argparse.Namespace, rrd_path: Path | None) -> list[str]:
+def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
+                     mcap_path: Path | None = None) -> list[str]:
+    arguments = rate_arguments(args)
+    if mcap_path is not None:
+        arguments += ["--mcap", str(mcap_path)]
     if args.connect:
-        return ["--connect"] + (["--url", args.url] if args.url else [])
+        return [*arguments, "--connect", *(["--url", args.url] if args.url else [])]
     if args.serve:
-        return ["--serve", "--keep-running"]
-    return ["--save", str(rrd_path)]
+        return [*arguments, "--serve", "--keep-running"]
+    return [*arguments, "--save", str(rrd_path)]
+
+
+def file_size(path: Path | None) -> str:
+    """``"12.3 MB"``, or a note that the file is missing."""
+    if path is None or not path.is_file():
+        return "not written"
+    return f"{path.stat().st_size / 1e6:.1f} MB"
 
 
 def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
-                   destination: str) -> str:
+                   destination: str, outputs: list[str] | None = None) -> str:
     """The lines ``run`` prints at the end."""
     lines = [f"frames sent:        {end.frames_sent if end else 'no end of stream'}"]
     if status is None:
@@ -253,6 +277,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"p99 {status.latency_p99_ms:.1f} ms",
         ]
     lines.append(f"rerun:              {destination}")
+    lines += outputs or []
     return "\n".join(lines)
 
 
@@ -264,6 +289,14 @@ def main(args: argparse.Namespace) -> int:
         log.error("--url needs --connect")
         return 2
     topic(args.cam, "points")  # validates the camera name
+    try:
+        rates = rates_from_args(args)
+    except ValueError as error:
+        log.error("%s", error)
+        return 2
+    mcap_path = unused_rrd_path(args.mcap) if args.mcap else None
+    if mcap_path is not None:
+        mcap_path.parent.mkdir(parents=True, exist_ok=True)
     rrd_path = None
     if not (args.connect or args.serve):
         # the logger never overwrites a file: name the one it will really write
@@ -294,7 +327,7 @@ def main(args: argparse.Namespace) -> int:
     failure: Child | None = None
     try:
         pipeline.start("learn", learner_arguments(args))
-        pipeline.start("log", logger_arguments(args, rrd_path))
+        pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
         ready = wait_until(
             lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
             and observed.has_alive(LIVELINESS_KEY),
@@ -323,7 +356,13 @@ def main(args: argparse.Namespace) -> int:
         router.close()
     with observed.lock:
         status, end = observed.status, observed.end
-    print(format_summary(status, end, destination), flush=True)
+    outputs = [f"  in the .rrd:      {rates.describe()}"]
+    if rrd_path is not None:
+        outputs[0:0] = [f"  .rrd size:        {file_size(rrd_path)}"]
+    if mcap_path is not None:
+        outputs.append(f"mcap:               {mcap_path} ({file_size(mcap_path)}; every stream, "
+                       "for Foxglove or `rerun`)")
+    print(format_summary(status, end, destination, outputs), flush=True)
     if failure is not None:
         print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"
               f"{failure.stderr_tail()}", file=sys.stderr)
