@@ -21,9 +21,12 @@ from typing import Any, TypeVar
 
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.message import Message
 from google.protobuf.timestamp_pb2 import Timestamp
 
@@ -37,6 +40,7 @@ __all__ = [
     "StreamEndInfo",
     "TopologySnapshot",
     "calibration_to_intrinsics",
+    "cloud_pose",
     "cloud_to_msg",
     "decode_pixels",
     "decode_status",
@@ -51,6 +55,7 @@ __all__ = [
     "ns_to_timestamp",
     "pack_array",
     "parse_message",
+    "pose_to_transform",
     "raw_to_image",
     "timestamp_to_ns",
     "unpack_array",
@@ -367,11 +372,14 @@ def cloud_to_msg(
     *,
     timestamp_ns: int,
     frame_id: str = "camera",
+    pose: np.ndarray | None = None,
 ) -> PointCloud:
     """foxglove PointCloud of ``positions`` (N, 3) float32 metres and ``colors`` (N, 3) uint8 RGB.
 
     Layout: x, y, z FLOAT32 at offsets 0, 4, 8 and red, green, blue UINT8 at 12, 13, 14,
-    point_stride 15 (12 and no colour fields when ``colors`` is None). Pose is the identity.
+    point_stride 15 (12 and no colour fields when ``colors`` is None). ``pose``: (4, 4) transform
+    from the points' own frame (the camera's) into ``frame_id`` (foxglove's "origin of the point
+    cloud relative to the frame of reference"); None: the identity, the points are in ``frame_id``.
     """
     positions = np.asarray(positions)
     if positions.ndim != 2 or positions.shape[1] != 3:
@@ -399,7 +407,53 @@ def cloud_to_msg(
         fields=cloud_fields,
         data=data,
     )
-    message.pose.orientation.w = 1.0
+    if pose is None:
+        message.pose.orientation.w = 1.0
+    else:
+        _set_rigid(message.pose.position, message.pose.orientation, pose)
+    return message
+
+
+def _set_rigid(translation: Vector3, rotation: Quaternion, matrix: np.ndarray) -> None:
+    """Fill a foxglove translation/position and quaternion from a (4, 4) rigid transform."""
+    from services.recording.transforms import matrix_to_pose
+
+    offset, quaternion = matrix_to_pose(matrix)
+    translation.x, translation.y, translation.z = offset.tolist()
+    rotation.x, rotation.y, rotation.z, rotation.w = quaternion.tolist()
+
+
+def cloud_pose(message: PointCloud | bytes) -> np.ndarray:
+    """(4, 4) float64 pose of a PointCloud: maps its points into its ``frame_id``.
+
+    An unset orientation (all zero, as a publisher that never set the pose leaves it) is the
+    identity. Raises :class:`MessageError` naming the frame for non-finite numbers or a quaternion
+    that is not of unit length (see ``services.recording.transforms.QUATERNION_TOLERANCE``).
+    """
+    from services.recording.transforms import TransformError, pose_to_matrix
+
+    message = parse_message(PointCloud, message)
+    position, rotation = message.pose.position, message.pose.orientation
+    quaternion = [rotation.x, rotation.y, rotation.z, rotation.w]
+    if not any(quaternion):
+        quaternion = [0.0, 0.0, 0.0, 1.0]
+    try:
+        return pose_to_matrix([position.x, position.y, position.z], quaternion,
+                              f"point cloud pose in {message.frame_id!r}")
+    except TransformError as error:
+        raise MessageError(str(error)) from error
+
+
+def pose_to_transform(
+    matrix: np.ndarray, parent_frame_id: str, child_frame_id: str, *, timestamp_ns: int
+) -> FrameTransform:
+    """foxglove FrameTransform ``parent -> child`` of a (4, 4) child-to-parent transform."""
+    message = FrameTransform(
+        timestamp=ns_to_timestamp(timestamp_ns),
+        parent_frame_id=parent_frame_id,
+        child_frame_id=child_frame_id,
+    )
+    _set_rigid(message.translation, message.rotation, matrix)
     return message
 
 

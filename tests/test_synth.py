@@ -41,7 +41,7 @@ def world_points(frame: Frame, mask: np.ndarray) -> np.ndarray:
     rows, columns = np.nonzero(mask & (frame.depth > 0))
     z = frame.depth[rows, columns] / 1000.0
     camera = np.column_stack([(columns - k.cx) / k.fx * z, (rows - k.cy) / k.fy * z, z])
-    pose = frame.extras["camera_pose"]
+    pose = frame.pose.matrix
     return camera @ pose[:3, :3].T + pose[:3, 3]
 
 
@@ -63,7 +63,7 @@ def test_frames_have_the_documented_shapes_types_and_intrinsics():
         assert (k.width, k.height) == (WIDTH, HEIGHT)
         assert k.fx == k.fy == pytest.approx(525.0 * WIDTH / 640)
         assert (k.cx, k.cy) == pytest.approx(((WIDTH - 1) / 2, (HEIGHT - 1) / 2))
-        pose = frame.extras["camera_pose"]
+        pose = frame.pose.matrix
         assert pose.shape == (4, 4)
         np.testing.assert_allclose(pose[:3, :3] @ pose[:3, :3].T, np.eye(3), atol=1e-12)
         assert np.linalg.det(pose[:3, :3]) == pytest.approx(1.0)
@@ -89,7 +89,7 @@ def test_same_seed_same_frames_other_seed_other_noise():
         np.testing.assert_array_equal(a.color, b.color)
         np.testing.assert_array_equal(a.labels, b.labels)
         assert not np.array_equal(a.depth, c.depth)  # noise differs ...
-        np.testing.assert_array_equal(a.extras["camera_pose"], c.extras["camera_pose"])
+        np.testing.assert_array_equal(a.pose.matrix, c.pose.matrix)
         valid = (a.depth > 0) & (c.depth > 0)
         # ... but the geometry does not: a few mm apart at ~1.3 m
         difference = np.abs(a.depth[valid].astype(int) - c.depth[valid].astype(int))
@@ -119,7 +119,7 @@ def test_colour_noise_is_optional_seeded_and_small():
 
 def test_the_camera_moves_smoothly_and_keeps_looking_at_the_scene():
     frames = list(render_scene("tabletop", 3, width=WIDTH, height=HEIGHT))
-    positions = [f.extras["camera_pose"][:3, 3] for f in frames]
+    positions = [f.pose.position for f in frames]
     step = np.linalg.norm(positions[1] - positions[0])
     assert 0 < step < 0.05  # metres per frame at 30 fps
     overlap = np.mean(frames[0].labels == frames[1].labels)
@@ -213,7 +213,7 @@ def test_holes_follow_the_incidence_angle_on_a_tilted_plane():
     scene = single_object_scene([floor], target=(0.0, 2.0, 0.0), distance=2.2, elevation=27.0)
     intrinsics = kinect_intrinsics(WIDTH, HEIGHT)
     frame = render_frame(scene, 0, intrinsics)
-    pose = frame.extras["camera_pose"]
+    pose = frame.pose.matrix
     k = intrinsics
     columns, rows = np.meshgrid(np.arange(k.width), np.arange(k.height))
     rays = np.stack([(columns - k.cx) / k.fx, (rows - k.cy) / k.fy, np.ones(rows.shape)], -1)
@@ -337,8 +337,8 @@ def test_documented_ground_truth_matches_what_the_camera_sees(scene_name):
     fps = 8 / scene.orbit.period_s
     for index in range(8):
         frame = render_frame(scene, index, intrinsics, fps=fps)
-        hits = cast_rays(scene, frame.extras["camera_pose"], intrinsics)
-        pose = frame.extras["camera_pose"]
+        hits = cast_rays(scene, frame.pose.matrix, intrinsics)
+        pose = frame.pose.matrix
         k = intrinsics
         columns, rows = np.meshgrid(np.arange(k.width), np.arange(k.height))
         rays = np.stack([(columns - k.cx) / k.fx, (rows - k.cy) / k.fy, np.ones(rows.shape)], -1)

@@ -15,6 +15,7 @@ logger = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
   gngdt record synth --scene tabletop --frames 30 --out recordings/tabletop.mcap
+  gngdt record synth --scene tabletop_vanish --frames 90 --out vanish.mcap   # a changing scene
   gngdt record images --format redwood ../shared/data/rgbd/rtabmap_rgbd_test --out lab.mcap
   gngdt record images --format tum rgbd_dataset_freiburg1_xyz --out fr1_xyz.mcap
   gngdt record images --format pcl-tiff frames/ --out grabber.mcap --fx 525 --fy 525
@@ -22,6 +23,12 @@ EXAMPLES = """examples:
 
 #: Log a progress line every this many frames.
 PROGRESS_EVERY = 10
+
+
+class _DefaultsAndRawEpilog(
+    argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter
+):
+    """Show defaults, and the epilog's lines as they are."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,12 +49,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             help="colour as RawImage rgb8 (raw, default) or CompressedImage jpeg/png",
         )
 
+    from services.recording.synth import SCENES
+
+    scene_list = "\n".join(f"  {name:16s}{text}" for name, text in SCENES.items())
     synth = kinds.add_parser(
         "synth",
-        help="render a synthetic scene with ground-truth labels",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        help="render a synthetic scene with ground-truth labels and camera poses",
+        description="Render a synthetic scene with the virtual Kinect: colour, depth, "
+        "ground-truth labels and the camera's pose (/tf) per frame.",
+        epilog=f"scenes:\n{scene_list}",
+        formatter_class=_DefaultsAndRawEpilog,
     )
-    synth.add_argument("--scene", required=True, help="scene name (an unknown name lists them)")
+    synth.add_argument("--scene", required=True, metavar="NAME",
+                       help=f"scene: {', '.join(SCENES)} (described below)")
     synth.add_argument("--frames", type=int, required=True, help="number of frames")
     synth.add_argument("--width", type=int, default=640)
     synth.add_argument("--height", type=int, default=480)
@@ -71,14 +85,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_output_options(images)
 
 
-def write_recording(frames: Iterable[Frame], args: argparse.Namespace) -> int:
-    """Write ``frames`` to ``args.out`` with a progress line every ``PROGRESS_EVERY`` frames."""
+def write_recording(
+    frames: Iterable[Frame],
+    args: argparse.Namespace,
+    metadata: dict[str, dict[str, str]] | None = None,
+) -> int:
+    """Write ``frames`` to ``args.out`` with a progress line every ``PROGRESS_EVERY`` frames;
+    ``metadata``: named MCAP metadata records."""
     from services.recording.writer import RecordingWriter
 
     started = time.perf_counter()
     with RecordingWriter(
         args.out, compression=args.compression, color_format=args.color_format
     ) as writer:
+        for name, data in (metadata or {}).items():
+            writer.add_metadata(name, data)
         for frame in frames:
             writer.write_frame(frame)
             if writer.frames_written % PROGRESS_EVERY == 0:
@@ -127,10 +148,19 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     )
 
 
+def _synth_metadata(args: argparse.Namespace) -> dict[str, dict[str, str]]:
+    from services.recording.scenes import build_scene
+    from services.recording.synth import SCENE_METADATA, scene_metadata
+
+    return {SCENE_METADATA: scene_metadata(build_scene(args.scene), args.fps)}
+
+
 def main(args: argparse.Namespace) -> int:
     try:
-        frames = _synth_frames(args) if args.record_kind == "synth" else _image_frames(args)
-        return write_recording(frames, args)
+        if args.record_kind == "synth":
+            frames = _synth_frames(args)
+            return write_recording(frames, args, _synth_metadata(args))
+        return write_recording(_image_frames(args), args)
     except (RecordingError, ValueError) as error:
         logger.error("%s", error)
         return 2

@@ -11,6 +11,16 @@ Channels are recognised by schema, whatever their topic:
 The first channel seen in each role (colour, depth, calibration, labels) is used; other channels,
 and channels of any other schema, are ignored. ``camera_prefix`` restricts the topics considered.
 
+Camera poses come from transform channels, whatever their topic: ``foxglove.FrameTransform``
+(gngdt's ``/tf``), ``foxglove.FrameTransforms`` and ROS 2 ``tf2_msgs/msg/TFMessage`` (``/tf``;
+``/tf_static`` holds static transforms). They are read in a first pass, then each frame's pose is
+the transform from the fixed frame to the colour image's ``frame_id`` at the frame's stamp,
+through any chain of frames, interpolated (:mod:`services.recording.transforms`). The fixed frame
+is ``fixed_frame``, or with ``"auto"`` the first of ``world``, ``map``, ``odom`` connected to the
+camera, else the root of the camera's tree. A recording whose transforms never connect the
+fixed frame and the camera gives frames without a pose, with one warning naming the frames; a
+frame whose time the transforms do not cover has no pose either (warned).
+
 Frames: a colour image and a depth image are paired when their stamps (the message's own
 timestamp/header stamp, else the MCAP ``log_time``) differ by at most ``max_skew_ns`` (default
 0: the same stamp, as gngdt writes them). The frame takes the colour stamp, the latest
@@ -37,9 +47,10 @@ from typing import IO, Any
 import numpy as np
 
 from services.recording.errors import RecordingError
-from services.recording.frame import CameraIntrinsics, Frame
+from services.recording.frame import CameraIntrinsics, CameraPose, Frame
+from services.recording.transforms import TransformError, TransformTree
 
-__all__ = ["RecordingError", "read_frames", "recording_info"]
+__all__ = ["RecordingError", "read_frames", "recording_info", "recording_metadata"]
 
 logger = logging.getLogger(__name__)
 
@@ -63,6 +74,13 @@ _IMAGE_SCHEMAS = frozenset(
 _ROS_SCHEMAS = frozenset(
     {"sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "sensor_msgs/msg/CameraInfo"}
 )
+_TRANSFORM_SCHEMAS = frozenset(
+    {"foxglove.FrameTransform", "foxglove.FrameTransforms", "tf2_msgs/msg/TFMessage"}
+)
+#: fixed frames tried, in this order, when the caller asks for "auto"
+FIXED_FRAME_CANDIDATES = ("world", "map", "odom")
+#: frames without a pose are warned about one by one up to this many, then only counted
+MAX_POSE_WARNINGS = 5
 
 
 @dataclass
@@ -71,6 +89,7 @@ class _Image:
 
     stamp_ns: int
     pixels: np.ndarray
+    frame_id: str = ""
 
 
 class _DecodeFailure(Exception):
@@ -161,6 +180,13 @@ class _MessageDecoder:
             raise _DecodeFailure(f"cannot decode {schema.name}: {error}") from error
 
     @staticmethod
+    def frame_id(schema_name: str, payload: Any) -> str:
+        """The image's coordinate frame name (foxglove ``frame_id``, ROS ``header.frame_id``)."""
+        if schema_name in _FOXGLOVE_SCHEMAS:
+            return str(payload.frame_id)
+        return str(payload.header.frame_id)
+
+    @staticmethod
     def stamp_ns(schema_name: str, payload: Any, log_time_ns: int) -> int:
         """The message's own stamp in ns, or ``log_time_ns`` when it carries none."""
         if schema_name in _FOXGLOVE_SCHEMAS:
@@ -238,8 +264,10 @@ class _FrameAssembler:
         intrinsics: CameraIntrinsics | None,
         max_skew_ns: int,
         on_bad_frame: BadFrameHandler | None = None,
+        poses: PoseLookup | None = None,
     ) -> None:
         self.path = path
+        self.poses = poses
         self.on_bad_frame = on_bad_frame
         self.calibration = intrinsics
         self.max_skew_ns = max_skew_ns
@@ -335,9 +363,148 @@ class _FrameAssembler:
             depth=normalize_depth(depth.pixels),
             intrinsics=self.calibration,
             labels=None if labels is None else labels.astype(np.uint16, copy=False),
+            pose=None if self.poses is None else self.poses(
+                color.frame_id or depth.frame_id, color.stamp_ns, self.next_index
+            ),
         )
         self.next_index += 1
         return frame
+
+
+def _transform_samples(
+    schema: Any, channel: Any, message: Any, decoder: _MessageDecoder
+) -> Iterator[tuple[str, str, int, list[float], list[float], bool]]:
+    """(parent, child, stamp_ns, translation, quaternion xyzw, static) of one transform message."""
+    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+    from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+
+    from schemas.packing import MessageError, parse_message, timestamp_to_ns
+
+    static = channel.topic.rstrip("/").endswith("tf_static")
+    try:
+        if schema.name == "foxglove.FrameTransform":
+            transforms = [parse_message(FrameTransform, message.data)]
+        elif schema.name == "foxglove.FrameTransforms":
+            transforms = list(parse_message(FrameTransforms, message.data).transforms)
+        else:
+            for stamped in decoder.parse(schema, message).transforms:
+                stamp = stamped.header.stamp.sec * 1_000_000_000 + stamped.header.stamp.nanosec
+                t, q = stamped.transform.translation, stamped.transform.rotation
+                yield (stamped.header.frame_id, stamped.child_frame_id, stamp or message.log_time,
+                       [t.x, t.y, t.z], [q.x, q.y, q.z, q.w], static)
+            return
+    except MessageError as error:
+        raise _DecodeFailure(str(error)) from error
+    for transform in transforms:
+        t, q = transform.translation, transform.rotation
+        yield (transform.parent_frame_id, transform.child_frame_id,
+               timestamp_to_ns(transform.timestamp) or message.log_time,
+               [t.x, t.y, t.z], [q.x, q.y, q.z, q.w], static)
+
+
+def _may_have_transforms(stream: IO[bytes]) -> bool:
+    """False when the file's summary lists no transform channel (so no pass is needed)."""
+    from mcap.reader import SeekingReader
+
+    try:
+        summary = SeekingReader(stream).get_summary()
+    except Exception:  # no readable summary: only a full pass can tell
+        summary = None
+    finally:
+        stream.seek(0)
+    if summary is None:
+        return True
+    return any(
+        schema.name in _TRANSFORM_SCHEMAS for schema in summary.schemas.values()
+    )
+
+
+def read_transforms(stream: IO[bytes], path: Path) -> TransformTree:
+    """Every transform of the recording (first pass). A bad transform message is warned about
+    (naming its frames) and skipped; damage to the file ends the pass, the main pass reports it."""
+    tree = TransformTree()
+    if not _may_have_transforms(stream):
+        return tree
+    decoder = _MessageDecoder()
+    bad = 0
+    try:
+        for schema, channel, message in _open_messages(stream):
+            if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
+                continue
+            try:
+                for parent, child, stamp, translation, rotation, static in _transform_samples(
+                    schema, channel, message, decoder
+                ):
+                    tree.add(parent, child, stamp, translation, rotation, static)
+            except (_DecodeFailure, TransformError) as error:
+                bad += 1
+                if bad <= MAX_POSE_WARNINGS:
+                    logger.warning("%s: %s: %s; skipped", path, channel.topic, error)
+    except Exception as error:  # damaged file: keep the transforms read so far
+        logger.debug("%s: transform pass stopped: %s", path, error)
+    if bad > MAX_POSE_WARNINGS:
+        logger.warning("%s: %d bad transform messages skipped in all", path, bad)
+    return tree
+
+
+class PoseLookup:
+    """Each frame's camera pose from the recording's transforms (see the module docstring)."""
+
+    def __init__(self, path: Path, transforms: TransformTree, fixed_frame: str) -> None:
+        self.path = path
+        self.transforms = transforms
+        self.requested = fixed_frame
+        self.fixed_frames: dict[str, str | None] = {}  # camera frame -> fixed frame (None: none)
+        self.missing = 0
+
+    def fixed_frame_for(self, camera_frame: str) -> str | None:
+        """The fixed frame poses of ``camera_frame`` are given in; None (warned once) when the
+        transforms never connect them."""
+        if camera_frame in self.fixed_frames:
+            return self.fixed_frames[camera_frame]
+        tree = self.transforms
+        if self.requested == "auto":
+            connected = [
+                frame for frame in FIXED_FRAME_CANDIDATES
+                if frame != camera_frame and tree.chain(frame, camera_frame) is not None
+            ]
+            root = tree.root(camera_frame) if camera_frame in tree.frames else None
+            fixed = connected[0] if connected else (root if root != camera_frame else None)
+        else:
+            fixed = self.requested if tree.chain(self.requested, camera_frame) else None
+        if fixed is None:
+            wanted = (" or ".join(repr(f) for f in FIXED_FRAME_CANDIDATES)
+                      if self.requested == "auto" else repr(self.requested))
+            logger.warning(
+                "%s: the transforms never connect %s to the images' frame %r (known frames: %s); "
+                "frames have no pose", self.path, wanted, camera_frame,
+                ", ".join(sorted(tree.frames)))
+        else:
+            logger.info("%s: camera poses of %r in %r (%s)", self.path, camera_frame, fixed,
+                        " -> ".join(tree.chain(fixed, camera_frame) or []))
+        self.fixed_frames[camera_frame] = fixed
+        return fixed
+
+    def __call__(self, camera_frame: str, stamp_ns: int, index: int) -> CameraPose | None:
+        """The camera's pose at ``stamp_ns``, or None (warned) when there is none."""
+        if not camera_frame:
+            if "" not in self.fixed_frames:
+                self.fixed_frames[""] = None
+                logger.warning("%s: the images carry no frame_id, so no pose can be attached",
+                               self.path)
+            return None
+        fixed = self.fixed_frame_for(camera_frame)
+        if fixed is None:
+            return None
+        try:
+            return CameraPose(self.transforms.lookup(fixed, camera_frame, stamp_ns), fixed)
+        except TransformError as error:
+            self.missing += 1
+            if self.missing <= MAX_POSE_WARNINGS:
+                logger.warning("%s: frame %d has no pose: %s", self.path, index, error)
+            elif self.missing == MAX_POSE_WARNINGS + 1:
+                logger.warning("%s: more frames without a pose; not warned one by one", self.path)
+            return None
 
 
 def _topic_matches(topic: str, camera_prefix: str | None) -> bool:
@@ -354,13 +521,15 @@ def read_frames(
     intrinsics: CameraIntrinsics | None = None,
     max_skew_ns: int = 0,
     on_bad_frame: BadFrameHandler | None = None,
+    fixed_frame: str | None = "auto",
 ) -> Iterator[Frame]:
     """Yield the frames of an MCAP recording in log-time order (see the module docstring).
 
     camera_prefix: only topics under it (``"/camera"``, ``"/kinect"``). intrinsics: used until a
     calibration message arrives (and when the recording has none). max_skew_ns: largest stamp
     difference between a paired colour and depth image. on_bad_frame: called with the
-    RecordingError of each bad frame, which is then skipped (default: raise it).
+    RecordingError of each bad frame, which is then skipped (default: raise it). fixed_frame:
+    the frame poses are given in (``"auto"``: see the module docstring; None: no poses).
     Raises RecordingError naming the file and frame for missing calibration, mismatched sizes,
     undecodable messages and truncated or corrupt files -- after yielding the frames before.
     """
@@ -370,7 +539,13 @@ def read_frames(
     except OSError as error:
         raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
     with stream:
-        assembler = _FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame)
+        poses = None
+        if fixed_frame is not None:
+            transforms = read_transforms(stream, path)
+            if len(transforms):
+                poses = PoseLookup(path, transforms, fixed_frame)
+            stream.seek(0)
+        assembler = _FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame, poses)
         yield from _read_stream(path, stream, camera_prefix, assembler)
 
 
@@ -398,6 +573,7 @@ def _read_stream(
                 image = _Image(
                     decoder.stamp_ns(schema.name, payload, message.log_time),
                     decoder.pixels(schema.name, payload),
+                    decoder.frame_id(schema.name, payload),
                 )
             except _DecodeFailure as failure:
                 error = assembler.error(f"{channel.topic}: {failure}")
@@ -467,3 +643,20 @@ def recording_info(path: str | Path) -> dict[str, Any]:
         "messages": statistics.message_count,
         "channels": channels,
     }
+
+
+def recording_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    """The recording's MCAP metadata records, by name (e.g. ``gngdt.scene`` of a synthetic
+    scene); empty when it has none or no readable summary."""
+    from mcap.reader import SeekingReader
+
+    path = Path(path)
+    try:
+        with open(path, "rb") as stream:
+            return {record.name: dict(record.metadata)
+                    for record in SeekingReader(stream).iter_metadata()}
+    except OSError as error:
+        raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
+    except Exception as error:  # no summary / damaged index: no metadata to offer
+        logger.debug("%s: no readable metadata (%s)", path, error)
+        return {}

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -58,6 +58,15 @@ class Primitive(ABC):
     @abstractmethod
     def corners(self) -> np.ndarray:
         """``(8, 3) float64`` corners of a box enclosing the primitive (for culling)."""
+
+    @abstractmethod
+    def translated(self, offset: np.ndarray) -> Primitive:
+        """The same primitive moved by ``offset (3,)`` metres."""
+
+
+def _shifted(point: tuple[float, ...], offset: np.ndarray) -> tuple[float, float, float]:
+    x, y, z = (float(v) for v in np.asarray(point, dtype=np.float64) + offset)
+    return x, y, z
 
 
 def _axis_box_corners(low: np.ndarray, high: np.ndarray) -> np.ndarray:
@@ -118,6 +127,9 @@ class Rectangle(Primitive):
         rim = [center + su * hu * axis_u + sv * hv * axis_v for su in (-1, 1) for sv in (-1, 1)]
         return np.array(rim + rim, dtype=np.float64)
 
+    def translated(self, offset: np.ndarray) -> Rectangle:
+        return replace(self, center=_shifted(self.center, offset))
+
 
 @dataclass(frozen=True)
 class ConvexPolyhedron(Primitive):
@@ -159,6 +171,15 @@ class ConvexPolyhedron(Primitive):
     def corners(self) -> np.ndarray:
         vertices = np.asarray(self.vertices, dtype=np.float64)
         return _axis_box_corners(vertices.min(axis=0), vertices.max(axis=0))
+
+    def translated(self, offset: np.ndarray) -> ConvexPolyhedron:
+        normals = np.asarray(self.plane_normals, dtype=np.float64)
+        offsets = np.asarray(self.plane_offsets, dtype=np.float64) + normals @ offset
+        return replace(
+            self,
+            plane_offsets=tuple(float(d) for d in offsets),
+            vertices=tuple(_shifted(vertex, offset) for vertex in self.vertices),
+        )
 
 
 def _yaw_matrix(yaw_deg: float) -> np.ndarray:
@@ -307,6 +328,9 @@ class Cylinder(Primitive):
         ends = np.array([base, base + self.height * axis])
         return _axis_box_corners(ends.min(axis=0) - self.radius, ends.max(axis=0) + self.radius)
 
+    def translated(self, offset: np.ndarray) -> Cylinder:
+        return replace(self, base_center=_shifted(self.base_center, offset))
+
 
 @dataclass(frozen=True)
 class Sphere(Primitive):
@@ -336,6 +360,23 @@ class Sphere(Primitive):
     def corners(self) -> np.ndarray:
         center = np.asarray(self.center, dtype=np.float64)
         return _axis_box_corners(center - self.radius, center + self.radius)
+
+    def translated(self, offset: np.ndarray) -> Sphere:
+        return replace(self, center=_shifted(self.center, offset))
+
+
+def look_at(position: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``(4, 4) float64`` world_from_camera of a camera at ``position`` looking at ``target``,
+    level (its x axis horizontal); camera axes x right, y down, z forward."""
+    forward = target - position
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    pose = np.eye(4)
+    pose[:3, :3] = np.column_stack([right, down, forward])
+    pose[:3, 3] = position
+    return pose
 
 
 @dataclass(frozen=True)
@@ -372,15 +413,74 @@ class Orbit:
                 math.sin(elevation),
             ]
         )
-        forward = target - position
-        forward /= np.linalg.norm(forward)
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        down = np.cross(forward, right)
-        pose = np.eye(4)
-        pose[:3, :3] = np.column_stack([right, down, forward])
-        pose[:3, 3] = position
-        return pose
+        return look_at(position, target)
+
+
+@dataclass(frozen=True)
+class Walk:
+    """A camera that travels from ``start`` to ``end`` and back (positions, metres), looking at a
+    point that travels from ``look_start`` to ``look_end`` with it.
+
+    One way takes ``period_s / 2`` seconds; the speed follows a cosine, so the camera eases out
+    of and into both ends: at time ``s`` it is the fraction ``(1 - cos(2 pi s / period_s)) / 2``
+    of the way.
+    """
+
+    start: tuple[float, float, float]
+    end: tuple[float, float, float]
+    look_start: tuple[float, float, float]
+    look_end: tuple[float, float, float]
+    period_s: float
+
+    def pose(self, time_s: float) -> np.ndarray:
+        """``(4, 4) float64`` world_from_camera (camera axes: x right, y down, z forward)."""
+        fraction = 0.5 - 0.5 * math.cos(2.0 * math.pi * time_s / self.period_s)
+
+        def along(first: tuple[float, ...], last: tuple[float, ...]) -> np.ndarray:
+            a, b = np.asarray(first, dtype=np.float64), np.asarray(last, dtype=np.float64)
+            return a + fraction * (b - a)
+
+        return look_at(along(self.start, self.end), along(self.look_start, self.look_end))
+
+
+#: how the camera moves: anything with ``pose(time_s) -> (4, 4)`` and ``period_s``
+CameraPath = Orbit | Walk
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A change of one primitive during a recording (the scene is static without any).
+
+    From ``start_s`` to ``end_s`` (seconds from the first frame) the primitive ``primitive``
+    slides by ``offset (3,)`` metres at constant speed and then stays; with ``vanish`` it is gone
+    from ``start_s`` on (``offset`` and ``end_s`` unused). Segment ids never change: a vanished
+    primitive's ids are simply no longer seen.
+    """
+
+    primitive: str
+    start_s: float
+    end_s: float | None = None
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    vanish: bool = False
+
+    def displacement(self, time_s: float) -> np.ndarray:
+        """``(3,)`` metres the primitive has moved by ``time_s``."""
+        if time_s <= self.start_s:
+            return np.zeros(3)
+        span = (self.end_s if self.end_s is not None else self.start_s) - self.start_s
+        fraction = 1.0 if span <= 0 else min(1.0, (time_s - self.start_s) / span)
+        return fraction * np.asarray(self.offset, dtype=np.float64)
+
+    def describe(self, fps: float) -> dict[str, object]:
+        """The motion as recording metadata: frames rather than seconds."""
+        end_s = self.end_s if self.end_s is not None else self.start_s
+        return {
+            "primitive": self.primitive,
+            "kind": "vanish" if self.vanish else "move",
+            "start_frame": math.ceil(self.start_s * fps - 1e-9),
+            "end_frame": math.ceil(end_s * fps - 1e-9),
+            "offset_m": list(self.offset),
+        }
 
 
 @dataclass(frozen=True)
@@ -390,11 +490,16 @@ class Scene:
     name: str
     description: str
     primitives: tuple[Primitive, ...]
-    orbit: Orbit
+    #: the camera's path (an Orbit or a Walk)
+    orbit: CameraPath
     #: RGB 0-255 where a ray hits nothing
     background: tuple[int, int, int]
     #: expected cluster counts per GNG-DT topology, see ``SCENE_GROUND_TRUTH`` in synth.py
     ground_truth: dict[str, object]
+    #: primitives that move or vanish during the recording
+    motions: tuple[Motion, ...] = ()
+    #: names of primitives that are not there (rays pass through them); set by :meth:`at`
+    absent: frozenset[str] = frozenset()
 
     def primitive(self, name: str) -> Primitive:
         """The primitive called ``name``; ``KeyError`` if there is none."""
@@ -402,6 +507,27 @@ class Scene:
             if candidate.name == name:
                 return candidate
         raise KeyError(f"scene {self.name!r} has no primitive {name!r}")
+
+    def at(self, time_s: float) -> Scene:
+        """The scene as it is ``time_s`` seconds after the first frame (itself when static).
+
+        Primitives keep their places in ``primitives`` (so segment ids stay the same); a moved
+        one is replaced by its translated copy, a vanished one is named in ``absent``.
+        """
+        if not self.motions:
+            return self
+        primitives = list(self.primitives)
+        absent = set(self.absent)
+        for motion in self.motions:
+            index = next(
+                i for i, candidate in enumerate(primitives) if candidate.name == motion.primitive
+            )
+            if motion.vanish:
+                if time_s >= motion.start_s:
+                    absent.add(motion.primitive)
+            else:
+                primitives[index] = primitives[index].translated(motion.displacement(time_s))
+        return replace(self, primitives=tuple(primitives), absent=frozenset(absent))
 
 
 BROWN = (140, 90, 50)
@@ -459,13 +585,8 @@ def data2_scene() -> Scene:
 TABLE_TOP_HEIGHT = 0.74
 
 
-def tabletop_scene() -> Scene:
-    """A table with four coloured objects, standing on a floor in front of a wall.
-
-    Colour regions: floor, wall, table (top and side panels), red box, green cylinder, blue sphere,
-    yellow prism -> 7. Dominant plane orientations: up (floor, table top, object tops) and the
-    wall's normal, facing the camera.
-    """
+def _tabletop_primitives() -> tuple[Primitive, ...]:
+    """The tabletop scene's floor, wall, table and four objects."""
     wood = (150, 105, 60)
     top = TABLE_TOP_HEIGHT
     # Two full-depth side panels rather than four legs: the back legs of a four-legged table
@@ -479,7 +600,7 @@ def tabletop_scene() -> Scene:
         )
         for side, sign in (("left", -1.0), ("right", 1.0))
     )
-    primitives: tuple[Primitive, ...] = (
+    return (
         Rectangle("floor", (105, 105, 110), center=(0.0, 0.0, 0.0), half_size=(4.0, 4.0)),
         Rectangle(
             "wall",
@@ -516,20 +637,33 @@ def tabletop_scene() -> Scene:
             yaw_deg=-20.0,
         ),
     )
+
+
+#: the tabletop scene's camera arc: 1.9-2.1 m from the table, 30-40 degrees above, +-20 degrees
+TABLETOP_ORBIT = Orbit(
+    target=(0.0, 0.3, 0.45),
+    distance=2.0,
+    elevation_deg=35.0,
+    azimuth_swing_deg=20.0,
+    elevation_swing_deg=5.0,
+    distance_swing=0.1,
+    period_s=12.0,
+)
+
+
+def tabletop_scene() -> Scene:
+    """A table with four coloured objects, standing on a floor in front of a wall.
+
+    Colour regions: floor, wall, table (top and side panels), red box, green cylinder, blue sphere,
+    yellow prism -> 7. Dominant plane orientations: up (floor, table top, object tops) and the
+    wall's normal, facing the camera.
+    """
     return Scene(
         name="tabletop",
         description="a table with a red box, green cylinder, blue sphere and yellow prism, "
         "on a floor in front of a wall",
-        primitives=primitives,
-        orbit=Orbit(
-            target=(0.0, 0.3, 0.45),
-            distance=2.0,
-            elevation_deg=35.0,
-            azimuth_swing_deg=20.0,
-            elevation_swing_deg=5.0,
-            distance_swing=0.1,
-            period_s=12.0,
-        ),
+        primitives=_tabletop_primitives(),
+        orbit=TABLETOP_ORBIT,
         background=(0, 0, 0),
         ground_truth={
             "col": 7,
@@ -538,10 +672,75 @@ def tabletop_scene() -> Scene:
     )
 
 
+#: when the tabletop's objects change in the moving scenes, seconds after the first frame
+CHANGE_AT_S = 1.0
+
+
+def tabletop_vanish_scene() -> Scene:
+    """The tabletop, camera orbiting as in ``tabletop``; the red box vanishes 1 s in (frame 30
+    at 30 fps), leaving the table top under it to be seen."""
+    return Scene(
+        name="tabletop_vanish",
+        description="tabletop with the camera orbiting; the red box vanishes 1 s in",
+        primitives=_tabletop_primitives(),
+        orbit=TABLETOP_ORBIT,
+        background=(0, 0, 0),
+        ground_truth={},
+        motions=(Motion("red_box", start_s=CHANGE_AT_S, vanish=True),),
+    )
+
+
+def tabletop_move_scene() -> Scene:
+    """The tabletop, camera orbiting as in ``tabletop``; from 1 s to 2.5 s in the blue sphere
+    slides 0.3 m away from the camera (+y, 0.2 m/s) across the table, then rests."""
+    return Scene(
+        name="tabletop_move",
+        description="tabletop with the camera orbiting; the blue sphere slides 0.3 m across "
+        "the table from 1 s to 2.5 s",
+        primitives=_tabletop_primitives(),
+        orbit=TABLETOP_ORBIT,
+        background=(0, 0, 0),
+        ground_truth={},
+        motions=(
+            Motion("blue_sphere", start_s=CHANGE_AT_S, end_s=CHANGE_AT_S + 1.5,
+                   offset=(0.0, 0.3, 0.0)),
+        ),
+    )
+
+
+def tabletop_walk_scene() -> Scene:
+    """The tabletop plus a crate on the floor to its left and a bin to its right; the camera
+    walks 3.2 m sideways past them and back (8 s period: 4 s one way), so the crate leaves the
+    view on the way out and comes back into it on the way back. Nothing in the scene moves."""
+    primitives = (
+        *_tabletop_primitives(),
+        box("crate", (70, 140, 160), center=(-1.7, 0.5, 0.25), size=(0.5, 0.5, 0.5), yaw_deg=10),
+        Cylinder("bin", (150, 60, 150), base_center=(1.7, 0.4, 0.0), radius=0.25, height=0.6),
+    )
+    return Scene(
+        name="tabletop_walk",
+        description="a camera walking 3.2 m past the tabletop, a crate and a bin, and back "
+        "(static scene)",
+        primitives=primitives,
+        orbit=Walk(
+            start=(-1.6, -1.3, 1.5),
+            end=(1.6, -1.3, 1.5),
+            look_start=(-1.4, 0.6, 0.4),
+            look_end=(1.4, 0.6, 0.4),
+            period_s=8.0,
+        ),
+        background=(0, 0, 0),
+        ground_truth={},
+    )
+
+
 #: scene name -> builder. Builders are cheap; scenes are immutable.
 SCENE_BUILDERS: dict[str, Callable[[], Scene]] = {
     "data2": data2_scene,
     "tabletop": tabletop_scene,
+    "tabletop_walk": tabletop_walk_scene,
+    "tabletop_vanish": tabletop_vanish_scene,
+    "tabletop_move": tabletop_move_scene,
 }
 
 

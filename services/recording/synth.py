@@ -13,13 +13,14 @@ Same scene, size, seed and frame index -> the same frame, bit for bit.
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
-from services.recording.frame import CameraIntrinsics, Frame
+from services.recording.frame import CameraIntrinsics, CameraPose, Frame
 from services.recording.scenes import SCENE_BUILDERS, Scene, build_scene
 
 #: scene name -> one-line description
@@ -127,6 +128,8 @@ def cast_rays(
     face = np.zeros(shape, dtype=np.int8)
     cos_incidence = np.zeros(shape)
     for index, candidate in enumerate(scene.primitives):
+        if candidate.name in scene.absent:
+            continue
         window = _screen_window(candidate.corners(), camera_from_world, intrinsics)
         if window is None:
             continue
@@ -234,13 +237,15 @@ def render_frame(
     color_noise: float = 0.0,
     rays: np.ndarray | None = None,
 ) -> Frame:
-    """Frame ``index`` of ``scene``: the camera at its orbit pose at time ``index / fps``.
+    """Frame ``index`` of ``scene``: the camera on its path and the scene as they are at time
+    ``index / fps``; the frame's ``pose`` is the camera's in the scene's ``world`` frame.
 
     The noise depends only on ``(seed, index)``, so a frame is the same whichever frames are
     rendered before it. ``rays`` is :func:`camera_rays` of ``intrinsics``, to reuse.
     """
-    world_from_camera = scene.orbit.pose(index / fps)
-    hits = cast_rays(scene, world_from_camera, intrinsics, rays)
+    time_s = index / fps
+    world_from_camera = scene.orbit.pose(time_s)
+    hits = cast_rays(scene.at(time_s), world_from_camera, intrinsics, rays)
     rng = np.random.default_rng([seed, index])
     depth = kinect_depth(hits, rng)
     color = shade(scene, hits, rng, color_noise)
@@ -255,12 +260,25 @@ def render_frame(
         depth=depth,
         intrinsics=intrinsics,
         labels=labels,
-        extras={
-            "scene": scene.name,
-            "segments": segment_names(scene),
-            "camera_pose": world_from_camera,
-        },
+        pose=CameraPose(world_from_camera),
+        extras={"scene": scene.name, "segments": segment_names(scene)},
     )
+
+
+#: name of the MCAP metadata record describing a synthetic scene
+SCENE_METADATA = "gngdt.scene"
+
+
+def scene_metadata(scene: Scene, fps: float) -> dict[str, str]:
+    """What a recording of ``scene`` stores about it (MCAP metadata ``gngdt.scene``, strings only):
+    ``scene``, ``fps``, ``segments`` (JSON {id: "primitive/face"}) and ``motions`` (JSON list of
+    {primitive, kind "move"/"vanish", start_frame, end_frame, offset_m})."""
+    return {
+        "scene": scene.name,
+        "fps": repr(float(fps)),
+        "segments": json.dumps(segment_names(scene)),
+        "motions": json.dumps([motion.describe(fps) for motion in scene.motions]),
+    }
 
 
 def _check_int(name: str, value: object, low: int, high: int | None = None) -> int:
@@ -285,8 +303,9 @@ def render_scene(
     """Render ``frames`` frames of the synthetic ``scene`` (a key of :data:`SCENES`).
 
     Yields :class:`Frame` objects: color (H, W, 3) uint8 RGB, depth (H, W) uint16 mm (0 = hole),
-    Kinect-like intrinsics, labels (H, W) uint16 segment ids (0 = nothing/hole), and extras
-    ``{"scene", "segments": {id: "primitive/face"}, "camera_pose": (4, 4) world_from_camera}``.
+    Kinect-like intrinsics, labels (H, W) uint16 segment ids (0 = nothing/hole), the camera's
+    ``pose`` in the scene's ``world`` frame, and extras ``{"scene", "segments": {id:
+    "primitive/face"}}``.
     ``color_noise``: sigma of Gaussian colour noise, 0-255 units (default 0: flat colours).
     Parameters are checked here, before the first frame: ``ValueError`` names the bad one.
     """

@@ -1,10 +1,13 @@
 """Write RGB-D frames to an MCAP recording in gngdt's foxglove-protobuf layout (DESIGN.md).
 
 Per frame, in this order and all with ``log_time`` = the frame's capture time:
-``/camera/calibration`` (foxglove.CameraCalibration, every frame), ``/camera/labels``
+``/tf`` (foxglove.FrameTransform from the fixed frame to the images' ``frame_id``, frames with a
+pose only), ``/camera/calibration`` (foxglove.CameraCalibration, every frame), ``/camera/labels``
 (foxglove.RawImage mono16, synthetic scenes only), ``/camera/depth`` (foxglove.RawImage 16UC1
 millimetres) and ``/camera/color`` (foxglove.RawImage rgb8, or foxglove.CompressedImage jpeg/png).
 MCAP chunks are written as they fill, so a crash leaves a readable prefix of whole chunks.
+Metadata records (``add_metadata``) carry what is known about the whole recording, e.g. a
+synthetic scene's segment names and motions (``gngdt.scene``).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ logger = logging.getLogger(__name__)
 COLOR_FORMATS = ("raw", "jpeg", "png")
 COMPRESSIONS = ("zstd", "lz4", "none")
 DEFAULT_CAMERA_PREFIX = "/camera"
+TF_TOPIC = "/tf"
 JPEG_QUALITY = 95
 
 
@@ -84,6 +88,10 @@ class RecordingWriter:
 
         self._check_frame(frame)
         stamp = int(frame.timestamp_ns)
+        if frame.pose is not None:
+            self.write_transform(
+                frame.pose.matrix, frame.pose.frame_id, self.frame_id, stamp, frame.index
+            )
         messages = [
             (
                 "calibration",
@@ -108,6 +116,30 @@ class RecordingWriter:
                 sequence=frame.index,
             )
         self.frames_written += 1
+
+    def write_transform(
+        self,
+        matrix: np.ndarray,
+        parent_frame_id: str,
+        child_frame_id: str,
+        timestamp_ns: int,
+        sequence: int = 0,
+        topic: str = TF_TOPIC,
+    ) -> None:
+        """Append a ``foxglove.FrameTransform`` ``parent -> child``: ``matrix`` (4, 4) maps
+        points of the child frame into the parent frame."""
+        from schemas.packing import pose_to_transform
+
+        transform = pose_to_transform(
+            matrix, parent_frame_id, child_frame_id, timestamp_ns=timestamp_ns
+        )
+        self._writer.write_message(
+            topic, transform, log_time=timestamp_ns, publish_time=timestamp_ns, sequence=sequence
+        )
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Store a named set of strings about the whole recording (an MCAP metadata record)."""
+        self._writer.add_metadata(name, data)
 
     def _color_message(self, color: np.ndarray, timestamp_ns: int):
         from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
@@ -142,6 +174,10 @@ class RecordingWriter:
                 f"labels must be {color.shape[:2]} uint16, got "
                 f"{frame.labels.dtype} {frame.labels.shape}"
             )
+        if frame.pose is not None:
+            matrix = np.asarray(frame.pose.matrix)
+            if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
+                raise fail(f"pose must be a finite (4, 4) matrix, got {matrix.shape}")
         size = (frame.intrinsics.width, frame.intrinsics.height)
         if size != (color.shape[1], color.shape[0]):
             raise fail(

@@ -1,0 +1,216 @@
+"""Rigid transforms between named frames over time, looked up the way ROS tf2 does.
+
+A transform ``parent -> child`` is the child frame's pose in the parent frame: it maps a point
+given in the child frame into the parent frame, ``p_parent = R p_child + t`` (ROS
+``TransformStamped`` and ``foxglove.FrameTransform`` both mean this). Every frame has at most one
+parent, so the frames form trees; a lookup walks from both frames up to their common ancestor.
+Static transforms (``/tf_static``) hold at every time; the others are interpolated at the
+requested time (linear translation, spherical-linear rotation) between the two samples around
+it, and held for at most ``max_extrapolation_ns`` beyond the first or last sample.
+
+Quaternions are (x, y, z, w). As tf2 does, a quaternion whose squared norm is more than
+``QUATERNION_TOLERANCE`` away from 1 is refused (a sign of a wrong field order, not rounding);
+one within it is normalised.
+"""
+
+from __future__ import annotations
+
+from bisect import insort
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "QUATERNION_TOLERANCE",
+    "TransformError",
+    "TransformTree",
+    "matrix_to_pose",
+    "pose_to_matrix",
+    "unit_quaternion",
+]
+
+#: largest | |q|^2 - 1 | accepted (tf2's own bound); anything closer to 1 is normalised
+QUATERNION_TOLERANCE = 0.01
+#: a lookup may use the first/last sample this far outside the samples' time span (20 ms: a
+#: camera frame stamped just after the last transform of a 50 Hz stream still gets it)
+DEFAULT_MAX_EXTRAPOLATION_NS = 20_000_000
+
+
+class TransformError(ValueError):
+    """A transform is invalid or cannot be looked up; the message names the frames."""
+
+
+def unit_quaternion(quaternion: object, what: str) -> np.ndarray:
+    """(4,) float64 unit quaternion (x, y, z, w); ``TransformError`` naming ``what`` when it is
+    not finite or not within ``QUATERNION_TOLERANCE`` of unit length."""
+    q = np.asarray(quaternion, dtype=np.float64).reshape(-1)
+    if q.shape != (4,) or not np.isfinite(q).all():
+        raise TransformError(f"{what}: rotation must be 4 finite numbers (x, y, z, w), got {q}")
+    norm2 = float(q @ q)
+    if abs(norm2 - 1.0) > QUATERNION_TOLERANCE:
+        raise TransformError(
+            f"{what}: rotation quaternion (x, y, z, w) = {np.round(q, 4).tolist()} has norm "
+            f"{np.sqrt(norm2):.4f}, not 1 (is the order x, y, z, w?)"
+        )
+    return q / np.sqrt(norm2)
+
+
+def pose_to_matrix(translation: object, quaternion: object, what: str = "pose") -> np.ndarray:
+    """(4, 4) float64 rigid transform from a translation (3,) and a quaternion (x, y, z, w)."""
+    from scipy.spatial.transform import Rotation
+
+    t = np.asarray(translation, dtype=np.float64).reshape(-1)
+    if t.shape != (3,) or not np.isfinite(t).all():
+        raise TransformError(f"{what}: translation must be 3 finite numbers, got {t}")
+    matrix = np.eye(4)
+    matrix[:3, :3] = Rotation.from_quat(unit_quaternion(quaternion, what)).as_matrix()
+    matrix[:3, 3] = t
+    return matrix
+
+
+def matrix_to_pose(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Translation (3,) and unit quaternion (x, y, z, w) of a (4, 4) rigid transform."""
+    from scipy.spatial.transform import Rotation
+
+    matrix = np.asarray(matrix, dtype=np.float64)
+    return matrix[:3, 3].copy(), Rotation.from_matrix(matrix[:3, :3]).as_quat()
+
+
+def _inverse(matrix: np.ndarray) -> np.ndarray:
+    inverse = np.eye(4)
+    rotation_t = matrix[:3, :3].T
+    inverse[:3, :3] = rotation_t
+    inverse[:3, 3] = -rotation_t @ matrix[:3, 3]
+    return inverse
+
+
+@dataclass
+class _Link:
+    """The samples of one parent -> child transform, kept sorted by time."""
+
+    parent: str
+    static: bool
+    samples: list[tuple[int, tuple[float, ...], tuple[float, ...]]] = field(default_factory=list)
+    #: (S,) int64 stamps of ``samples``, rebuilt after a change
+    _stamps: np.ndarray | None = None
+
+    def add(self, stamp_ns: int, translation: np.ndarray, quaternion: np.ndarray) -> None:
+        sample = (stamp_ns, tuple(translation.tolist()), tuple(quaternion.tolist()))
+        self._stamps = None
+        if self.static:
+            self.samples = [sample]  # the latest static transform replaces the previous one
+        elif not self.samples or stamp_ns > self.samples[-1][0]:
+            self.samples.append(sample)
+        else:
+            insort(self.samples, sample, key=lambda item: item[0])
+
+    def span_ns(self) -> tuple[int, int]:
+        return self.samples[0][0], self.samples[-1][0]
+
+    def at(self, stamp_ns: int, max_extrapolation_ns: int, child: str) -> np.ndarray:
+        """(4, 4) parent_from_child at ``stamp_ns``."""
+        from scipy.spatial.transform import Rotation, Slerp
+
+        if self.static:
+            _, translation, quaternion = self.samples[0]
+            return pose_to_matrix(translation, quaternion)
+        first, last = self.span_ns()
+        if stamp_ns <= first or stamp_ns >= last:
+            nearest = self.samples[0] if stamp_ns <= first else self.samples[-1]
+            if abs(stamp_ns - nearest[0]) > max_extrapolation_ns:
+                raise TransformError(
+                    f"no transform {self.parent!r} -> {child!r} at {stamp_ns / 1e9:.3f} s: "
+                    f"its {len(self.samples)} samples span {first / 1e9:.3f}-{last / 1e9:.3f} s"
+                )
+            return pose_to_matrix(nearest[1], nearest[2])
+        if self._stamps is None:
+            self._stamps = np.array([sample[0] for sample in self.samples], dtype=np.int64)
+        after = int(np.searchsorted(self._stamps, stamp_ns))
+        (t0, p0, q0), (t1, p1, q1) = self.samples[after - 1], self.samples[after]
+        fraction = (stamp_ns - t0) / (t1 - t0) if t1 > t0 else 1.0
+        rotation = Slerp([0.0, 1.0], Rotation.from_quat([q0, q1]))(fraction)
+        matrix = np.eye(4)
+        matrix[:3, :3] = rotation.as_matrix()
+        matrix[:3, 3] = np.asarray(p0) + fraction * (np.asarray(p1) - np.asarray(p0))
+        return matrix
+
+
+class TransformTree:
+    """Transforms between named frames over time; see the module docstring."""
+
+    def __init__(self, max_extrapolation_ns: int = DEFAULT_MAX_EXTRAPOLATION_NS) -> None:
+        self.max_extrapolation_ns = int(max_extrapolation_ns)
+        self._links: dict[str, _Link] = {}  # child -> link to its parent
+
+    def __len__(self) -> int:
+        return len(self._links)
+
+    @property
+    def frames(self) -> set[str]:
+        """Every frame named by a transform."""
+        return set(self._links) | {link.parent for link in self._links.values()}
+
+    def add(self, parent: str, child: str, stamp_ns: int, translation: object,
+            quaternion: object, static: bool = False) -> None:
+        """Add one sample of ``parent -> child``; ``TransformError`` naming the frames for an
+        invalid one (empty or equal names, non-finite numbers, a non-unit quaternion, a child
+        that already has another parent, a static/dynamic mix on one link)."""
+        what = f"transform {parent!r} -> {child!r}"
+        if not parent or not child or parent == child:
+            raise TransformError(f"{what}: frame ids must be two different non-empty names")
+        matrix = pose_to_matrix(translation, quaternion, what)  # validates both
+        link = self._links.get(child)
+        if link is None:
+            if child in self._ancestors(parent):
+                raise TransformError(f"{what}: would close a loop")
+            link = self._links[child] = _Link(parent, static)
+        elif link.parent != parent:
+            raise TransformError(f"{what}: {child!r} already has the parent {link.parent!r}")
+        elif link.static != static:
+            raise TransformError(f"{what}: published both as static and as dynamic")
+        t, q = matrix_to_pose(matrix)
+        link.add(int(stamp_ns), t, q)
+
+    def _ancestors(self, frame: str) -> list[str]:
+        """``frame`` and its parents up to its tree's root, in that order."""
+        chain = [frame]
+        while chain[-1] in self._links:
+            chain.append(self._links[chain[-1]].parent)
+        return chain
+
+    def root(self, frame: str) -> str:
+        """The root of the tree holding ``frame``."""
+        return self._ancestors(frame)[-1]
+
+    def chain(self, target: str, source: str) -> list[str] | None:
+        """Frames from ``target`` to ``source`` through their common ancestor, or None when they
+        are in different trees (or unknown)."""
+        up_from_source = self._ancestors(source)
+        up_from_target = self._ancestors(target)
+        common = next((frame for frame in up_from_source if frame in up_from_target), None)
+        if common is None:
+            return None
+        down = up_from_source[: up_from_source.index(common) + 1][::-1]
+        return up_from_target[: up_from_target.index(common)] + down
+
+    def lookup(self, target: str, source: str, stamp_ns: int) -> np.ndarray:
+        """(4, 4) float64 ``target_from_source`` at ``stamp_ns``: maps points given in
+        ``source`` into ``target``. ``TransformError`` naming the frames when the frames are not
+        connected or a link has no sample near ``stamp_ns``."""
+        up_from_source = self._ancestors(source)
+        up_from_target = self._ancestors(target)
+        common = next((frame for frame in up_from_source if frame in up_from_target), None)
+        if common is None:
+            raise TransformError(
+                f"no transform chain from {target!r} to {source!r} "
+                f"(known frames: {', '.join(sorted(self.frames)) or 'none'})"
+            )
+
+        def common_from(chain: list[str]) -> np.ndarray:
+            matrix = np.eye(4)
+            for child in chain[: chain.index(common)]:
+                link = self._links[child]
+                matrix = link.at(stamp_ns, self.max_extrapolation_ns, child) @ matrix
+            return matrix
+
+        return _inverse(common_from(up_from_target)) @ common_from(up_from_source)
