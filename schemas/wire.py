@@ -46,4 +46,6 @@ class FrameStamp:
         if data is None or len(data) != _ATTACHMENT.size:
             raise ValueError("missing or malformed frame attachment")
         sequence, capture_time_ns = _ATTACHMENT.unpack(data)
+        if sequence >= 2**63:  # timelines (rerun's, MCAP's) hold signed 64-bit sequences
+            raise ValueError(f"frame sequence {sequence} is out of range")
         return cls(sequence, capture_time_ns)

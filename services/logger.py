@@ -335,6 +335,8 @@ class RerunLog:
     def due(self, paths: EntityPaths, stream: str, sequence: int, every: int) -> bool:
         """Whether frame ``sequence`` of ``stream`` is logged: ``every`` frames after the last
         one logged (so frames the learner skipped do not starve a stream), or a new stream."""
+        if every == 1:
+            return True
         key = (paths.camera, stream)
         last = self._last_logged.get(key)
         if last is not None and last <= sequence < last + every:
@@ -418,11 +420,12 @@ class RerunLog:
         """Boxes3D, one per object: colour and label by its persistent id (``object_id``)."""
         import rerun as rr
 
+        ids = [rr.AnyValues(object_id=boxes.ids, node_count=boxes.node_counts)] if len(
+            boxes.ids) else []  # no objects: empty boxes clear the previous ones
         self.rec.log(paths.objects, rr.Boxes3D(
             centers=boxes.centers, half_sizes=boxes.half_sizes,
             quaternions=boxes.quaternions_xyzw, colors=boxes.colors, labels=boxes.labels,
-            radii=rr.Radius.ui_points(2.0), fill_mode="majorwireframe"),
-            rr.AnyValues(object_id=boxes.ids, node_count=boxes.node_counts))
+            radii=rr.Radius.ui_points(2.0), fill_mode="majorwireframe"), *ids)
         self.scalar(paths, "objects", len(boxes.ids))
 
     def status(self, paths: EntityPaths, status: LearnerStatusInfo) -> None:

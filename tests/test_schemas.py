@@ -403,3 +403,15 @@ def test_negative_timestamp_round_trips() -> None:
     message = image_to_raw(np.zeros((1, 1), np.uint8), timestamp_ns=-1_500_000_000)
     assert message.timestamp.seconds == -2 and message.timestamp.nanos == 500_000_000
     assert math.isclose(message.timestamp.seconds + message.timestamp.nanos / 1e9, -1.5)
+
+
+def test_frame_attachment_refuses_sequences_beyond_signed_64_bits() -> None:
+    import struct
+
+    from schemas.wire import FrameStamp
+
+    largest = FrameStamp(2**63 - 1, 5).to_attachment()
+    assert FrameStamp.from_attachment(largest).sequence == 2**63 - 1
+    # rerun's and MCAP's timelines are signed: such a frame would crash a consumer, not log it
+    with pytest.raises(ValueError, match="out of range"):
+        FrameStamp.from_attachment(struct.pack("<Qq", 2**63, 0))
