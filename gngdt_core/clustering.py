@@ -28,11 +28,19 @@ def connected_component_labels(n_nodes: int, edges: np.ndarray, min_size: int = 
         (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])), shape=(n_nodes, n_nodes)
     ).tocsr()
     _, raw = connected_components(graph, directed=False)
-    sizes = np.bincount(raw)
-    first_node = np.full(sizes.size, n_nodes)
-    np.minimum.at(first_node, raw, np.arange(n_nodes))
-    ranking = np.lexsort((first_node, -sizes))  # by size descending, then first node
+    return rank_by_size(raw, min_size)
+
+
+def rank_by_size(labels: np.ndarray, min_size: int = 1) -> np.ndarray:
+    """(N,) int32 relabelling of any integer ``labels`` (N,): 0..k-1 by decreasing group size
+    (ties: the group holding the lowest index first); groups below ``min_size`` get -1."""
+    n = labels.size
+    _, dense = np.unique(labels, return_inverse=True)
+    sizes = np.bincount(dense)
+    first = np.full(sizes.size, n)
+    np.minimum.at(first, dense, np.arange(n))
+    ranking = np.lexsort((first, -sizes))  # by size descending, then first index
     kept = ranking[sizes[ranking] >= min_size]
     new_label = np.full(sizes.size, -1, dtype=np.int32)
     new_label[kept] = np.arange(kept.size, dtype=np.int32)
-    return new_label[raw]
+    return new_label[dense]

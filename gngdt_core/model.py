@@ -19,19 +19,31 @@ Step 0 places the two initial nodes on two random input samples. Growth stops at
 from __future__ import annotations
 
 import json
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from gngdt_core import _kernels as K
+from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
 from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
+from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_network
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 _STATE_VERSION = 2  # 2: persistent node ids (``ids``, a fourth counter)
+#: a nearest-node batch is split over the CPUs when each part gets at least this many points
+PARALLEL_MIN_POINTS = 50_000
+
+
+def split_range(n: int, min_part: int) -> list[int]:
+    """Bounds of up to one part per usable CPU over ``range(n)``, each part >= ``min_part``."""
+    parts = max(1, min(len(os.sched_getaffinity(0)), n // max(min_part, 1)))
+    return [n * k // parts for k in range(parts + 1)]
 
 
 def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
@@ -267,16 +279,42 @@ class _GrowingGas:
         return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
 
     def predict(self, positions: Any) -> np.ndarray:
-        """(N,) int64 index of the winner node (nearest by position) of each row."""
+        """(N,) int64 index of the winner node (nearest by position) of each row.
+
+        Rows in scan order (a depth image's pixels row by row) are fastest: each search starts
+        from the previous row's winner in the learner's own spatial grid.
+        """
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        query = np.asarray(positions, dtype=np.float64)
+        query = np.asarray(positions)
         if query.ndim != 2 or query.shape[1] != self._dim:
             raise ValueError(f"positions must have shape (N, {self._dim}), got {query.shape}")
+        if query.dtype not in (np.float32, np.float64):
+            query = query.astype(np.float64)
         if not np.isfinite(query).all():
             raise ValueError("positions contain NaN or inf")
-        _, winners = cKDTree(self.positions_).query(query, k=1)
-        return np.asarray(winners, dtype=np.int64)
+        if self._dim != 3 or self._MODE != K.MODE_GNGDT:
+            _, winners = cKDTree(self.positions_).query(query, k=1)
+            return np.asarray(winners, dtype=np.int64)
+        return self._nearest_nodes(np.ascontiguousarray(query))[0].astype(np.int64)
+
+    def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
+        large batches are split over the CPUs (the kernel releases the GIL)."""
+        winners = np.empty(points.shape[0], dtype=np.int32)
+        sq_distances = np.empty(points.shape[0])
+        a = self._arrays
+        grid = (self.n_nodes_, a["ghead"], a["gnext"], bool(self._istate[K.I_GRID]),
+                self._fstate[K.F_CELL], winners, sq_distances)
+        bounds = split_range(points.shape[0], PARALLEL_MIN_POINTS)
+        if len(bounds) == 2:
+            SK.nearest_nodes(points, 0, points.shape[0], a["pos"], *grid)
+        else:
+            with ThreadPoolExecutor(len(bounds) - 1) as pool:
+                list(pool.map(lambda start, stop: SK.nearest_nodes(points, start, stop,
+                                                                   a["pos"], *grid),
+                              bounds[:-1], bounds[1:]))
+        return winners, sq_distances
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
         """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
@@ -353,6 +391,33 @@ class GNGDT(_GrowingGas):
         if self._dim == 3:
             props.append("nor")
         return tuple(props)
+
+    def fresh_normals(self) -> np.ndarray:
+        """(n_nodes, 3) eq. 16 normals of every node from the current positions (the stored
+        ``normals_`` are recomputed only for each step's winner, so they lag behind the nodes'
+        moves). Unit vectors facing ``viewpoint``; zero where undefined. The model is unchanged.
+        """
+        if self._dim != 3:
+            raise ValueError("normals need 3-D positions")
+        a = self._arrays
+        normals = a["nor"].copy()
+        fparams, iparams = self._kernel_parameters()
+        SK.refresh_normals(self.n_nodes_, a["pos"], normals, a["nbr"], a["deg"],
+                           fparams[K.P_MU], bool(iparams[K.Q_ORIENT]), fparams[K.P_VX],
+                           fparams[K.P_VY], fparams[K.P_VZ])
+        return normals[: self.n_nodes_]
+
+    def segmentation(self, params: SegmentationParams | None = None) -> Segmentation:
+        """Segments of the current network by local convexity (`gngdt_core.segmentation`),
+        from fresh normals and the position topology; details (patches, convex edges) included.
+        """
+        return segment_network(self.positions_, self.fresh_normals(), self.edges("pos"), params)
+
+    def segment(self, params: SegmentationParams | None = None) -> np.ndarray:
+        """(n_nodes,) int32 segment of each node, 0..k-1 by decreasing size: one segment per
+        object, support surfaces apart (see `gngdt_core.segmentation`). Label points or pixels
+        with ``labels[model.predict(points)]``."""
+        return self.segmentation(params).labels
 
 
 class GNG(_GrowingGas):

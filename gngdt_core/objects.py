@@ -54,6 +54,15 @@ class ObjectSet:
         return Rotation.from_matrix(self.rotations).as_quat()
 
 
+def drop_small(labels: np.ndarray, min_size: int) -> np.ndarray:
+    """(N,) labels with the clusters of fewer than ``min_size`` nodes set to -1 (copies)."""
+    labels = np.array(labels, copy=True)
+    member = labels >= 0
+    sizes = np.bincount(labels[member])
+    labels[member & (sizes[np.maximum(labels, 0)] < min_size)] = -1
+    return labels
+
+
 def describe_objects(positions: np.ndarray, colors: np.ndarray | None, normals: np.ndarray | None,
                      labels: np.ndarray, ids: np.ndarray | None = None) -> ObjectSet:
     """One object per label 0..K-1 of ``labels`` (N,) int (-1: no object).
@@ -68,8 +77,10 @@ def describe_objects(positions: np.ndarray, colors: np.ndarray | None, normals: 
                          f"{labels.shape}")
     n_labels = int(labels.max()) + 1 if labels.size else 0
     ids = np.arange(n_labels) if ids is None else np.asarray(ids, dtype=np.int64)
-    if ids.shape != (n_labels,):
-        raise ValueError(f"ids must have one entry per label ({n_labels}), got {ids.shape}")
+    if ids.ndim != 1 or ids.size < n_labels:
+        raise ValueError(f"ids must have an entry for every label 0..{n_labels - 1}, got "
+                         f"{ids.shape}")
+    n_labels = ids.size  # labels without nodes (e.g. dropped as too small) give no object
     member = labels >= 0
     counts = np.bincount(labels[member], minlength=n_labels)
     present = counts > 0  # a label may have no node (e.g. -1 everywhere after filtering)
@@ -147,7 +158,9 @@ class ObjectTracker:
         return model.clusters(*self.clustering.split("+"), min_size=self.min_size)
 
     def update(self, model: Any) -> ObjectSet:
-        """The model's objects now; ids carried over from the previous call by node membership."""
+        """The model's objects now (clusters of at least ``min_size`` nodes); ids carried over
+        from the previous call by node membership."""
         labels = self.labels(model)
         ids = self.tracker.update(model.node_ids_, labels)
-        return describe_objects(model.positions_, model.colors_, model.normals_, labels, ids)
+        return describe_objects(model.positions_, model.colors_, model.normals_,
+                                drop_small(labels, self.min_size), ids)

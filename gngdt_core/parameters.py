@@ -13,7 +13,7 @@ import numpy as np
 MAX_NODES_LIMIT = 10_000_000
 
 
-def _integer(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
+def check_integer(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{name} must be an integer, got {value!r}")
     if value < minimum:
@@ -23,7 +23,7 @@ def _integer(name: str, value: Any, minimum: int, maximum: int | None = None) ->
     return int(value)
 
 
-def _real(name: str, value: Any, low: float, high: float = math.inf,
+def check_real(name: str, value: Any, low: float, high: float = math.inf,
           low_open: bool = False) -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be a real number, got {value!r}")
@@ -42,23 +42,23 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
     Raises ValueError naming the offending parameter.
     """
     checked = dict(params)
-    checked["max_nodes"] = _integer("max_nodes", params["max_nodes"], 2, MAX_NODES_LIMIT)
-    checked["lambda_"] = _integer("lambda_", params["lambda_"], 1)
-    checked["age_max"] = _integer("age_max", params["age_max"], 1)
-    checked["eta1"] = _real("eta1", params["eta1"], 0.0, 1.0, low_open=True)
-    checked["eta2"] = _real("eta2", params["eta2"], 0.0, 1.0)
+    checked["max_nodes"] = check_integer("max_nodes", params["max_nodes"], 2, MAX_NODES_LIMIT)
+    checked["lambda_"] = check_integer("lambda_", params["lambda_"], 1)
+    checked["age_max"] = check_integer("age_max", params["age_max"], 1)
+    checked["eta1"] = check_real("eta1", params["eta1"], 0.0, 1.0, low_open=True)
+    checked["eta2"] = check_real("eta2", params["eta2"], 0.0, 1.0)
     if checked["eta2"] > checked["eta1"]:
         raise ValueError(f"eta2 ({checked['eta2']}) must not exceed eta1 ({checked['eta1']})")
-    checked["alpha"] = _real("alpha", params["alpha"], 0.0, 1.0)
-    checked["beta"] = _real("beta", params["beta"], 0.0, 1.0, low_open=False)
+    checked["alpha"] = check_real("alpha", params["alpha"], 0.0, 1.0)
+    checked["beta"] = check_real("beta", params["beta"], 0.0, 1.0, low_open=False)
     if checked["beta"] >= 1.0:
         raise ValueError(f"beta must be < 1, got {checked['beta']}")
     if "tau_col" in params:
-        checked["tau_col"] = _real("tau_col", params["tau_col"], 0.0, low_open=True)
+        checked["tau_col"] = check_real("tau_col", params["tau_col"], 0.0, low_open=True)
     if "tau_nor" in params:
-        checked["tau_nor"] = _real("tau_nor", params["tau_nor"], 0.0, low_open=True)
+        checked["tau_nor"] = check_real("tau_nor", params["tau_nor"], 0.0, low_open=True)
     if "normal_mu" in params and params["normal_mu"] is not None:
-        checked["normal_mu"] = _real("normal_mu", params["normal_mu"], 0.0, low_open=True)
+        checked["normal_mu"] = check_real("normal_mu", params["normal_mu"], 0.0, low_open=True)
     if "viewpoint" in params and params["viewpoint"] is not None:
         try:
             viewpoint = np.asarray(params["viewpoint"], dtype=np.float64)
@@ -71,10 +71,10 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
         checked["viewpoint"] = tuple(float(v) for v in viewpoint)
     for weight in ("w_pos", "w_col"):
         if weight in params:
-            checked[weight] = _real(weight, params[weight], 0.0)
+            checked[weight] = check_real(weight, params[weight], 0.0)
     if "w_pos" in params and checked["w_pos"] == 0.0:
         raise ValueError("w_pos must be > 0 (the position drives the topology)")
     random_state = params.get("random_state")
     if random_state is not None:
-        checked["random_state"] = _integer("random_state", random_state, 0)
+        checked["random_state"] = check_integer("random_state", random_state, 0)
     return checked

@@ -79,7 +79,7 @@ def objects_to_scene_update(*, ids: np.ndarray, centers: np.ndarray, quaternions
         sx, sy, sz = (float(v) for v in sizes[k])
         entity.cubes.add(pose=pose, size=Vector3(x=sx, y=sy, z=sz),
                          color=_color(colors[k], OBJECT_ALPHA))
-        label = f"#{object_id} ({int(node_counts[k])} nodes)"
+        label = f"#{object_id}"
         entity.texts.add(pose=pose, billboard=True, font_size=14.0, scale_invariant=True,
                          color=_color(colors[k]), text=label)
         for key, value in (("id", str(object_id)), ("node_count", str(int(node_counts[k]))),

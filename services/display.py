@@ -31,18 +31,26 @@ def id_colors(ids: np.ndarray) -> np.ndarray:
     return colors
 
 
-def node_cluster_ids(labels: np.ndarray, cluster_ids: np.ndarray | None) -> np.ndarray:
-    """(N,) int64 persistent cluster id of each node (labels (N,) int, -1 = none); without
-    ``cluster_ids`` the labels themselves (stable only within one frame)."""
+def node_cluster_ids(labels: np.ndarray, cluster_ids: np.ndarray | None,
+                     min_nodes: int = 1) -> np.ndarray:
+    """(N,) int64 persistent cluster id of each node (labels (N,) int, -1 = none), -1 also for
+    clusters of fewer than ``min_nodes`` nodes; without ``cluster_ids`` the labels themselves
+    (stable only within one frame)."""
     labels = np.asarray(labels, dtype=np.int64)
+    clustered = labels >= 0
+    if min_nodes > 1 and clustered.any():
+        too_small = np.bincount(labels[clustered]) < min_nodes
+        labels = np.where(clustered & too_small[np.maximum(labels, 0)], -1, labels)
     if cluster_ids is None or len(cluster_ids) == 0:
         return labels
     return np.where(labels >= 0, np.asarray(cluster_ids)[np.maximum(labels, 0)], -1)
 
 
-def node_colors(labels: np.ndarray, cluster_ids: np.ndarray | None) -> np.ndarray:
-    """(N, 3) uint8 colour of each node by its cluster's persistent id (grey: no cluster)."""
-    return id_colors(node_cluster_ids(labels, cluster_ids))
+def node_colors(labels: np.ndarray, cluster_ids: np.ndarray | None,
+                min_nodes: int = 1) -> np.ndarray:
+    """(N, 3) uint8 colour of each node by its cluster's persistent id (grey: no cluster, or
+    one of fewer than ``min_nodes`` nodes)."""
+    return id_colors(node_cluster_ids(labels, cluster_ids, min_nodes))
 
 
 def clustering_edges(name: str, edges: Mapping[str, np.ndarray], labels: np.ndarray) -> np.ndarray:
@@ -68,7 +76,7 @@ def clustering_edges(name: str, edges: Mapping[str, np.ndarray], labels: np.ndar
 
 def edge_colors(pairs: np.ndarray, colors: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """(E, 3) uint8 colour per edge: its cluster's colour when both ends share a cluster, else
-    grey. colors: (N, 3) node colours; labels: (N,) cluster labels."""
+    grey. colors: (N, 3) node colours; labels: (N,) cluster labels or persistent ids (-1: none)."""
     pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
     labels = np.asarray(labels)
     same = (labels[pairs[:, 0]] >= 0) & (labels[pairs[:, 0]] == labels[pairs[:, 1]])

@@ -56,6 +56,9 @@ EXAMPLES = """examples:
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
 CLUSTERINGS = ("pos", "col", "nor", "col+nor")
+#: the local-convexity topology and the segmentation built on it (`gngdt_core.segmentation`)
+CONVEXITY_PROPERTY = "cvx"
+SEGMENTS = "segments"
 #: clustering the objects come from when ``objects_from`` names one the learner does not publish
 FALLBACK_OBJECTS_FROM = "pos"
 
@@ -117,10 +120,12 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
 
 @dataclass
 class LearnerConfig:
-    """GNG-DT constructor arguments plus learner options."""
+    """GNG-DT constructor arguments, learner options and segmentation parameters."""
 
     model: dict[str, Any] = field(default_factory=dict)
     options: LearnerOptions = field(default_factory=LearnerOptions)
+    #: `SegmentationParams` keys (validated when loaded)
+    segmentation: dict[str, Any] = field(default_factory=dict)
 
 
 def model_parameter_names() -> set[str]:
@@ -133,7 +138,9 @@ def model_parameter_names() -> set[str]:
 
 
 def load_params(path: Path | None) -> LearnerConfig:
-    """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt], [learner]).
+    """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt],
+    [learner]), segmentation parameters ([segmentation]); a sensor profile's [frames] table
+    (for `gngdt segment`) is checked and otherwise not used here.
 
     ``lambda`` is accepted for ``lambda_``. Unknown keys raise ``ValueError`` naming key and file.
     """
@@ -151,6 +158,17 @@ def load_params(path: Path | None) -> LearnerConfig:
     for key, value in document.items():
         if isinstance(value, dict) and key in ("gngdt", "learner"):
             flat.update(value)
+        elif isinstance(value, dict) and key in ("segmentation", "frames"):
+            from gngdt_core.frame_segmenter import FrameSchedule
+            from gngdt_core.segmentation import SegmentationParams
+
+            schema = SegmentationParams if key == "segmentation" else FrameSchedule
+            try:
+                schema.from_dict(value)
+            except (TypeError, ValueError) as error:
+                raise ValueError(f"--params {path}: [{key}]: {error}") from error
+            if key == "segmentation":
+                config.segmentation = dict(value)
         else:
             flat[key] = value
     model_names = model_parameter_names()
@@ -285,6 +303,7 @@ class Learner:
     def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
                  counters: Counters | None = None) -> None:
         from gngdt_core import GNGDT
+        from gngdt_core.segmentation import SegmentationParams
 
         self.camera = camera
         self.options = config.options
@@ -292,6 +311,7 @@ class Learner:
             model_args = {"random_state": config.options.seed, **config.model}
             model = GNGDT(**model_args)
         self.model = model
+        self.segmentation = SegmentationParams.from_dict(config.segmentation)
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
         self._rng = np.random.default_rng(config.options.seed)
@@ -319,14 +339,17 @@ class Learner:
 
         model = self.model
         min_size = self.options.min_cluster_size
+        segmentation = model.segmentation(self.segmentation)
+        edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
+        edges[CONVEXITY_PROPERTY] = edges["pos"][segmentation.convex]
         labels = {name: model.clusters(*name.split("+"), min_size=min_size)
                   for name in CLUSTERINGS}
+        labels[SEGMENTS] = segmentation.labels
         node_ids = model.node_ids_
         cluster_ids = {}
         for name, values in labels.items():
             tracker = self._trackers.setdefault(name, ClusterTracker())
             cluster_ids[name] = tracker.update(node_ids, values)
-        edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
         return LearnedFrame(edges=edges, labels=labels, cluster_ids=cluster_ids)
 
     def topology(self, stamp: FrameStamp, quantization_error: dict[str, float],
@@ -358,13 +381,15 @@ class Learner:
         return wanted if wanted in learned.labels else FALLBACK_OBJECTS_FROM
 
     def objects(self, learned: LearnedFrame) -> ObjectSet:
-        """One object per cluster of the objects clustering, ids persistent."""
-        from gngdt_core.objects import describe_objects
+        """One object per cluster of at least ``min_cluster_size`` nodes of the objects
+        clustering, ids persistent."""
+        from gngdt_core.objects import describe_objects, drop_small
 
         name = self.objects_clustering(learned)
         model = self.model
-        return describe_objects(model.positions_, model.colors_, model.normals_,
-                                learned.labels[name], learned.cluster_ids[name])
+        labels = drop_small(learned.labels[name], self.options.min_cluster_size)
+        return describe_objects(model.positions_, model.colors_, model.normals_, labels,
+                                learned.cluster_ids[name])
 
     def objects_update(self, stamp: FrameStamp, objects: ObjectSet) -> Any:
         """The objects as a ``foxglove.SceneUpdate``, coloured as the logger colours clusters."""
@@ -387,7 +412,8 @@ class Learner:
         layers = {}
         for name, labels in learned.labels.items():
             pairs = clustering_edges(name, learned.edges, labels)
-            layers[name] = (pairs, node_colors(labels, learned.cluster_ids[name]))
+            layers[name] = (pairs, node_colors(labels, learned.cluster_ids[name],
+                                               self.options.min_cluster_size))
         pos_edges = learned.edges["pos"]
         spacing = (float(np.median(np.linalg.norm(
             positions[pos_edges[:, 0]] - positions[pos_edges[:, 1]], axis=1)))

@@ -257,7 +257,9 @@ class EntityPaths:
 #: the metric plots: title (with unit) and the metric names each shows
 METRIC_PLOTS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("nodes (count)", ("nodes",)),
-    ("clusters per clustering (count)", tuple(f"clusters/{name}" for name in CLUSTERING_VIEWS)),
+    # segments are many (single nodes at creases count): their objects are plotted instead
+    ("clusters per clustering (count)", tuple(f"clusters/{name}" for name in CLUSTERING_VIEWS
+                                              if name != "segments")),
     ("objects (count)", ("objects",)),
     ("quantization error, position (m)", ("quantization_error/pos",)),
     ("quantization error, colour (RGB 0-255)", ("quantization_error/col",)),
@@ -265,38 +267,68 @@ METRIC_PLOTS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("latency, capture to topology (ms)", ("latency_ms",)),
     ("frames dropped (count)", ("frames_dropped",)),
 )
-#: where the 3D views start: just behind the camera, looking along its optical axis (+z, RDF)
-EYE_POSITION = (0.0, -0.15, -0.6)
-EYE_LOOK_TARGET = (0.0, 0.0, 1.5)
+#: clusters (segments) of fewer nodes are drawn grey, as the learner's own minimum cluster size
+DISPLAY_MIN_NODES = 5
 EYE_UP = (0.0, -1.0, 0.0)
 
 
-def _spatial_view(name: str, origin: str, contents: list[str]) -> Any:
-    """A 3D view starting from the camera's viewpoint, on a dark background."""
+@dataclass(frozen=True)
+class Framing:
+    """Where a camera's 3D views start, in its frame (RDF: at the origin, looking along +z):
+    the topology views from the camera itself, looking along its axis at the scene's median
+    depth, so that they show the nodes as the colour image shows the scene (rerun's views are
+    wider than a depth camera's field of view, so a little smaller); the overview from behind and
+    above the camera, so that the camera (frustum and image) is in sight with the scene beyond.
+    """
+
+    depth: float = 1.5
+
+    @property
+    def target(self) -> tuple[float, float, float]:
+        return (0.0, 0.0, self.depth)
+
+    @property
+    def camera_eye(self) -> tuple[float, float, float]:
+        return (0.0, 0.0, 0.0)
+
+    @property
+    def overview_eye(self) -> tuple[float, float, float]:
+        return (0.0, -0.2 * self.depth, -0.15 * self.depth)
+
+    @classmethod
+    def of(cls, positions: np.ndarray) -> Framing:
+        """Framing the nodes ``positions`` (N, 3), metres: their median depth."""
+        depth = float(np.median(positions[:, 2]))
+        return cls(depth if depth > 0.05 else cls.depth)
+
+
+def _spatial_view(name: str, origin: str, contents: list[str], framing: Framing,
+                  eye: tuple[float, float, float]) -> Any:
+    """A 3D view starting at ``eye``, looking at the scene, on a dark background."""
     import rerun.blueprint as rrb
 
     return rrb.Spatial3DView(
         name=name, origin=origin, contents=contents,
-        eye_controls=rrb.EyeControls3D(position=EYE_POSITION, look_target=EYE_LOOK_TARGET,
-                                       eye_up=EYE_UP),
+        eye_controls=rrb.EyeControls3D(position=eye, look_target=framing.target, eye_up=EYE_UP),
         background=rrb.Background(color=[22, 24, 28]))
 
 
-def _camera_row(camera: str) -> Any:
+def _camera_row(camera: str, framing: Framing) -> Any:
     """The images beside a grid of six 3D views: objects and segments, one per clustering of
     properties, and the cloud with the nodes in their learned colours."""
     import rerun.blueprint as rrb
 
     paths = EntityPaths(camera)
     suffix = "" if camera == DEFAULT_CAMERA else f" ({camera})"
-    frustum = paths.pinhole
+    eye = framing.camera_eye
     views = [_spatial_view(f"objects and segments{suffix}", paths.world, [
-        paths.objects, paths.clusters("segments"), paths.edges("segments"), frustum])]
+        paths.objects, paths.clusters("segments"), paths.edges("segments")], framing, eye)]
     views += [_spatial_view(f"{name} clusters{suffix}", paths.world,
-                            [paths.clusters(name), paths.edges(name), frustum])
+                            [paths.clusters(name), paths.edges(name)], framing, eye)
               for name in CLUSTERING_VIEWS if name != "segments"]
-    views.append(_spatial_view(f"cloud and learned colours{suffix}", paths.world,
-                               [paths.points, paths.nodes, frustum, paths.rgb]))
+    views.append(_spatial_view(f"cloud, learned colours and the camera{suffix}", paths.world,
+                               [paths.points, paths.nodes, paths.pinhole, paths.rgb], framing,
+                               framing.overview_eye))
     images = rrb.Vertical(
         rrb.Spatial2DView(name=f"rgb{suffix}", origin=paths.pinhole, contents=[paths.rgb]),
         rrb.Spatial2DView(name=f"depth{suffix}", origin=paths.pinhole, contents=[paths.depth]),
@@ -304,11 +336,13 @@ def _camera_row(camera: str) -> Any:
     return rrb.Horizontal(images, rrb.Grid(*views, grid_columns=3), column_shares=[1, 3])
 
 
-def blueprint(cameras: list[str]) -> Any:
-    """Per camera a row (`_camera_row`), then one plot per metric (all cameras in each)."""
+def blueprint(cameras: list[str], framings: dict[str, Framing] | None = None) -> Any:
+    """Per camera a row (`_camera_row`), then one plot per metric (all cameras in each); the
+    time cursor follows the newest data (a finished file opens on its last frame)."""
     import rerun.blueprint as rrb
 
-    rows = [_camera_row(camera) for camera in cameras]
+    framings = framings or {}
+    rows = [_camera_row(camera, framings.get(camera, Framing())) for camera in cameras]
     plots = [
         rrb.TimeSeriesView(name=title, origin="/",
                            contents=[EntityPaths(camera).metric(name)
@@ -318,6 +352,7 @@ def blueprint(cameras: list[str]) -> Any:
     return rrb.Blueprint(
         rrb.Vertical(*rows, rrb.Grid(*plots, grid_columns=4),
                      row_shares=[3] * len(rows) + [1.4]),
+        rrb.TimePanel(timeline="frame", play_state="following", state="collapsed"),
         collapse_panels=True)
 
 
@@ -330,6 +365,8 @@ class RerunLog:
         self.rec = recording
         self.rates = rates or DisplayRates()
         self._last_logged: dict[tuple[str, str], int] = {}
+        #: per camera, where its views start, once its first topology showed the scene
+        self.framings: dict[str, Framing] = {}
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
 
     def due(self, paths: EntityPaths, stream: str, sequence: int, every: int) -> bool:
@@ -402,19 +439,27 @@ class RerunLog:
     def _draw_topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
         import rerun as rr
 
-        from services.display import clustering_edges, edge_colors, node_colors
+        from services.display import clustering_edges, edge_colors, id_colors, node_cluster_ids
 
         positions = snapshot.positions
+        if paths.camera not in self.framings and snapshot.node_count >= 50:
+            framing = self.framings[paths.camera] = Framing.of(positions)
+            # a small frustum near the camera: the image on it stays a thumbnail in the
+            # overview instead of covering the scene
+            self.rec.log(paths.pinhole, rr.Pinhole.from_fields(
+                image_plane_distance=0.1 * framing.depth))
         self.rec.log(paths.nodes, rr.Points3D(positions, colors=snapshot.colors,
                                               radii=rr.Radius.ui_points(4.0)))
         for clustering, labels in snapshot.clusterings.items():
-            colors = node_colors(labels, snapshot.cluster_ids.get(clustering))
+            ids = node_cluster_ids(labels, snapshot.cluster_ids.get(clustering),
+                                   DISPLAY_MIN_NODES)
+            colors = id_colors(ids)
             self.rec.log(paths.clusters(clustering), rr.Points3D(
                 positions, colors=colors, radii=rr.Radius.ui_points(4.0)))
             pairs = clustering_edges(clustering, snapshot.edges, labels)
             self.rec.log(paths.edges(clustering), rr.LineStrips3D(
                 positions[pairs] if len(pairs) else np.zeros((0, 2, 3)),
-                colors=edge_colors(pairs, colors, labels), radii=rr.Radius.ui_points(1.5)))
+                colors=edge_colors(pairs, colors, ids), radii=rr.Radius.ui_points(1.5)))
 
     def objects(self, paths: EntityPaths, boxes: ObjectBoxes) -> None:
         """Boxes3D, one per object: colour and label by its persistent id (``object_id``)."""
@@ -500,12 +545,13 @@ class CameraProgress:
 class Dispatcher:
     """Decodes one sample by stream name and logs it; malformed messages are counted, skipped."""
 
-    def __init__(self, rerun_log: RerunLog, on_new_camera: Any = None) -> None:
+    def __init__(self, rerun_log: RerunLog, on_new_layout: Any = None) -> None:
+        """``on_new_layout(cameras)`` is called when a camera appears or its views are framed."""
         self.rerun_log = rerun_log
         self.cameras: dict[str, CameraProgress] = {}
         self.malformed = 0
         self.last_status: dict[str, LearnerStatusInfo] = {}
-        self._on_new_camera = on_new_camera
+        self._on_new_layout = on_new_layout
 
     def handle(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         from schemas import packing
@@ -543,8 +589,7 @@ class Dispatcher:
                 return
             if camera not in self.cameras:
                 self.cameras[camera] = CameraProgress()
-                if self._on_new_camera is not None:
-                    self._on_new_camera(list(self.cameras))
+                self._layout_changed()
             rerun_log.set_time(stamp)
             handler()
         except ValueError as error:  # MessageError is a ValueError
@@ -555,10 +600,17 @@ class Dispatcher:
                   stamp: FrameStamp) -> None:
         rerun_log = self.rerun_log
         draw = rerun_log.due(paths, "topology", stamp.sequence, rerun_log.rates.topology_every)
+        framed = camera in rerun_log.framings
         rerun_log.topology(paths, snapshot, draw)
+        if not framed and camera in rerun_log.framings:
+            self._layout_changed()  # the views now start looking at this camera's scene
         progress = self.cameras[camera]
         progress.last_topology_sequence = max(progress.last_topology_sequence,
                                               snapshot.frame_sequence)
+
+    def _layout_changed(self) -> None:
+        if self._on_new_layout is not None:
+            self._on_new_layout(list(self.cameras))
 
     def _status(self, camera: str, paths: EntityPaths, status: LearnerStatusInfo) -> None:
         self.rerun_log.status(paths, status)
@@ -623,7 +675,8 @@ def main(args: argparse.Namespace) -> int:
 
     inbox = Inbox()
     dispatcher = Dispatcher(rerun_log,
-                            on_new_camera=lambda cams: rec.send_blueprint(blueprint(cams)))
+                            on_new_layout=lambda cams: rec.send_blueprint(
+                                blueprint(cams, rerun_log.framings)))
     try:
         session = open_session(args)
     except ZenohSetupError as error:

@@ -26,7 +26,7 @@ ROUTER_CONFIG = REPO_ROOT / "config" / "zenoh-router.json5"
 #: 10 frames, 320x240 (recordings/README.md)
 SMALL_RECORDING = REPO_ROOT / "recordings" / "tabletop_small.mcap"
 SMALL_RECORDING_FRAMES = 10
-CLUSTERINGS = {"pos", "col", "nor", "col+nor"}
+CLUSTERINGS = {"pos", "col", "nor", "col+nor", "segments"}
 #: learning steps per frame: enough for a few dozen nodes, little enough to keep the tests fast
 SAMPLES_PER_FRAME = "3000"
 

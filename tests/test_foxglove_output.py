@@ -3,6 +3,7 @@ and the services' behaviour when these are flooded or never read."""
 
 from __future__ import annotations
 
+import itertools
 import os
 import subprocess
 import sys
@@ -92,9 +93,16 @@ def test_mcap_holds_every_stream_with_foxglove_schemas(recorded_run) -> None:
             assert min(size.x, size.y, size.z) >= 0 and max(size.x, size.y, size.z) > 0.05
             metadata = {pair.key: pair.value for pair in entity.metadata}
             assert int(metadata["node_count"]) > 0 and len(metadata["centroid"].split()) == 3
-    # objects default to "segments", or "pos" when not published: one object, one id throughout
-    first_ids = [{entity.id for entity in update.entities} for update in objects]
-    assert all(ids == first_ids[-1] for ids in first_ids[1:])
+    # objects (segments by default) keep their ids from frame to frame, even while the network
+    # is still growing (8 frames)
+    kept = seen = 0
+    for before, after in itertools.pairwise(objects):
+        sizes = {entity.id: int({pair.key: pair.value for pair in entity.metadata}["node_count"])
+                 for entity in before.entities}
+        big = {name for name, count in sizes.items() if count >= 10}
+        seen += len(big)
+        kept += len(big & {entity.id for entity in after.entities})
+    assert seen >= len(objects) and kept / seen >= 0.8, (kept, seen)
 
 
 @pytest.mark.timeout(200)

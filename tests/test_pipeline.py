@@ -157,7 +157,7 @@ def test_late_joiner_gets_the_current_topology(
     assert snapshot.frame_sequence == 7
     assert snapshot.steps == last.steps
     assert snapshot.node_count == last.nodes > 2
-    assert set(snapshot.clusterings) == {"pos", "col", "nor", "col+nor"}
+    assert set(snapshot.clusterings) == {"pos", "col", "nor", "col+nor", "segments"}
     assert FrameStamp.from_attachment(replies[0].ok.attachment.to_bytes()).sequence == 7
 
     learner.send_signal(signal.SIGINT)

@@ -5,7 +5,8 @@
 // The viewer is WebAssembly drawing into one canvas, so nothing in the DOM says "loaded". Every
 // two seconds we take a screenshot and measure, inside the page, the share of strongly coloured
 // pixels (rerun's own interface is grey; clusters and images are coloured). The screenshot is
-// kept once that share has grown past MIN_COLOURED and stopped changing; if that never happens
+// kept once that share has grown past MIN_COLOURED and stayed the same for three polls in a row
+// (images decode after the 3D views draw); if that never happens
 // before the timeout, the last screenshot is written anyway and the exit status is 1.
 // Chromium: /usr/bin/chromium (Debian's package) or $CHROMIUM.
 import { writeFileSync } from "node:fs";
@@ -36,11 +37,17 @@ try {
   await page.waitForSelector("canvas", { timeout: Number(timeoutS) * 1000 });
 
   const deadline = Date.now() + Number(timeoutS) * 1000;
-  let previous = -1;
   let shot = null;
+  const recent = [];
   while (Date.now() < deadline) {
     await page.waitForTimeout(2000);
-    shot = await page.screenshot();
+    try {
+      // software rendering on a busy machine can take long for one frame
+      shot = await page.screenshot({ timeout: 120_000 });
+    } catch (error) {
+      console.error(`screenshot failed, trying again: ${error.message.split("\n")[0]}`);
+      continue;
+    }
     const coloured = await page.evaluate(async (base64) => {
       const blob = await (await fetch(`data:image/png;base64,${base64}`)).blob();
       const bitmap = await createImageBitmap(blob);
@@ -56,14 +63,15 @@ try {
       return count / (pixels.length / 4);
     }, shot.toString("base64"));
     console.error(`coloured pixels: ${(100 * coloured).toFixed(2)} %`);
-    if (coloured >= MIN_COLOURED && previous >= MIN_COLOURED
-        && Math.abs(coloured - previous) <= STABLE * previous) {
+    recent.push(coloured);
+    const last = recent.slice(-3);
+    if (last.length === 3 && Math.min(...last) >= MIN_COLOURED
+        && Math.max(...last) - Math.min(...last) <= STABLE * Math.min(...last)) {
       status = 0;
       break;
     }
-    previous = coloured;
   }
-  writeFileSync(out, shot);
+  if (shot) writeFileSync(out, shot);
   if (status !== 0) console.error("the viewer never showed stable coloured content; last screenshot kept");
 } finally {
   await browser.close();

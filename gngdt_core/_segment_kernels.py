@@ -1,0 +1,188 @@
+"""Numba kernels over a learned network: fresh normals, property bits, nearest-node labelling.
+
+They read the estimator's arrays (layout in `_kernels`) and write only their outputs; the
+learning loop never calls them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from gngdt_core._kernels import (
+    BOUND_SLACK,
+    _axis_gap,
+    _bucket,
+    _sq_dist,
+    compute_normal,
+    inlined,
+    property_bits,
+)
+
+
+@njit(cache=True)
+def refresh_normals(n, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
+    """Eq. 16 for every node ``0..n-1`` from the current positions, written to ``nor``."""
+    for i in range(n):
+        compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
+
+
+@njit(cache=True)
+def refresh_property_bits(n, col, nor, nbr, emask, rev, deg, has_col, has_nor, tau_col, tau_nor):
+    """Eqs. 4/9 for every edge of nodes ``0..n-1`` from the current colours and normals."""
+    for i in range(n):
+        for k in range(deg[i]):
+            j = nbr[i, k]
+            if j > i:
+                mask = property_bits(col, nor, i, j, has_col, has_nor, tau_col, tau_nor)
+                emask[i, k] = mask
+                emask[j, rev[i, k]] = mask
+
+
+@inlined
+def _nearest_brute(pos, n, x0, x1, x2):
+    best = np.inf
+    s = -1
+    for i in range(n):
+        d = _sq_dist(pos, i, x0, x1, x2, 3)
+        if d < best:
+            best = d
+            s = i
+    return s, best
+
+
+@inlined
+def _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess):
+    """Exact nearest node by position from the grid, starting from node ``guess`` (or -1).
+
+    Rings of cells around the query's cell are visited outward; a cell is skipped when its box
+    is farther than the best distance so far, and the search stops when no unvisited ring can
+    hold a closer node. A good guess (the previous pixel's winner) prunes almost every cell.
+    """
+    table_mask = ghead.shape[0] - 1
+    qx = x0 * inv_cell
+    qy = x1 * inv_cell
+    qz = x2 * inv_cell
+    fx = np.floor(qx)
+    fy = np.floor(qy)
+    fz = np.floor(qz)
+    cx = np.int64(fx)
+    cy = np.int64(fy)
+    cz = np.int64(fz)
+    rx = qx - fx
+    ry = qy - fy
+    rz = qz - fz
+    up_x = rx >= 0.5
+    up_y = ry >= 0.5
+    up_z = rz >= 0.5
+    near_x = min(rx, 1.0 - rx)
+    near_y = min(ry, 1.0 - ry)
+    near_z = min(rz, 1.0 - rz)
+    far_x = 1.0 - near_x
+    far_y = 1.0 - near_y
+    far_z = 1.0 - near_z
+    margin = min(near_x, near_y, near_z)
+    prune = (1.0 + BOUND_SLACK) * inv_cell * inv_cell
+    best = np.inf
+    s = -1
+    if guess >= 0:
+        best = _sq_dist(pos, guess, x0, x1, x2, 3)
+        s = guess
+    r = 0
+    while True:
+        if r > 0:
+            bound = (r - 1 + margin) * cell_size
+            if best * (1.0 + BOUND_SLACK) <= bound * bound:
+                return s, best
+            side = 2 * r + 1
+            if side * side * side > 2 * n:
+                return _nearest_brute(pos, n, x0, x1, x2)
+        for dx in range(-r, r + 1):
+            gx = _axis_gap(dx, up_x, near_x, far_x)
+            for dy in range(-r, r + 1):
+                gy = _axis_gap(dy, up_y, near_y, far_y)
+                gxy = gx * gx + gy * gy
+                if gxy > best * prune:
+                    continue
+                on_ring = abs(dx) == r or abs(dy) == r
+                for dz in range(-r, r + 1):
+                    if not on_ring and abs(dz) != r:
+                        continue
+                    gz = _axis_gap(dz, up_z, near_z, far_z)
+                    if gxy + gz * gz > best * prune:
+                        continue
+                    p = ghead[_bucket(cx + dx, cy + dy, cz + dz, table_mask)]
+                    while p >= 0:
+                        d = _sq_dist(pos, p, x0, x1, x2, 3)
+                        if d < best:
+                            best = d
+                            s = p
+                        p = gnext[p]
+        r += 1
+
+
+@njit(cache=True, nogil=True)
+def nearest_nodes(points, start, stop, pos, n, ghead, gnext, grid_on, cell_size, winners,
+                  sq_distances):
+    """Nearest node by position of points ``start..stop-1``, through the learner's hash grid.
+
+    points: (N, 3) float32/float64, ideally in scan order (each search starts from the previous
+    point's winner); pos: (cap, 3) float64 node positions, nodes ``0..n-1`` (n >= 1). Writes
+    ``winners`` (N,) int32 and ``sq_distances`` (N,) float64 in that range. Exact; brute force
+    without a grid (few nodes). Releases the GIL, so threads can label disjoint ranges at once.
+    """
+    inv_cell = 1.0 / cell_size if grid_on else 0.0
+    guess = -1
+    for q in range(start, stop):
+        x0 = np.float64(points[q, 0])
+        x1 = np.float64(points[q, 1])
+        x2 = np.float64(points[q, 2])
+        if grid_on:
+            s, d = _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess)
+        else:
+            s, d = _nearest_brute(pos, n, x0, x1, x2)
+        winners[q] = s
+        sq_distances[q] = d
+        guess = s
+
+
+@njit(cache=True)
+def grow_patches(n, offsets, neighbours, usable, normals, seeds, cos_patch):
+    """Region growing over usable edges (CSR ``offsets``/``neighbours``/``usable``), seeds in the
+    given order; a node joins while its normal is within ``acos(cos_patch)`` of the patch's
+    running mean normal. Returns (n,) int32 patch labels."""
+    patch = np.full(n, -1, dtype=np.int32)
+    queue = np.empty(n, dtype=np.int64)
+    n_patches = 0
+    for seed in seeds:
+        if patch[seed] >= 0:
+            continue
+        patch[seed] = n_patches
+        queue[0] = seed
+        head = 0
+        tail = 1
+        sx = normals[seed, 0]
+        sy = normals[seed, 1]
+        sz = normals[seed, 2]
+        while head < tail:
+            u = queue[head]
+            head += 1
+            for slot in range(offsets[u], offsets[u + 1]):
+                v = neighbours[slot]
+                if not usable[slot] or patch[v] >= 0:
+                    continue
+                norm = math.sqrt(sx * sx + sy * sy + sz * sz)
+                if norm <= 0.0:
+                    continue
+                if normals[v, 0] * sx + normals[v, 1] * sy + normals[v, 2] * sz < cos_patch * norm:
+                    continue
+                patch[v] = n_patches
+                queue[tail] = v
+                tail += 1
+                sx += normals[v, 0]
+                sy += normals[v, 1]
+                sz += normals[v, 2]
+        n_patches += 1
+    return patch

@@ -1,0 +1,206 @@
+"""Segments a robot can use, from a GNG-DT network: one per object, support surfaces apart.
+
+The procedure works on what GNG-DT learns — node positions, surface normals (eq. 16) and the
+position topology — and adds one more topology, **local convexity** (after LCCP, Stein et al.,
+CVPR 2014, and CPC, Schoeler et al., CVPR 2015, whose supervoxel adjacency graph is what the
+position topology is here):
+
+1. Elevations. For a position edge (i, j) with unit direction d from i to j, the *elevation of j
+   seen from i* is ``asin(n_i . d)``: how far j rises above i's tangent plane (normals face the
+   sensor). Both ends below each other's tangent planes is a convex fold (a box's ridge), both
+   near zero is flat, and one end above the other's plane is a concave fold (an object standing
+   on a table, two boxes touching) or a step (one surface in front of another).
+2. Smooth patches. Region growing over *smooth* edges (both elevations within
+   ``smooth_angle_deg``), where a node joins a patch only while its normal stays within
+   ``patch_angle_deg`` of the patch's mean normal, so slow drift (a rounded corner, a chain of
+   straddling nodes at a crease) cannot carry a patch from a table onto an object.
+3. Convexity topology. An edge is *convex* when neither end rises above the other's tangent
+   plane by more than ``concavity_angle_deg`` (flat and convex folds; concave folds and steps
+   are cut). These edges are the network's local-convexity topology (``convex_edges``).
+4. Objects. Two adjacent patches merge when at least ``convex_share`` of the position edges
+   between them are convex and there are at least ``min_boundary_edges`` of them: a majority over
+   the whole shared boundary, so one noisy edge neither joins an object to its table nor splits a
+   box. Merges are transitive (connected components of the patch graph).
+5. Fragments. Segments of fewer than ``min_segment_nodes`` nodes (typically single nodes that
+   straddle a crease) join the adjacent larger segment they share most convex edges with; they
+   never bridge two larger segments.
+
+Support surfaces come out as their own segments because everything standing on them meets them
+concavely. Labels are ordered by decreasing segment size.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from gngdt_core import _segment_kernels as SK
+from gngdt_core.clustering import connected_component_labels, rank_by_size
+from gngdt_core.parameters import check_integer, check_real
+
+
+@dataclass(frozen=True)
+class SegmentationParams:
+    """Parameters of `segment_network`, validated on construction (angles in degrees)."""
+
+    #: an edge is smooth (inside a patch) when both elevations are within this angle
+    smooth_angle_deg: float = 8.0
+    #: a node joins a patch only while its normal is within this angle of the patch's mean
+    patch_angle_deg: float = 30.0
+    #: an edge is convex unless one end rises above the other's tangent plane by more than this
+    concavity_angle_deg: float = 10.0
+    #: adjacent patches merge when at least this share of their boundary edges is convex ...
+    convex_share: float = 0.5
+    #: ... and the boundary has at least this many edges
+    min_boundary_edges: int = 3
+    #: segments smaller than this many nodes join a larger neighbour
+    min_segment_nodes: int = 4
+
+    def __post_init__(self) -> None:
+        for name in ("smooth_angle_deg", "patch_angle_deg", "concavity_angle_deg"):
+            check_real(name, getattr(self, name), 0.0, 90.0, low_open=True)
+        check_real("convex_share", self.convex_share, 0.0, 1.0)
+        check_integer("min_boundary_edges", self.min_boundary_edges, 1)
+        check_integer("min_segment_nodes", self.min_segment_nodes, 1)
+
+    @classmethod
+    def from_dict(cls, values: dict) -> SegmentationParams:
+        """From a mapping (e.g. a TOML table); ValueError naming an unknown key."""
+        known = {item.name for item in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(f"unknown segmentation parameter(s) {unknown}; known: "
+                             f"{sorted(known)}")
+        return cls(**values)
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """Result of `segment_network` for a network of n nodes and E position edges."""
+
+    #: (n,) int32 segment of each node, 0..n_segments-1 by decreasing size
+    labels: np.ndarray
+    #: (n,) int32 smooth patch of each node (step 2)
+    patches: np.ndarray
+    #: (E,) bool, per position edge: convex or flat (the local-convexity topology)
+    convex: np.ndarray
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.labels.max()) + 1 if self.labels.size else 0
+
+
+def edge_elevations(positions: np.ndarray, normals: np.ndarray,
+                    edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sines of the elevations of each edge's ends: (E,) ``n_i . d`` and ``-n_j . d``.
+
+    positions: (n, 3) metres; normals: (n, 3) unit, facing the sensor (zero where undefined:
+    elevation 0); edges: (E, 2) node pairs (i, j); d: unit vector from i to j. The first is how
+    far j rises above i's tangent plane, the second how far i rises above j's.
+    """
+    i, j = edges[:, 0], edges[:, 1]
+    direction = positions[j] - positions[i]
+    length = np.linalg.norm(direction, axis=1)
+    direction /= np.maximum(length, 1e-300)[:, None]
+    rise_of_j = np.einsum("ij,ij->i", normals[i], direction)
+    rise_of_i = -np.einsum("ij,ij->i", normals[j], direction)
+    return rise_of_j, rise_of_i
+
+
+def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarray,
+                    params: SegmentationParams | None = None) -> Segmentation:
+    """Segments of a network (see the module docstring for the procedure).
+
+    positions: (n, 3) float, metres; normals: (n, 3) float unit normals facing the sensor (zero
+    where undefined); edges: (E, 2) int position-topology node pairs.
+    """
+    params = params or SegmentationParams()
+    positions = np.asarray(positions, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    n = positions.shape[0]
+    if positions.shape != (n, 3) or normals.shape != (n, 3):
+        raise ValueError(f"positions and normals must be (n, 3), got {positions.shape} and "
+                         f"{normals.shape}")
+    if n == 0:
+        empty = np.zeros(0, dtype=np.int32)
+        return Segmentation(empty, empty, np.zeros(len(edges), dtype=bool))
+    rise_of_j, rise_of_i = edge_elevations(positions, normals, edges)
+    smooth = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i)) < _sine(params.smooth_angle_deg)
+    convex = np.maximum(rise_of_j, rise_of_i) < _sine(params.concavity_angle_deg)
+    patches = _smooth_patches(n, edges, smooth, normals, rise_of_j, rise_of_i,
+                              math.cos(math.radians(params.patch_angle_deg)))
+    objects = _merge_convex_patches(patches, edges, convex, params)
+    labels = _absorb_fragments(objects, edges, convex, params.min_segment_nodes)
+    return Segmentation(rank_by_size(labels), patches, convex)
+
+
+def _sine(degrees: float) -> float:
+    return math.sin(math.radians(degrees))
+
+
+def _smooth_patches(n: int, edges: np.ndarray, smooth: np.ndarray, normals: np.ndarray,
+                    rise_of_j: np.ndarray, rise_of_i: np.ndarray, cos_patch: float) -> np.ndarray:
+    """(n,) int32 patch of each node: region growing over smooth edges, flattest seeds first."""
+    steepest = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i))
+    roughness = np.zeros(n)
+    np.maximum.at(roughness, edges[:, 0], steepest)
+    np.maximum.at(roughness, edges[:, 1], steepest)
+    seeds = np.argsort(roughness, kind="stable")
+    offsets, neighbours, usable = _adjacency(n, edges, smooth)
+    return SK.grow_patches(n, offsets, neighbours, usable, normals, seeds, cos_patch)
+
+
+def _adjacency(n: int, edges: np.ndarray,
+               flags: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """CSR adjacency of an undirected edge list: offsets (n+1,), neighbours and their flags."""
+    source = np.concatenate([edges[:, 0], edges[:, 1]])
+    target = np.concatenate([edges[:, 1], edges[:, 0]])
+    order = np.argsort(source, kind="stable")
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(np.bincount(source, minlength=n), out=offsets[1:])
+    return offsets, target[order], np.concatenate([flags, flags])[order]
+
+
+def _merge_convex_patches(patches: np.ndarray, edges: np.ndarray, convex: np.ndarray,
+                          params: SegmentationParams) -> np.ndarray:
+    """(n,) segment of each node: patches joined where their shared boundary is mostly convex."""
+    n_patches = int(patches.max()) + 1
+    a, b = patches[edges[:, 0]], patches[edges[:, 1]]
+    between = a != b
+    pair = np.minimum(a, b)[between].astype(np.int64) * n_patches + np.maximum(a, b)[between]
+    pairs, pair_of_edge = np.unique(pair, return_inverse=True)
+    boundary = np.bincount(pair_of_edge, minlength=pairs.size)
+    convex_count = np.bincount(pair_of_edge, weights=convex[between], minlength=pairs.size)
+    join = (boundary >= params.min_boundary_edges) & (
+        convex_count >= params.convex_share * boundary)
+    joined = np.stack([pairs[join] // n_patches, pairs[join] % n_patches], axis=1)
+    return connected_component_labels(n_patches, joined)[patches]
+
+
+def _absorb_fragments(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
+                      min_nodes: int) -> np.ndarray:
+    """Segments below ``min_nodes`` nodes join the adjacent larger segment with the most convex
+    edges to them (then the most edges). Only small-to-large moves, so nothing bridges."""
+    n_labels = int(labels.max()) + 1
+    small = np.bincount(labels, minlength=n_labels) < min_nodes
+    a, b = labels[edges[:, 0]], labels[edges[:, 1]]
+    source = np.concatenate([a, b])
+    target = np.concatenate([b, a])
+    edge_convex = np.concatenate([convex, convex])
+    moving = small[source] & ~small[target]
+    if not moving.any():
+        return labels
+    pair = source[moving].astype(np.int64) * n_labels + target[moving]
+    pairs, pair_of_edge = np.unique(pair, return_inverse=True)
+    score = (np.bincount(pair_of_edge, weights=edge_convex[moving]) * (len(edges) + 1)
+             + np.bincount(pair_of_edge))
+    fragment, host = pairs // n_labels, pairs % n_labels
+    best_first = np.lexsort((-score, fragment))
+    first = np.ones(best_first.size, dtype=bool)
+    first[1:] = fragment[best_first][1:] != fragment[best_first][:-1]
+    destination = np.arange(n_labels)
+    destination[fragment[best_first][first]] = host[best_first][first]
+    return destination[labels]

@@ -1,0 +1,184 @@
+"""Segmentation by local convexity (gngdt_core.segmentation) and the helpers it relies on."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from gngdt_core import GNGDT
+from gngdt_core.segmentation import SegmentationParams, edge_elevations, segment_network
+
+
+def box_faces(rng: np.random.Generator, x: tuple[float, float], y: tuple[float, float],
+              z: tuple[float, float], density: float) -> np.ndarray:
+    """Points on the faces of an axis-aligned box a camera at the origin (looking +z, y down)
+    sees from above and in front: the top (y = y[0]) and the front (z = z[0])."""
+    def face(u: tuple[float, float], v: tuple[float, float]) -> np.ndarray:
+        count = int((u[1] - u[0]) * (v[1] - v[0]) * density)
+        return np.column_stack([rng.uniform(*u, count), rng.uniform(*v, count)])
+
+    top = face(x, z)
+    front = face(x, y)
+    return np.vstack([
+        np.column_stack([top[:, 0], np.full(len(top), y[0]), top[:, 1]]),
+        np.column_stack([front[:, 0], front[:, 1], np.full(len(front), z[0])]),
+    ])
+
+
+def table_scene(rng: np.random.Generator, boxes: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    """A table (y = 0.2 m, 0.6 m x 0.5 m) with boxes standing on it; (points, true part)."""
+    density = 400_000.0  # points per square metre
+    count = int(0.6 * 0.5 * density)
+    table = np.column_stack([rng.uniform(-0.3, 0.3, count), np.full(count, 0.2),
+                             rng.uniform(0.6, 1.1, count)])
+    parts = [table]
+    for x, height, z in boxes:
+        parts.append(box_faces(rng, x, (0.2 - height, 0.2), z, density))
+        table = parts[0]
+        inside = ((table[:, 0] > x[0]) & (table[:, 0] < x[1])
+                  & (table[:, 2] > z[0]) & (table[:, 2] < z[1]))
+        parts[0] = table[~inside]
+    labels = np.concatenate([np.full(len(part), index) for index, part in enumerate(parts)])
+    points = np.vstack(parts) + rng.normal(0.0, 0.0005, (len(labels), 3))
+    return points.astype(np.float32), labels
+
+
+def learned_parts(points: np.ndarray, labels: np.ndarray) -> tuple[GNGDT, np.ndarray]:
+    model = GNGDT(max_nodes=800, lambda_=50, random_state=1).fit(points, n_steps=120_000)
+    node_part = labels[cKDTree(points).query(model.positions_)[1]]
+    return model, node_part
+
+
+def purity_and_coverage(segments: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """Share of nodes in a segment whose majority part is theirs, and of parts that own a
+    segment holding most of their nodes."""
+    pure = 0
+    for segment in np.unique(segments):
+        pure += np.bincount(truth[segments == segment]).max()
+    covered = 0
+    for part in np.unique(truth):
+        best = np.bincount(segments[truth == part]).max()
+        covered += best >= 0.8 * np.count_nonzero(truth == part)
+    return pure / len(truth), covered / len(np.unique(truth))
+
+
+def test_a_box_on_a_table_is_one_segment_and_the_table_another() -> None:
+    points, labels = table_scene(np.random.default_rng(0), [((-0.08, 0.08), 0.12, (0.8, 0.9))])
+    model, truth = learned_parts(points, labels)
+    segments = model.segment()
+    purity, coverage = purity_and_coverage(segments, truth)
+    assert purity > 0.97 and coverage == 1.0, (purity, coverage)
+    # the box's top and front (a convex ridge) are one segment, apart from the table's
+    assert np.bincount(segments[truth == 1]).argmax() != np.bincount(segments[truth == 0]).argmax()
+
+
+def test_two_touching_boxes_are_two_segments() -> None:
+    # side by side, touching along x = 0; the right one taller and 6 cm deeper, so the left
+    # one's top meets its front in a concave corner and the fronts make a step
+    boxes = [((-0.12, 0.0), 0.10, (0.78, 0.88)), ((0.0, 0.12), 0.16, (0.84, 0.94))]
+    points, labels = table_scene(np.random.default_rng(1), boxes)
+    model, truth = learned_parts(points, labels)
+    purity, coverage = purity_and_coverage(model.segment(), truth)
+    assert purity > 0.95 and coverage == 1.0, (purity, coverage)
+
+
+def test_the_paper_topologies_are_untouched_by_segmenting() -> None:
+    points, _ = table_scene(np.random.default_rng(2), [((-0.08, 0.08), 0.12, (0.8, 0.9))])
+    model = GNGDT(max_nodes=300, random_state=3).fit(points, n_steps=30_000)
+    before = {prop: model.edges(prop) for prop in model.properties_}
+    normals = model.normals_
+    model.segment()
+    assert all(np.array_equal(model.edges(prop), edges) for prop, edges in before.items())
+    assert np.array_equal(model.normals_, normals)
+
+
+def test_elevations_tell_convex_flat_concave_and_step() -> None:
+    # edge from node 0 to node 1, 1 cm apart along x; normals face the sensor (-z)
+    positions = np.array([[0.0, 0.0, 1.0], [0.01, 0.0, 1.0]])
+    up = np.array([0.0, 0.0, -1.0])
+    tilt = np.radians(30.0)
+    cases = {
+        "flat": (up, up, positions),
+        # a ridge: each side's normal tilts away from the other
+        "convex": (np.array([-np.sin(tilt), 0, -np.cos(tilt)]),
+                   np.array([np.sin(tilt), 0, -np.cos(tilt)]), positions),
+        "concave": (np.array([np.sin(tilt), 0, -np.cos(tilt)]),
+                    np.array([-np.sin(tilt), 0, -np.cos(tilt)]), positions),
+        # node 1 is 1 cm in front of node 0 (toward the sensor): a step
+        "step": (up, up, positions + np.array([[0, 0, 0], [0, 0, -0.01]])),
+    }
+    edges = np.array([[0, 1]])
+    rises = {}
+    for name, (n0, n1, where) in cases.items():
+        rise_of_1, rise_of_0 = edge_elevations(where, np.stack([n0, n1]), edges)
+        rises[name] = (float(rise_of_1[0]), float(rise_of_0[0]))
+    assert rises["flat"] == pytest.approx((0.0, 0.0), abs=1e-12)
+    assert max(rises["convex"]) < -0.4
+    assert min(rises["concave"]) > 0.4
+    assert max(rises["step"]) == pytest.approx(np.sin(np.radians(45.0)))
+
+
+def test_one_concave_edge_does_not_split_a_flat_patch() -> None:
+    # a 10 x 10 grid on a plane with one edge's end normal tilted: the majority rule keeps it
+    side = 10
+    grid = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
+    positions = np.column_stack([grid.reshape(-1, 2) * 0.01, np.ones(side * side)])
+    normals = np.tile([0.0, 0.0, -1.0], (side * side, 1))
+    index = np.arange(side * side).reshape(side, side)
+    edges = np.vstack([np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
+                       np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    normals[45] = [np.sin(0.6), 0.0, -np.cos(0.6)]
+    result = segment_network(positions, normals, edges)
+    assert result.n_segments == 1
+    assert not result.convex.all()  # the tilted node's edges are not convex ...
+
+
+def test_segmentation_parameters_are_validated() -> None:
+    with pytest.raises(ValueError, match="concavity_angle_deg"):
+        SegmentationParams(concavity_angle_deg=0.0)
+    with pytest.raises(ValueError, match="convex_share"):
+        SegmentationParams(convex_share=1.5)
+    with pytest.raises(ValueError, match="unknown segmentation parameter"):
+        SegmentationParams.from_dict({"concavity": 10})
+
+
+def test_predict_through_the_grid_is_the_exact_nearest_node() -> None:
+    rng = np.random.default_rng(4)
+    points, _ = table_scene(rng, [((-0.08, 0.08), 0.12, (0.8, 0.9))])
+    model = GNGDT(max_nodes=500, lambda_=50, random_state=5).fit(points, n_steps=60_000)
+    # scan-ordered, shuffled and far-away queries (the search must leave the grid's rings)
+    queries = np.vstack([points[:5000], rng.permutation(points)[:5000],
+                         rng.normal(0.0, 3.0, (200, 3))])
+    _, expected = cKDTree(model.positions_).query(queries)
+    winners = model.predict(queries)
+    distances = np.linalg.norm(model.positions_[winners] - queries, axis=1)
+    best = np.linalg.norm(model.positions_[expected] - queries, axis=1)
+    assert np.allclose(distances, best, rtol=0, atol=1e-12)
+
+
+def test_fresh_normals_follow_eq_16_on_the_current_positions() -> None:
+    points, _ = table_scene(np.random.default_rng(6), [((-0.08, 0.08), 0.12, (0.8, 0.9))])
+    model = GNGDT(max_nodes=300, random_state=7).fit(points, n_steps=40_000)
+    fresh = model.fresh_normals()
+    positions, edges = model.positions_, model.edges("pos")
+    neighbours: list[list[int]] = [[] for _ in range(model.n_nodes_)]
+    for i, j in edges:
+        neighbours[i].append(j)
+        neighbours[j].append(i)
+    compared = 0
+    for node, around in enumerate(neighbours):
+        if len(around) < 3:
+            continue
+        h_i, h_j = positions[node], positions[around]
+        distance = np.linalg.norm(h_j - h_i, axis=1)
+        weights = np.exp(-(distance**2) / distance.mean() ** 2)
+        centre = (h_i + weights @ h_j) / (1.0 + weights.sum())
+        deviations = h_j - centre
+        values, vectors = np.linalg.eigh(deviations.T @ deviations)
+        if values[1] - values[0] < 1e-3 * values[2]:
+            continue  # the smallest eigenvector is not well defined
+        expected = vectors[:, 0] * np.sign(vectors[:, 0] @ -h_i)  # faces the sensor
+        assert abs(fresh[node] @ expected) > 1 - 1e-6, node
+        compared += 1
+    assert compared > 50
