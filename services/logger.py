@@ -18,7 +18,8 @@ clouds for every Nth frame (by frame sequence), colour as JPEG, clouds capped in
 ``--keep-everything`` logs every frame in full.
 
 The logger stops on its own once every camera it heard of has ended its stream (eos) and the
-topology of its last frame has arrived, or ``--eos-drain`` seconds after that eos.
+topology of its last frame has arrived, or ``--eos-drain`` seconds after that eos, and no new
+camera has appeared for ``STOP_GRACE_SECONDS`` (a second camera whose capture started late).
 
 Crash safety: the ``.rrd`` is flushed every ``FLUSH_EVERY_SECONDS``, so a logger killed outright
 (``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which only makes
@@ -71,6 +72,8 @@ RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
 #: how often the .rrd is flushed to disk: what a killed logger can lose at most
 FLUSH_EVERY_SECONDS = 1.0
+#: once every camera heard of has finished, how long to wait for one not heard of yet
+STOP_GRACE_SECONDS = 2.0
 
 
 def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
@@ -690,6 +693,7 @@ def main(args: argparse.Namespace) -> int:
                  if recorder is not None else None)
     token = session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}")
     last_flush = time.monotonic()
+    finished_at: float | None = None
     try:
         while not stop.is_set():
             inbox.arrived.wait(0.05)
@@ -698,7 +702,11 @@ def main(args: argparse.Namespace) -> int:
             if time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
                 rec.flush()
                 last_flush = time.monotonic()
-            if not args.keep_running and dispatcher.all_finished(args.eos_drain):
+            if args.keep_running or not dispatcher.all_finished(args.eos_drain):
+                finished_at = None  # a camera still streams (or a new one appeared)
+            elif finished_at is None:
+                finished_at = time.monotonic()
+            elif time.monotonic() - finished_at >= STOP_GRACE_SECONDS:
                 break
     finally:
         token.undeclare()
