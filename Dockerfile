@@ -9,7 +9,7 @@ ENV PYTHONUNBUFFERED=1 \
     XDG_CONFIG_HOME=/var/cache/gngdt/config
 
 WORKDIR /app
-COPY pyproject.toml README.md ./
+COPY pyproject.toml README.md LICENSE ./
 COPY gngdt_core ./gngdt_core
 COPY schemas ./schemas
 COPY services ./services

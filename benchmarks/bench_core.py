@@ -4,6 +4,12 @@ Prints steps/s of the numba kernel at 100, 1,000 and 10,000 nodes, of the readab
 per-step reference on the same saturated networks (fewer steps), their ratio, and the numba
 first-call compile time (cold cache, in a subprocess) and cached load time.
 
+Then forgetting (``utility_k``, the learner's profile) at 1,000 nodes against the same network
+without it, in the same run: on Data2 seen as a depth camera's batch (one long call), and as the
+learner runs it, 10,000 steps a frame with the frame's camera pose, on virtual Kinect frames of
+the walking camera (``tabletop_walk``, 320x240); the per-frame time includes judging which nodes
+the sensor could see.
+
     python benchmarks/bench_core.py [--quick]
 """
 
@@ -55,6 +61,44 @@ def steps_per_second(learner: GNGDT | ReferenceGNGDT, positions: np.ndarray,
     return n_steps / (time.perf_counter() - start)
 
 
+def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
+                     frames: int) -> None:
+    """Steps/s at 1,000 nodes with and without forgetting, on one batch and frame by frame."""
+    from services.learner import LEARNER_MODEL_DEFAULTS
+    from services.pointcloud import Deprojector
+    from services.recording.synth import render_scene
+
+    forgetting = {"utility_k": LEARNER_MODEL_DEFAULTS["utility_k"]}
+    # Data2 as a depth camera's batch: in front of the camera, z from 200 to 300 units
+    camera_batch = positions + np.array([-150.0, -150.0, 200.0])
+    print(f"forgetting at 1,000 nodes ({forgetting}), against the same network without it:")
+    print(f"{'workload':>34} {'off steps/s':>13} {'on steps/s':>13} {'on/off':>7}")
+    rates = {}
+    for name, extra in (("off", {}), ("on", forgetting)):
+        model = GNGDT(max_nodes=1_000, random_state=0, **extra)
+        model.fit(camera_batch, colors, n_steps=700_000)
+        rates[name] = steps_per_second(model, camera_batch, colors, fast_steps)
+    print(f"{'Data2 batch, one call':>34} {rates['off']:>13,.0f} {rates['on']:>13,.0f} "
+          f"{rates['on'] / rates['off']:>7.2f}")
+
+    deproject = Deprojector()
+    views = []
+    for frame in render_scene("tabletop_walk", frames, width=320, height=240):
+        points, point_colors = deproject(frame.depth, frame.color, frame.intrinsics)
+        views.append((points, point_colors, frame.pose.matrix))
+    for name, extra in (("off", {}), ("on", forgetting)):
+        model = GNGDT(max_nodes=1_000, random_state=0, **extra)
+        for points, point_colors, pose in views[: frames // 2] * 3:  # fill up to 1,000 nodes
+            model.partial_fit(points, point_colors, n_steps=10_000, camera_pose=pose)
+        assert model.n_nodes_ == 1_000, model.n_nodes_
+        start = time.perf_counter()
+        for points, point_colors, pose in views[frames // 2:]:
+            model.partial_fit(points, point_colors, n_steps=10_000, camera_pose=pose)
+        rates[name] = 10_000 * (frames - frames // 2) / (time.perf_counter() - start)
+    print(f"{'walk frames, 10,000 steps + pose':>34} {rates['off']:>13,.0f} "
+          f"{rates['on']:>13,.0f} {rates['on'] / rates['off']:>7.2f}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer steps (smoke run)")
@@ -76,6 +120,7 @@ def main() -> None:
         fast = steps_per_second(model, positions, colors, fast_steps)
         naive = steps_per_second(reference, positions, colors, naive_steps)
         print(f"{n_nodes:>7} {fast:>15,.0f} {naive:>15,.0f} {fast / naive:>8,.0f}")
+    forgetting_speed(positions, colors, fast_steps, 20 if args.quick else 60)
 
 
 if __name__ == "__main__":

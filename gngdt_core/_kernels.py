@@ -17,6 +17,15 @@ Layout (``cap`` = node capacity = ``max_nodes``, ``K`` = ``MAX_DEGREE``):
   Degree overflow: if ``s1`` or ``s2`` already has ``K`` edges when Step 4 must create their edge,
   the edge is not created in that step (everything else proceeds); GNG degrees stay far below
   ``K`` in practice.
+- Forgetting (GNG-U's utility, Fritzke 1997, judged only where the sensor can see): ``util``
+  (cap,) float64 utility, the error the network would gain without the node (for each sample a
+  node wins, the squared distance to the second winner minus that to the winner), decaying by
+  ``utility_decay`` per step (GNG-U2's chi, Toda et al. 2016) through its own lazy scale
+  ``util_scale``. A node ``judged`` (cap,) uint8 in the current call (one the sensor could see:
+  in the view, not behind the measured surface) stores it scaled (true = ``util * util_scale``)
+  and so decays; any other node stores it in true units, frozen, for the whole call. Every lambda
+  steps the judged node of least utility is removed, with its edges, when ``max error >
+  utility_k * its utility``.
 - ``ids`` (cap,) int64 persistent node ids: a node keeps its id while its index changes (deletion
   moves the last node into the hole); a new node takes ``istate[I_NEXT_ID]``, which then grows, so
   an id is never reused.
@@ -25,8 +34,8 @@ Layout (``cap`` = node capacity = ``max_nodes``, ``K`` = ``MAX_DEGREE``):
   each node (-1: not in the grid), ``gcell`` (cap, 3) int64 integer cell of each node. A node's
   cell is ``floor(position * (1 / cell_size))`` per axis (the z cell is 0 in 2-D); every node
   in the grid is kept in the bucket of its current cell.
-- ``istate`` int64: [n_nodes, n_steps, grid_active, next_id]; ``fstate`` float64:
-  [error_scale, cell_size, spacing_ema].
+- ``istate`` int64: [n_nodes, n_steps, grid_active, next_id, nodes_forgotten]; ``fstate``
+  float64: [error_scale, cell_size, spacing_ema, util_scale].
 
 Nodes are deleted by swapping the last node into the hole, so indices stay compact.
 
@@ -65,11 +74,11 @@ ERROR_SCALE_FLOOR = 1e-60
 BOUND_SLACK = 1e-9
 
 # indices into istate / fstate / fparams / iparams
-I_NODES, I_STEPS, I_GRID, I_NEXT_ID = 0, 1, 2, 3
-F_ERROR_SCALE, F_CELL, F_SPACING = 0, 1, 2
+I_NODES, I_STEPS, I_GRID, I_NEXT_ID, I_FORGOTTEN = 0, 1, 2, 3, 4
+F_ERROR_SCALE, F_CELL, F_SPACING, F_UTIL_SCALE = 0, 1, 2, 3
 P_ETA1, P_ETA2, P_ALPHA, P_BETA, P_TAU_COL, P_TAU_NOR, P_MU = 0, 1, 2, 3, 4, 5, 6
-P_VX, P_VY, P_VZ, P_W_POS, P_W_COL = 7, 8, 9, 10, 11
-Q_LAMBDA, Q_AGE_MAX, Q_MAX_NODES, Q_MODE, Q_HAS_COL, Q_HAS_NOR, Q_ORIENT = 0, 1, 2, 3, 4, 5, 6
+P_VX, P_VY, P_VZ, P_W_POS, P_W_COL, P_UTILITY_K, P_UTILITY_DECAY = 7, 8, 9, 10, 11, 12, 13
+Q_LAMBDA, Q_AGE_MAX, Q_MAX_NODES, Q_MODE, Q_HAS_COL, Q_HAS_NOR, Q_ORIENT, Q_FORGET = range(8)
 
 # helpers of the per-step loop: inlined into their callers at the numba IR level
 inlined = njit(cache=True, inline="always")
@@ -266,7 +275,7 @@ def _node_sq_dist(values, i, j):
 
 @inlined
 def nearest_two_brute(pos, n, x0, x1, x2, dim):
-    """The two nodes nearest to ``x`` by position, and the squared distance of the first."""
+    """The two nodes nearest to ``x`` by position and their squared distances."""
     best1 = np.inf
     best2 = np.inf
     s1 = -1
@@ -281,7 +290,7 @@ def nearest_two_brute(pos, n, x0, x1, x2, dim):
         elif d < best2:
             best2 = d
             s2 = i
-    return s1, s2, best1
+    return s1, s2, best1, best2
 
 
 def _first_cells(dim: int) -> np.ndarray:
@@ -329,7 +338,7 @@ def _scan_bucket(p, gnext, pos, x0, x1, x2, dim, s1, s2, best1, best2):
 
 @inlined
 def nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext, cell_size, inv_cell):
-    """Exact nearest two by position from the grid; returns s1, s2 and the squared distance of s1.
+    """Exact nearest two by position from the grid; returns s1, s2 and their squared distances.
 
     Visits the query's cell and its ring-1 neighbours (likely nearest first), skipping every cell
     whose box is farther than the current second-best distance, then further rings (pruned the
@@ -393,7 +402,7 @@ def nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext, cell_size, inv_cell)
             # every unvisited cell is at least (r + margin) cells away
             bound = (r + margin) * cell_size
             if best2 * (1.0 + BOUND_SLACK) <= bound * bound:
-                return s1, s2, best1
+                return s1, s2, best1, best2
         r += 1
         side = 2 * r + 1
         if side * side * (side if dim > 2 else 1) > 2 * n:
@@ -647,7 +656,7 @@ def property_bits(col, nor, i, j, has_col, has_nor, tau_col, tau_nor):
 
 
 @njit(cache=True)
-def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
+def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
                 ghead, gnext, gprev, gbucket, gcell):
     """Delete isolated node ``i`` by moving the last node ``n-1`` into its slot. Returns n - 1."""
     grid_remove(ghead, gnext, gprev, gbucket, i)
@@ -660,6 +669,8 @@ def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
             nor[i, a] = nor[last, a]
         err[i] = err[last]
         ids[i] = ids[last]
+        util[i] = util[last]
+        judged[i] = judged[last]
         d = deg[last]
         for k in range(d):
             j = nbr[last, k]
@@ -679,20 +690,75 @@ def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
 
 @njit(cache=True)
 def learn(samples, sample_colors, order,
-          pos, col, nor, err, nbr, age, emask, rev, deg, ids,
+          pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
           ghead, gnext, gprev, gbucket, gcell,
           istate, fstate, fparams, iparams):
     """Run one learning step (Steps 1-9) per index in ``order`` (rows of ``samples``).
 
     samples: (N, D) float64 positions; sample_colors: (N, 3) float64, or any (1, 3) placeholder
-    without colour (then never read).
+    without colour (then never read). With forgetting on, ``judged`` marks the nodes the sensor
+    could see in this call (see the module docstring); nodes inserted during it are judged.
     """
-    # scratch for Step 7: the neighbours whose edge to s1 just expired
-    candidates = np.empty(nbr.shape[1], dtype=np.int64)
+    # scratch for Step 7 (the neighbours whose edge to s1 just expired) and for forgetting (a
+    # node and its neighbours)
+    candidates = np.empty(nbr.shape[1] + 1, dtype=np.int64)
+    forget = iparams[Q_FORGET] != 0
+    if forget:  # utilities of the nodes not judged now: frozen, in true units, for this call
+        _rescale_unjudged(util, judged, istate[I_NODES], fstate[F_UTIL_SCALE])
     _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg, ids,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
                  ghead, gnext, gprev, gbucket, gcell,
                  istate, fstate, fparams, iparams, candidates)
+    if forget:
+        _rescale_unjudged(util, judged, istate[I_NODES], 1.0 / fstate[F_UTIL_SCALE])
+
+
+@njit(cache=True)
+def _rescale_unjudged(util, judged, n, factor):
+    for i in range(n):
+        if judged[i] == 0:
+            util[i] *= factor
+
+
+@njit(cache=True)
+def forget_least_useful(n, err, util, judged, error_scale, util_scale, utility_k, candidates,
+                        pos, col, nor, nbr, age, emask, rev, deg, ids,
+                        ghead, gnext, gprev, gbucket, gcell):
+    """GNG-U's removal among the judged nodes: the judged node ``l`` of least utility goes, with
+    its edges and any neighbour left without one, when ``max error > utility_k * U_l`` (true,
+    unscaled values). Returns (new n, nodes removed).
+    """
+    max_err = 0.0
+    least = -1
+    least_util = np.inf
+    for i in range(n):
+        if err[i] > max_err:
+            max_err = err[i]
+        if judged[i] != 0 and util[i] < least_util:
+            least_util = util[i]
+            least = i
+    if least < 0 or n <= 2 or not max_err * error_scale > utility_k * least_util * util_scale:
+        return n, 0
+    n_candidates = 0
+    while deg[least] > 0:
+        k = deg[least] - 1
+        candidates[n_candidates] = nbr[least, k]
+        n_candidates += 1
+        remove_edge(nbr, age, emask, rev, deg, least, k)
+    candidates[n_candidates] = least
+    n_candidates += 1
+    removed = 0
+    for q in range(n_candidates):
+        j = candidates[q]
+        if deg[j] == 0 and n > 2:
+            last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util,
+                               judged, ghead, gnext, gprev, gbucket, gcell)
+            n -= 1
+            removed += 1
+            for q2 in range(q + 1, n_candidates):
+                if candidates[q2] == last:
+                    candidates[q2] = j
+    return n, removed
 
 
 # Compiled without the numba runtime (``_nrt=False``, the option numba uses for its own hot
@@ -701,10 +767,10 @@ def learn(samples, sample_colors, order,
 # Without the runtime the function cannot allocate; numba refuses to compile it if it tries.
 @njit(cache=True, _nrt=False)
 def _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg, ids,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
                  ghead, gnext, gprev, gbucket, gcell,
                  istate, fstate, fparams, iparams, candidates):
-    """The body of `learn`; ``candidates`` (MAX_DEGREE,) int64 scratch."""
+    """The body of `learn`; ``candidates`` (MAX_DEGREE + 1,) int64 scratch."""
     eta1 = fparams[P_ETA1]
     eta2 = fparams[P_ETA2]
     alpha = fparams[P_ALPHA]
@@ -724,14 +790,19 @@ def _learn_steps(samples, sample_colors, order,
     has_col = iparams[Q_HAS_COL] != 0
     has_nor = iparams[Q_HAS_NOR] != 0
     orient = iparams[Q_ORIENT] != 0
+    forget = iparams[Q_FORGET] != 0
+    utility_k = fparams[P_UTILITY_K]
+    utility_decay = fparams[P_UTILITY_DECAY]
     # in GNG / GNG-W colour is part of the input vector and follows the single topology
     col_follows_pos = mode != MODE_GNGDT
 
     n = istate[I_NODES]
     t = istate[I_STEPS]
     next_id = istate[I_NEXT_ID]
+    forgotten = istate[I_FORGOTTEN]
     grid_on = istate[I_GRID] != 0
     error_scale = fstate[F_ERROR_SCALE]
+    util_scale = fstate[F_UTIL_SCALE]
     cell_size = fstate[F_CELL]
     inv_cell = 1.0 / cell_size if grid_on else 0.0
     spacing = fstate[F_SPACING]
@@ -757,17 +828,20 @@ def _learn_steps(samples, sample_colors, order,
         # Step 2 (and the error of Step 3)
         if mode == MODE_GNGDT:
             if grid_on:
-                s1, s2, err_add = nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext,
-                                                   cell_size, inv_cell)
+                s1, s2, err_add, second = nearest_two_grid(pos, n, x0, x1, x2, dim, ghead,
+                                                           gnext, cell_size, inv_cell)
             else:
-                s1, s2, err_add = nearest_two_brute(pos, n, x0, x1, x2, dim)
+                s1, s2, err_add, second = nearest_two_brute(pos, n, x0, x1, x2, dim)
         else:
             s1, s2, err_add = nearest_two_weighted(pos, col, n, x0, x1, x2, dim, c0, c1, c2,
                                                    mode, has_col, w_pos, w_col)
+            second = err_add
         if s2 < 0:  # every distance overflowed (|x| ~ 1e154): no winner, learn nothing
             continue
         # Step 3
         err[s1] += err_add / error_scale
+        if forget and judged[s1] != 0:  # GNG-U: what the network would lose without s1
+            util[s1] += (second - err_add) / util_scale
         # running node spacing (distance between winners) sizes the grid cells
         d12 = math.sqrt(_node_sq_dist(pos, s1, s2))
         if spacing <= 0.0:
@@ -818,7 +892,7 @@ def _learn_steps(samples, sample_colors, order,
             j = candidates[q]
             if deg[j] == 0:
                 last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
-                                   ghead, gnext, gprev, gbucket, gcell)
+                                   util, judged, ghead, gnext, gprev, gbucket, gcell)
                 n -= 1
                 if s1 == last:
                     s1 = j
@@ -827,15 +901,22 @@ def _learn_steps(samples, sample_colors, order,
                         candidates[q2] = j
         if deg[s1] == 0:
             delete_node(s1, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
-                        ghead, gnext, gprev, gbucket, gcell)
+                        util, judged, ghead, gnext, gprev, gbucket, gcell)
             n -= 1
         elif has_nor:
             compute_normal(s1, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
         # Step 8: insertion every lambda steps, until max_nodes
         if phase == 0:
+            if forget:
+                n, removed = forget_least_useful(n, err, util, judged, error_scale, util_scale,
+                                                 utility_k, candidates, pos, col, nor, nbr, age,
+                                                 emask, rev, deg, ids, ghead, gnext, gprev,
+                                                 gbucket, gcell)
+                forgotten += removed
             if n < max_nodes:
                 n = _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
-                                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz)
+                                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
+                                 forget, util, judged, util_scale)
                 ids[n - 1] = next_id
                 next_id += 1
                 if grid_on:
@@ -858,12 +939,21 @@ def _learn_steps(samples, sample_colors, order,
             for i in range(n):
                 err[i] *= error_scale
             error_scale = 1.0
+        if forget:  # the judged nodes' utilities decay (the others are frozen, in true units)
+            util_scale *= 1.0 - utility_decay
+            if util_scale < ERROR_SCALE_FLOOR:
+                for i in range(n):
+                    if judged[i] != 0:
+                        util[i] *= util_scale
+                util_scale = 1.0
 
     istate[I_NODES] = n
     istate[I_STEPS] = t
     istate[I_GRID] = 1 if grid_on else 0
     istate[I_NEXT_ID] = next_id
+    istate[I_FORGOTTEN] = forgotten
     fstate[F_ERROR_SCALE] = error_scale
+    fstate[F_UTIL_SCALE] = util_scale
     fstate[F_CELL] = cell_size
     fstate[F_SPACING] = spacing
 
@@ -876,8 +966,12 @@ def _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell):
 
 @njit(cache=True)
 def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
-                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz):
-    """Step 8 i-vi: new node halfway between the max-error node and its max-error neighbour."""
+                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
+                 forget, util, judged, util_scale):
+    """Step 8 i-vi: new node halfway between the max-error node and its max-error neighbour.
+
+    With forgetting, the new node is judged and takes the mean utility of the two (GNG-U).
+    """
     u = 0
     for i in range(1, n):
         if err[i] > err[u]:
@@ -902,6 +996,11 @@ def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
     err[u] -= alpha * err[u]
     err[f] -= alpha * err[f]
     err[r] = 0.5 * (err[u] + err[f])
+    if forget:
+        scaled_u = util[u] if judged[u] != 0 else util[u] / util_scale
+        scaled_f = util[f] if judged[f] != 0 else util[f] / util_scale
+        util[r] = 0.5 * (scaled_u + scaled_f)
+        judged[r] = 1
     return n + 1
 
 

@@ -73,7 +73,7 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     has_col = _scalar_int(state, "has_colors")
     n_invalid = _scalar_int(state, "n_invalid")
     counters = _counters(state)
-    scalars = _array(state, "scalars", (3,), "f").astype(np.float64)
+    scalars = _scalars(state)
     if dim not in (0, 2, 3):
         raise ValueError(f"state dim must be 0 (unfitted), 2 or 3, got {dim}")
     if has_col not in (0, 1) or n_invalid < 0:
@@ -105,12 +105,19 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
             raise ValueError(f"state[{key!r}] contains NaN or inf")
     _check_adjacency(n, arrays)
     arrays["ids"], counters[K.I_NEXT_ID] = _node_ids(state, n, int(counters[K.I_NEXT_ID]))
+    arrays["util"] = np.zeros(n)  # states saved before forgetting existed: no utility yet
+    if "util" in state:
+        arrays["util"] = _array(state, "util", (n,), "f").astype(np.float64)
+        if not np.isfinite(arrays["util"]).all() or (arrays["util"] < 0).any():
+            raise ValueError("state['util'] must be finite and non-negative")
 
     model._allocate(dim, bool(has_col))
     for key, value in arrays.items():
         model._arrays[key][:n] = value
     model._istate[:] = counters
     model._fstate[:] = scalars
+    if "camera_pose" in state:  # states saved before camera poses: the camera frame
+        model._camera_pose = model._checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
     if counters[K.I_GRID]:
         a = model._arrays
         K.grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
@@ -118,15 +125,32 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     return model
 
 
+def _scalars(state: dict[str, np.ndarray]) -> np.ndarray:
+    """(4,) float64 [error_scale, cell_size, spacing, util_scale]; states saved before
+    forgetting had three (util_scale = 1)."""
+    scalars = np.asarray(state["scalars"])
+    if scalars.shape not in ((3,), (4,)) or scalars.dtype.kind != "f":
+        raise ValueError(f"state['scalars'] has {scalars.dtype} {scalars.shape}, "
+                         "expected 3 or 4 floats")
+    full = np.ones(4)
+    full[: scalars.size] = scalars
+    if not full[K.F_UTIL_SCALE] > 0.0:
+        raise ValueError(f"state scalars are invalid: {full.tolist()}")
+    return full
+
+
 def _counters(state: dict[str, np.ndarray]) -> np.ndarray:
-    """(4,) int64 [n_nodes, n_steps, grid_active, next_id]; states saved before node ids had
-    three counters, and get next_id = -1 here (fresh ids are assigned by `_node_ids`)."""
+    """(5,) int64 [n_nodes, n_steps, grid_active, next_id, nodes_forgotten]; states saved
+    before node ids had three counters, and get next_id = -1 here (fresh ids are assigned by
+    `_node_ids`); states saved before forgetting had four, and have forgotten nothing."""
     counters = np.asarray(state["counters"])
-    if counters.shape not in ((3,), (4,)) or counters.dtype.kind not in "iu":
+    if counters.shape not in ((3,), (4,), (5,)) or counters.dtype.kind not in "iu":
         raise ValueError(f"state['counters'] has {counters.dtype} {counters.shape}, "
-                         "expected 3 or 4 integers")
-    full = np.full(4, -1, dtype=np.int64)
+                         "expected 3 to 5 integers")
+    full = np.array([-1, -1, -1, -1, 0], dtype=np.int64)
     full[: counters.size] = counters
+    if full[K.I_FORGOTTEN] < 0:
+        raise ValueError(f"state counters are invalid: {full.tolist()}")
     return full
 
 

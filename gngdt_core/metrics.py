@@ -1,4 +1,4 @@
-"""Evaluation measures of the paper (eqs. 17-18) and the adjusted Rand index."""
+"""Evaluation measures: the paper's (eqs. 17-18), the adjusted Rand index, and ghost nodes."""
 
 from __future__ import annotations
 
@@ -73,3 +73,34 @@ def adjusted_rand_index(labels_true: np.ndarray, labels_pred: np.ndarray) -> flo
     if maximum == expected:  # both partitions trivial (all one cluster or all singletons)
         return 1.0
     return (index - expected) / (maximum - expected)
+
+
+def ghost_nodes(
+    node_positions: np.ndarray,
+    camera_points: np.ndarray,
+    camera_pose: np.ndarray | None = None,
+    distance: float = 0.05,
+    margin: float = 0.05,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which nodes the sensor could have seen in a batch, and which of those are ghosts.
+
+    node_positions: (N, 3) in the model's frame; camera_points: (M, 3) the batch, camera frame;
+    camera_pose: (4, 4) camera-to-model (None: the model is in the camera frame). A node is seen
+    as in `gngdt_core.view.seen_nodes` (depth tolerance ``margin``, a fraction of the depth) and
+    a ghost when it is seen and farther than ``distance`` (the data's units) from every point of
+    the batch: the sensor looked there and found nothing. Returns (seen, ghost), (N,) bool each.
+    """
+    from scipy.spatial import cKDTree
+
+    from gngdt_core.view import seen_nodes
+
+    nodes = np.asarray(node_positions, dtype=np.float64)
+    seen = seen_nodes(nodes, camera_points, camera_pose, margin)
+    ghost = np.zeros(len(nodes), dtype=bool)
+    points = np.asarray(camera_points, dtype=np.float64)
+    if seen.any() and len(points):
+        if camera_pose is not None:
+            points = points @ camera_pose[:3, :3].T + camera_pose[:3, 3]
+        nearest, _ = cKDTree(points).query(nodes[seen], k=1, distance_upper_bound=distance)
+        ghost[np.flatnonzero(seen)[~np.isfinite(nearest)]] = True
+    return seen, ghost

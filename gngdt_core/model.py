@@ -19,6 +19,7 @@ Step 0 places the two initial nodes on two random input samples. Growth stops at
 from __future__ import annotations
 
 import json
+import math
 import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
@@ -33,17 +34,28 @@ from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
 from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
 from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_network
+from gngdt_core.view import SensorView, rigid_inverse
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
-_STATE_VERSION = 2  # 2: persistent node ids (``ids``, a fourth counter)
+_STATE_VERSION = 3  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
+# a fifth counter: nodes forgotten)
 #: a nearest-node batch is split over the CPUs when each part gets at least this many points
 PARALLEL_MIN_POINTS = 50_000
+#: largest deviation of a camera pose's rotation from orthonormal (and of its last row)
+POSE_TOLERANCE = 1e-6
 
 
 def split_range(n: int, min_part: int) -> list[int]:
     """Bounds of up to one part per usable CPU over ``range(n)``, each part >= ``min_part``."""
     parts = max(1, min(len(os.sched_getaffinity(0)), n // max(min_part, 1)))
     return [n * k // parts for k in range(parts + 1)]
+
+
+def _to_model(camera_samples: np.ndarray, camera_pose: np.ndarray | None) -> np.ndarray:
+    """Samples (M, 3) float64 in the model's frame: the pose applied, when there is one."""
+    if camera_pose is None:
+        return camera_samples
+    return camera_samples @ camera_pose[:3, :3].T + camera_pose[:3, 3]
 
 
 def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
@@ -73,8 +85,10 @@ class _GrowingGas:
         self._has_col = False
         self.n_invalid_ = 0
         self._arrays: dict[str, np.ndarray] = {}
-        self._istate = np.zeros(4, dtype=np.int64)
-        self._fstate = np.array([1.0, 0.0, 0.0])
+        self._istate = np.zeros(5, dtype=np.int64)
+        self._fstate = np.array([1.0, 0.0, 0.0, 1.0])
+        #: the last batch's camera pose (None: the model's frame is the camera's)
+        self._camera_pose: np.ndarray | None = None
 
     def _allocate(self, dim: int, has_col: bool) -> None:
         cap = self._params["max_nodes"]
@@ -92,6 +106,8 @@ class _GrowingGas:
             "rev": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
             "deg": np.zeros(cap, dtype=np.int32),
             "ids": np.zeros(cap, dtype=np.int64),
+            "util": np.zeros(cap),
+            "judged": np.zeros(cap, dtype=np.uint8),
             "ghead": np.full(table, -1, dtype=np.int32),
             "gnext": np.full(cap, -1, dtype=np.int32),
             "gprev": np.full(cap, -1, dtype=np.int32),
@@ -99,37 +115,60 @@ class _GrowingGas:
             "gcell": np.zeros((cap, 3), dtype=np.int64),
         }
 
-    def _kernel_parameters(self) -> tuple[np.ndarray, np.ndarray]:
+    @property
+    def _forgets(self) -> bool:
+        return self._params.get("utility_k") is not None
+
+    def _kernel_parameters(self, camera_pose: np.ndarray | None = None
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """Kernel parameters; ``camera_pose`` places the viewpoint (default: the last batch's)."""
         p = self._params
         viewpoint = p.get("viewpoint")
+        camera_pose = self._camera_pose if camera_pose is None else camera_pose
+        if viewpoint is not None and camera_pose is not None:  # the sensor's place in this batch
+            viewpoint = camera_pose[:3, :3] @ np.asarray(viewpoint) + camera_pose[:3, 3]
+        tau_nor = p.get("tau_nor", 1.0)
+        if p.get("normal_angle_deg") is not None:  # the chord between unit vectors that far apart
+            tau_nor = 2.0 * math.sin(math.radians(p["normal_angle_deg"]) / 2.0)
         fparams = np.array([
             p["eta1"], p["eta2"], p["alpha"], p["beta"],
-            p.get("tau_col", 1.0), p.get("tau_nor", 1.0), p.get("normal_mu") or 0.0,
+            p.get("tau_col", 1.0), tau_nor, p.get("normal_mu") or 0.0,
             *(viewpoint if viewpoint is not None else (0.0, 0.0, 0.0)),
-            p.get("w_pos", 1.0), p.get("w_col", 1.0),
+            p.get("w_pos", 1.0), p.get("w_col", 1.0), p.get("utility_k") or 0.0,
+            p.get("utility_decay", 0.0),
         ])
         has_nor = self._MODE == K.MODE_GNGDT and self._dim == 3
         iparams = np.array([
             p["lambda_"], p["age_max"], p["max_nodes"], self._MODE,
-            int(self._has_col), int(has_nor), int(viewpoint is not None),
+            int(self._has_col), int(has_nor), int(viewpoint is not None), int(self._forgets),
         ], dtype=np.int64)
         return fparams, iparams
 
     # ------------------------------------------------------------------ learning
 
-    def fit(self, positions: Any, colors: Any = None, n_steps: int | None = None) -> Self:
+    def fit(self, positions: Any, colors: Any = None, n_steps: int | None = None,
+            camera_pose: Any = None) -> Self:
         """Forget everything (the RNG is re-seeded from ``random_state``), then learn."""
         self._reset()
-        return self.partial_fit(positions, colors, n_steps)
+        return self.partial_fit(positions, colors, n_steps, camera_pose)
 
-    def partial_fit(self, positions: Any, colors: Any = None, n_steps: int | None = None) -> Self:
+    def partial_fit(self, positions: Any, colors: Any = None, n_steps: int | None = None,
+                    camera_pose: Any = None) -> Self:
         """Learn ``n_steps`` samples (default: one pass) drawn in random order from the batch.
 
         positions: (N, D) numeric, D = 2 or 3 (same D on every call); colors: (N, 3) numeric, any
         scale, or None (given on every call or on none). Rows with NaN/inf are dropped and counted
         in ``n_invalid_``.
+
+        camera_pose: (4, 4) camera-to-world transform of this batch (3-D only), or None. With it,
+        ``positions`` are in the camera frame (x right, y down, z forward) and are learned in the
+        fixed frame the pose maps them into, so the network is a map in that frame; normals face
+        the camera's place in this batch (``viewpoint`` is then given in the camera frame). Without
+        it the model's frame is the batch's own. See `GNGDT` for forgetting, which judges nodes
+        against this batch seen from this pose.
         """
         batch, batch_colors, finite_rows, n_invalid = check_batch(positions, colors)
+        camera_pose = self._checked_pose(camera_pose, batch.shape[1])
         if n_steps is not None:
             if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)):
                 raise ValueError(f"n_steps must be an integer or None, got {n_steps!r}")
@@ -147,25 +186,94 @@ class _GrowingGas:
         steps = n_samples if n_steps is None else int(n_steps)
         if self.n_nodes_ == 0:
             first_two = initial_indices(self._rng, n_samples)
-            self._initialise(*gather(batch, batch_colors, _rows(finite_rows, first_two)))
+            initial, initial_colors = gather(batch, batch_colors, _rows(finite_rows, first_two))
+            self._initialise(_to_model(initial, camera_pose), initial_colors)
+        self._camera_pose = camera_pose
         fparams, iparams = self._kernel_parameters()
         a = self._arrays
         # Fewer steps than samples (a large frame): convert only the sampled rows, so a frame
         # costs what its steps cost. A pass or more: convert the batch once, visit it by index.
-        whole_batch = gather(batch, batch_colors, finite_rows) if steps >= n_samples else None
-        for order in sample_orders(self._rng, n_samples, steps):
+        whole_batch = None
+        if steps >= n_samples:
+            camera_samples, sample_colors = gather(batch, batch_colors, finite_rows)
+            self._judge(camera_samples, camera_pose)
+            whole_batch = _to_model(camera_samples, camera_pose), sample_colors
+        for chunk, order in enumerate(sample_orders(self._rng, n_samples, steps)):
             if whole_batch is None:
                 samples, sample_colors = gather(batch, batch_colors, _rows(finite_rows, order))
+                if chunk == 0:
+                    self._judge(samples, camera_pose)
+                samples = _to_model(samples, camera_pose)
                 order = np.arange(order.size)
             else:
                 samples, sample_colors = whole_batch
             kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
-            K.learn(samples, kernel_colors, order,
-                    a["pos"], a["col"], a["nor"], a["err"],
-                    a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                    a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                    self._istate, self._fstate, fparams, iparams)
+            for part in self._refresh_parts(order):
+                K.learn(samples, kernel_colors, part,
+                        a["pos"], a["col"], a["nor"], a["err"],
+                        a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
+                        a["util"], a["judged"],
+                        a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                        self._istate, self._fstate, fparams, iparams)
+                if self._params.get("normal_refresh_steps"):
+                    self.refresh_normals()
         return self
+
+    def _refresh_parts(self, order: np.ndarray) -> list[np.ndarray]:
+        """``order`` cut into runs of ``normal_refresh_steps`` (whole when refresh is off)."""
+        every = self._params.get("normal_refresh_steps")
+        if not every:
+            return [order]
+        return [order[start:start + every] for start in range(0, order.size, every)]
+
+    def refresh_normals(self) -> None:
+        """Recompute eq. 16 for every node, then eqs. 4/9 for every edge, from the current nodes
+        (``normal_refresh_steps`` does this periodically while learning)."""
+        if not self._arrays:
+            return
+        fparams, iparams = self._kernel_parameters()
+        a = self._arrays
+        n = self.n_nodes_
+        if iparams[K.Q_HAS_NOR]:
+            SK.refresh_normals(n, a["pos"], a["nor"], a["nbr"], a["deg"], fparams[K.P_MU],
+                               bool(iparams[K.Q_ORIENT]), fparams[K.P_VX], fparams[K.P_VY],
+                               fparams[K.P_VZ])
+        SK.refresh_property_bits(n, a["col"], a["nor"], a["nbr"], a["emask"], a["rev"], a["deg"],
+                                 bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
+                                 fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
+
+    def _checked_pose(self, camera_pose: Any, dim: int) -> np.ndarray | None:
+        """(4, 4) float64 rigid camera-to-world transform, or None; ValueError otherwise."""
+        if camera_pose is None:
+            return None
+        pose = np.asarray(camera_pose, dtype=np.float64)
+        if dim != 3:
+            raise ValueError(f"camera_pose needs 3-D positions, got {dim}-D")
+        if pose.shape != (4, 4) or not np.isfinite(pose).all():
+            raise ValueError(f"camera_pose must be a finite (4, 4) matrix, got {pose.shape}")
+        rotation = pose[:3, :3]
+        if (np.abs(rotation @ rotation.T - np.eye(3)).max() > POSE_TOLERANCE
+                or np.abs(pose[3] - (0.0, 0.0, 0.0, 1.0)).max() > POSE_TOLERANCE
+                or np.linalg.det(rotation) < 0):
+            raise ValueError("camera_pose must be rigid: an orthonormal rotation with det +1 and "
+                             "a last row of (0, 0, 0, 1)")
+        return None if np.array_equal(pose, np.eye(4)) else pose
+
+    def _judge(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None) -> None:
+        """Mark the nodes this batch judges (forgetting): in 3-D, those the sensor could have
+        seen given these camera-frame samples; in 2-D, all of them (plain GNG-U)."""
+        if not self._forgets:
+            return
+        n, judged = self.n_nodes_, self._arrays["judged"]
+        if self._dim != 3:
+            judged[:n] = 1
+            return
+        judged[:n] = 0
+        view = SensorView.of(camera_samples)
+        if view is not None:
+            camera_from_model = np.eye(4) if camera_pose is None else rigid_inverse(camera_pose)
+            view.judge(self._arrays["pos"], n, camera_from_model,
+                       self._params["view_depth_margin"], self._fstate[K.F_SPACING], judged)
 
     def _check_consistent(self, dim: int, has_col: bool) -> None:
         if dim != self._dim:
@@ -278,8 +386,9 @@ class _GrowingGas:
         mask = self._property_mask(props or ("pos",))
         return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
 
-    def predict(self, positions: Any) -> np.ndarray:
-        """(N,) int64 index of the winner node (nearest by position) of each row.
+    def predict(self, positions: Any, return_distance: bool = False) -> Any:
+        """(N,) int64 index of the winner node (nearest by position) of each row; with
+        ``return_distance``, also (N,) float64 the distance to it (input units).
 
         Rows in scan order (a depth image's pixels row by row) are fastest: each search starts
         from the previous row's winner in the learner's own spatial grid.
@@ -294,9 +403,12 @@ class _GrowingGas:
         if not np.isfinite(query).all():
             raise ValueError("positions contain NaN or inf")
         if self._dim != 3 or self._MODE != K.MODE_GNGDT:
-            _, winners = cKDTree(self.positions_).query(query, k=1)
-            return np.asarray(winners, dtype=np.int64)
-        return self._nearest_nodes(np.ascontiguousarray(query))[0].astype(np.int64)
+            distances, winners = cKDTree(self.positions_).query(query, k=1)
+        else:
+            winners, sq_distances = self._nearest_nodes(np.ascontiguousarray(query))
+            distances = np.sqrt(sq_distances)
+        winners = np.asarray(winners, dtype=np.int64)
+        return (winners, np.asarray(distances, dtype=np.float64)) if return_distance else winners
 
     def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
@@ -346,7 +458,10 @@ class _GrowingGas:
             "counters": self._istate.copy(),
             "scalars": self._fstate.copy(),
         }
-        for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids"):
+        if self._camera_pose is not None:  # the last batch's pose places the viewpoint
+            state["camera_pose"] = self._camera_pose.copy()
+        for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
+                     "util"):
             if a:
                 state[name] = a[name][:n].copy()
         return state
@@ -365,11 +480,34 @@ class GNGDT(_GrowingGas):
     Defaults are the paper's Table 1 plus a node budget. ``normal_mu=None`` (default) uses, per
     node, the mean distance to its position neighbours as the eq. 16 coefficient, so normals do not
     depend on the data's scale. ``viewpoint``: normals are flipped to face it (None: no orienting).
+
+    Beyond the paper (off by default): ``normal_angle_deg`` states the normal threshold as what it
+    means — a normal edge is kept while the (sign-invariant) angle between the two normals is
+    below it; it replaces ``tau_nor`` (the chord ``2 sin(angle / 2)``). ``normal_refresh_steps``
+    keeps normals fresh: the paper recomputes eq. 16 only for each step's winner, so a node's
+    normal lags behind its neighbours' moves; with it, eq. 16 is recomputed for every node, and
+    eqs. 4/9 for every edge, every that many steps and at the end of each `partial_fit`.
+
+    Forgetting (off by default, as in the paper): with ``utility_k`` set, nodes that stop
+    representing data are removed as in GNG-U (Fritzke 1997): each node's utility accumulates,
+    for the samples it wins, the squared distance to the second winner minus that to the winner,
+    and decays by ``utility_decay`` per step (GNG-U2's chi, Toda et al. 2016: slower than
+    ``beta``, so that a node winning a sample every few thousand steps keeps its utility); every
+    ``lambda_`` steps the node of least utility goes, with its edges, when
+    ``max error > utility_k * its utility``. Only nodes the sensor
+    could see in the current batch are judged (their utility decays, they may be removed): put in
+    the camera frame, inside the batch's view and not behind its farthest measured depth by more
+    than ``view_depth_margin`` times that depth (``gngdt_core.view``). The rest of the map keeps
+    its utility, frozen, however long it is out of view. 3-D batches are then taken as a depth
+    camera's points (camera frame, z forward; or mapped by ``camera_pose``); in 2-D every node is
+    judged.
     """
 
     _MODE = K.MODE_GNGDT
     _PARAM_NAMES = (
         *_GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
+        "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
+        "view_depth_margin",
     )
 
     def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
@@ -377,11 +515,36 @@ class GNGDT(_GrowingGas):
                  beta: float = 0.0005, tau_col: float = 10.0, tau_nor: float = 0.02,
                  normal_mu: float | None = None,
                  viewpoint: tuple[float, float, float] | None = (0.0, 0.0, 0.0),
-                 random_state: int | None = None) -> None:
+                 normal_angle_deg: float | None = None, normal_refresh_steps: int | None = None,
+                 utility_k: float | None = None, utility_decay: float = 1e-4,
+                 view_depth_margin: float = 0.05, random_state: int | None = None) -> None:
         super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
                          age_max=age_max, alpha=alpha, beta=beta, tau_col=tau_col,
                          tau_nor=tau_nor, normal_mu=normal_mu, viewpoint=viewpoint,
+                         normal_angle_deg=normal_angle_deg,
+                         normal_refresh_steps=normal_refresh_steps, utility_k=utility_k,
+                         utility_decay=utility_decay, view_depth_margin=view_depth_margin,
                          random_state=random_state)
+
+    @property
+    def n_forgotten_(self) -> int:
+        """Nodes removed so far by forgetting (and neighbours it left without an edge)."""
+        return int(self._istate[K.I_FORGOTTEN])
+
+    @property
+    def judged_(self) -> np.ndarray:
+        """(n_nodes,) bool: the nodes the last batch judged (forgetting on; else all False).
+        Nodes inserted during the batch count as judged."""
+        if not self._arrays or not self._forgets:
+            return np.zeros(self.n_nodes_, dtype=bool)
+        return self._arrays["judged"][: self.n_nodes_].astype(bool)
+
+    @property
+    def utilities_(self) -> np.ndarray:
+        """(n_nodes,) float64 utilities with all decay applied (zeros when not forgetting)."""
+        if not self._arrays:
+            return np.zeros(0)
+        return self._arrays["util"][: self.n_nodes_] * self._fstate[K.F_UTIL_SCALE]
 
     @property
     def properties_(self) -> tuple[str, ...]:

@@ -57,6 +57,12 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
         checked["tau_col"] = check_real("tau_col", params["tau_col"], 0.0, low_open=True)
     if "tau_nor" in params:
         checked["tau_nor"] = check_real("tau_nor", params["tau_nor"], 0.0, low_open=True)
+    if params.get("normal_angle_deg") is not None:
+        checked["normal_angle_deg"] = check_real("normal_angle_deg", params["normal_angle_deg"],
+                                                 0.0, 90.0, low_open=True)
+    if params.get("normal_refresh_steps") is not None:
+        checked["normal_refresh_steps"] = check_integer("normal_refresh_steps",
+                                                        params["normal_refresh_steps"], 1)
     if "normal_mu" in params and params["normal_mu"] is not None:
         checked["normal_mu"] = check_real("normal_mu", params["normal_mu"], 0.0, low_open=True)
     if "viewpoint" in params and params["viewpoint"] is not None:
@@ -69,6 +75,16 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
                 f"viewpoint must be 3 finite numbers or None, got {params['viewpoint']!r}"
             )
         checked["viewpoint"] = tuple(float(v) for v in viewpoint)
+    if params.get("utility_k") is not None:
+        checked["utility_k"] = check_real("utility_k", params["utility_k"], 0.0, low_open=True)
+    if "utility_decay" in params:
+        checked["utility_decay"] = check_real("utility_decay", params["utility_decay"], 0.0, 1.0)
+        if checked["utility_decay"] >= 1.0:
+            raise ValueError(f"utility_decay must be < 1, got {checked['utility_decay']}")
+    if "view_depth_margin" in params:
+        checked["view_depth_margin"] = check_real(
+            "view_depth_margin", params["view_depth_margin"], 0.0, 10.0
+        )
     for weight in ("w_pos", "w_col"):
         if weight in params:
             checked[weight] = check_real(weight, params[weight], 0.0)

@@ -1,19 +1,29 @@
 """A readable, slow GNG-DT: NumPy work per step, Steps 0-10 written out as in the paper.
 
-It follows the same rules and tie-breaking as the numba kernel (node deletion by moving the last
-node into the hole, sign-invariant normal edges, normals oriented toward the viewpoint, new
-nodes' normals interpolated), so on the same samples in the same order both produce the same
-network up to floating-point rounding. Used to check the fast kernel and as the naive baseline of
-`benchmarks/bench_core.py`. Not meant for real work.
+It follows the same rules and tie-breaking as the numba kernel, so on the same samples in the same
+order both produce the same network up to floating-point rounding:
+
+- each node keeps its neighbours in the kernel's slot order (a new edge is appended; a removed
+  edge's slot is taken by the node's last one), which decides the order in which Step 7 deletes
+  nodes and which neighbour wins a tie in Step 8;
+- a node has at most ``MAX_DEGREE`` edges: Step 4 creates no edge when either winner is full;
+- nodes are deleted by moving the last node into the hole;
+- normal edges are sign-invariant, normals are oriented toward the viewpoint, new nodes' normals
+  are interpolated from their parents'.
+
+Normals use ``numpy.linalg.eigh`` where the kernel has a closed form; in near-degenerate
+neighbourhoods the two differ by up to ~1e-3. Used to check the fast kernel and as the naive
+baseline of `benchmarks/bench_core.py`. Not meant for real work.
 """
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from gngdt_core import _kernels as K
+from gngdt_core._kernels import COL_BIT, I_NEXT_ID, MAX_DEGREE, NOR_BIT
 from gngdt_core.model import GNGDT
 from gngdt_core.sampling import as_samples, initial_indices, sample_orders
 
@@ -24,8 +34,16 @@ class Edge:
     properties: set[str] = field(default_factory=lambda: {"pos"})
 
 
+def _key(i: int, j: int) -> tuple[int, int]:
+    return (i, j) if i < j else (j, i)
+
+
 class ReferenceGNGDT:
-    """Per-step NumPy GNG-DT with the parameters of `GNGDT` (same names and defaults)."""
+    """Per-step NumPy GNG-DT with the parameters of `GNGDT` (same names and defaults).
+
+    ``events`` counts what the kernel handles specially: ``"deleted_nodes"`` (Step 7) and
+    ``"degree_cap"`` (Step 4 found a winner with ``MAX_DEGREE`` edges and created no edge).
+    """
 
     def __init__(self, **params: object) -> None:
         self.params = GNGDT(**params)._params  # the same validation and defaults
@@ -37,8 +55,10 @@ class ReferenceGNGDT:
         self.ids = np.zeros(0, dtype=np.int64)  # persistent node ids; never reused
         self.next_id = 0
         self.edges: dict[tuple[int, int], Edge] = {}
+        self.adjacency: list[list[int]] = []  # neighbours of each node, in slot order
         self.n_steps = 0
         self.has_col = False
+        self.events: Counter[str] = Counter()
 
     @classmethod
     def from_model(cls, model: GNGDT) -> ReferenceGNGDT:
@@ -49,24 +69,40 @@ class ReferenceGNGDT:
         ref.normals = model.normals_
         ref.errors = model.errors_
         ref.ids = model.node_ids_
-        ref.next_id = int(model._istate[K.I_NEXT_ID])
+        ref.next_id = int(model._istate[I_NEXT_ID])
         ref.has_col = "col" in model.properties_
         ref.n_steps = model.n_steps_
-        for prop in model.properties_:
-            for i, j in model.edges(prop):
-                ref.edges.setdefault((int(i), int(j)), Edge(0, set())).properties.add(prop)
         a = model._arrays
         for i in range(model.n_nodes_):
-            for k in range(a["deg"][i]):
-                j = int(a["nbr"][i, k])
+            ref.adjacency.append([int(j) for j in a["nbr"][i, : a["deg"][i]]])
+            for k, j in enumerate(ref.adjacency[i]):
                 if i < j:
-                    ref.edges[(i, j)].age = int(a["age"][i, k])
+                    bits = int(a["emask"][i, k])
+                    props = {"pos"} | {name for name, bit in (("col", COL_BIT), ("nor", NOR_BIT))
+                                       if bits & bit and name in model.properties_}
+                    ref.edges[(i, j)] = Edge(int(a["age"][i, k]), props)
         return ref
 
     # ------------------------------------------------------------------ helpers
 
     def neighbours(self, i: int) -> list[tuple[int, Edge]]:
-        return [(b if a == i else a, e) for (a, b), e in self.edges.items() if i in (a, b)]
+        return [(j, self.edges[_key(i, j)]) for j in self.adjacency[i]]
+
+    def _connect(self, i: int, j: int, properties: set[str]) -> bool:
+        """A new edge of age 0; False (nothing changes) when ``i`` or ``j`` is full."""
+        if max(len(self.adjacency[i]), len(self.adjacency[j])) >= MAX_DEGREE:
+            return False
+        self.adjacency[i].append(j)
+        self.adjacency[j].append(i)
+        self.edges[_key(i, j)] = Edge(0, properties)
+        return True
+
+    def _disconnect(self, i: int, j: int) -> None:
+        del self.edges[_key(i, j)]
+        for a, b in ((i, j), (j, i)):
+            row = self.adjacency[a]
+            row[row.index(b)] = row[-1]  # the last slot fills the hole
+            row.pop()
 
     def _edge_properties(self, i: int, j: int) -> set[str]:
         """Eqs. 4 and 9: the position edge plus every property whose values are within tau."""
@@ -90,7 +126,7 @@ class ReferenceGNGDT:
 
     def _normal(self, i: int) -> None:
         """Eq. 16 with eigh; zero when the smallest eigenvector is not unique."""
-        neighbours = [j for j, _ in self.neighbours(i)]
+        neighbours = self.adjacency[i]
         self.normals[i] = 0.0
         if len(neighbours) < 2:
             return
@@ -112,17 +148,19 @@ class ReferenceGNGDT:
 
     def _delete_node(self, i: int) -> int:
         """Remove isolated node ``i``; the last node takes index ``i``. Returns the old last."""
+        self.events["deleted_nodes"] += 1
         last = len(self.errors) - 1
         for array_name in ("positions", "colors", "normals", "errors", "ids"):
             array = getattr(self, array_name)
             array[i] = array[last]
             setattr(self, array_name, array[:last])
+        moved = self.adjacency.pop()
         if i != last:
-            renamed = {}
-            for (a, b), edge in self.edges.items():
-                a2, b2 = (i if a == last else a), (i if b == last else b)
-                renamed[(min(a2, b2), max(a2, b2))] = edge
-            self.edges = renamed
+            self.adjacency[i] = moved
+            for j in moved:  # the neighbours keep their slot, now pointing at i
+                row = self.adjacency[j]
+                row[row.index(last)] = i
+                self.edges[_key(i, j)] = self.edges.pop(_key(last, j))
         return last
 
     # ------------------------------------------------------------------ learning
@@ -139,6 +177,7 @@ class ReferenceGNGDT:
                            else np.zeros((2, 3)))
             self.normals = np.zeros((2, 3))
             self.errors = np.zeros(2)
+            self.adjacency = [[1], [0]]
             self.ids = np.array([0, 1], dtype=np.int64)
             self.next_id = 2
             self.edges = {(0, 1): Edge(0, {"pos", "col", "nor"})}
@@ -158,8 +197,12 @@ class ReferenceGNGDT:
         # Step 3
         self.errors[s1] += squared[s1]
         # Step 4
-        key = (min(s1, s2), max(s1, s2))
-        self.edges[key] = Edge(0, self._edge_properties(s1, s2))
+        key = _key(s1, s2)
+        if key in self.edges or self._connect(s1, s2, {"pos"}):
+            self.edges[key].age = 0
+            self.edges[key].properties = self._edge_properties(s1, s2)
+        else:
+            self.events["degree_cap"] += 1
         # Step 5
         self.positions[s1] += p["eta1"] * (x - self.positions[s1])
         if self.has_col:
@@ -169,18 +212,22 @@ class ReferenceGNGDT:
             if self.has_col and "col" in edge.properties:
                 self.colors[j] += p["eta2"] * (colour - self.colors[j])
             edge.age += 1  # Step 6
-        # Step 7
-        old = [(j, (min(s1, j), max(s1, j)))
-               for j, e in self.neighbours(s1) if e.age > p["age_max"]]
-        for _, edge_key in old:
-            del self.edges[edge_key]
-        candidates = [j for j, _ in old]
+        # Step 7: expired edges of s1 in slot order (a removed slot is refilled: look again)
+        candidates = []
+        k = 0
+        while k < len(self.adjacency[s1]):
+            j = self.adjacency[s1][k]
+            if self.edges[_key(s1, j)].age > p["age_max"]:
+                candidates.append(j)
+                self._disconnect(s1, j)
+            else:
+                k += 1
         for q, j in enumerate(candidates):
-            if not self.neighbours(j):
+            if not self.adjacency[j]:
                 last = self._delete_node(j)
                 s1 = j if s1 == last else s1
                 candidates[q + 1:] = [j if c == last else c for c in candidates[q + 1:]]
-        if not self.neighbours(s1):
+        if not self.adjacency[s1]:
             self._delete_node(s1)
         elif self.positions.shape[1] == 3:
             self._normal(s1)
@@ -193,7 +240,7 @@ class ReferenceGNGDT:
     def _insert(self) -> None:
         alpha = self.params["alpha"]
         u = int(np.argmax(self.errors))
-        f = max((j for j, _ in self.neighbours(u)), key=lambda j: self.errors[j])
+        f = max(self.adjacency[u], key=lambda j: self.errors[j])  # first in slot order on ties
         r = len(self.errors)
         self.positions = np.vstack([self.positions, 0.5 * (self.positions[u] + self.positions[f])])
         self.colors = np.vstack([self.colors, 0.5 * (self.colors[u] + self.colors[f])])
@@ -203,9 +250,10 @@ class ReferenceGNGDT:
         self.normals = np.vstack([self.normals, normal / norm if norm**2 > 1e-24 else 0 * normal])
         if norm**2 > 1e-24:
             self._orient(r)
-        del self.edges[(min(u, f), max(u, f))]
-        self.edges[(u, r)] = Edge(0, self._edge_properties(u, r))
-        self.edges[(f, r)] = Edge(0, self._edge_properties(r, f))
+        self.adjacency.append([])
+        self._disconnect(u, f)
+        self._connect(u, r, self._edge_properties(u, r))
+        self._connect(r, f, self._edge_properties(r, f))
         self.errors[u] -= alpha * self.errors[u]
         self.errors[f] -= alpha * self.errors[f]
         self.errors = np.append(self.errors, 0.5 * (self.errors[u] + self.errors[f]))

@@ -17,10 +17,12 @@ position topology is here):
 3. Convexity topology. An edge is *convex* when neither end rises above the other's tangent
    plane by more than ``concavity_angle_deg`` (flat and convex folds; concave folds and steps
    are cut). These edges are the network's local-convexity topology (``convex_edges``).
-4. Objects. Two adjacent patches merge when at least ``convex_share`` of the position edges
-   between them are convex and there are at least ``min_boundary_edges`` of them: a majority over
-   the whole shared boundary, so one noisy edge neither joins an object to its table nor splits a
-   box. Merges are transitive (connected components of the patch graph).
+4. Objects. Two adjacent patches merge when ``convex_share`` of the position edges between them
+   are convex (the boundary's concavity at that quantile, interpolated, is below the concavity
+   angle: a 2-2 tie is settled by how concave the concave ones are) and there are at least
+   ``min_boundary_edges`` of them: a majority over the whole shared boundary, so one noisy edge
+   neither joins an object to its table nor splits a box. Merges are transitive (connected
+   components of the patch graph).
 5. Fragments. Segments of fewer than ``min_segment_nodes`` nodes (typically single nodes that
    straddle a crease) join the adjacent larger segment they share most convex edges with; they
    never bridge two larger segments.
@@ -51,7 +53,8 @@ class SegmentationParams:
     patch_angle_deg: float = 30.0
     #: an edge is convex unless one end rises above the other's tangent plane by more than this
     concavity_angle_deg: float = 10.0
-    #: adjacent patches merge when at least this share of their boundary edges is convex ...
+    #: adjacent patches merge when this share of their boundary edges is convex (the
+    #: boundary's concavity at this quantile is below the concavity angle) ...
     convex_share: float = 0.5
     #: ... and the boundary has at least this many edges
     min_boundary_edges: int = 3
@@ -129,10 +132,11 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
         return Segmentation(empty, empty, np.zeros(len(edges), dtype=bool))
     rise_of_j, rise_of_i = edge_elevations(positions, normals, edges)
     smooth = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i)) < _sine(params.smooth_angle_deg)
-    convex = np.maximum(rise_of_j, rise_of_i) < _sine(params.concavity_angle_deg)
+    concavity = np.maximum(rise_of_j, rise_of_i)
+    convex = concavity < _sine(params.concavity_angle_deg)
     patches = _smooth_patches(n, edges, smooth, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
-    objects = _merge_convex_patches(patches, edges, convex, params)
+    objects = _merge_convex_patches(patches, edges, concavity, params)
     labels = _absorb_fragments(objects, edges, convex, params.min_segment_nodes)
     return Segmentation(rank_by_size(labels), patches, convex)
 
@@ -164,18 +168,30 @@ def _adjacency(n: int, edges: np.ndarray,
     return offsets, target[order], np.concatenate([flags, flags])[order]
 
 
-def _merge_convex_patches(patches: np.ndarray, edges: np.ndarray, convex: np.ndarray,
+def _merge_convex_patches(patches: np.ndarray, edges: np.ndarray, concavity: np.ndarray,
                           params: SegmentationParams) -> np.ndarray:
-    """(n,) segment of each node: patches joined where their shared boundary is mostly convex."""
+    """(n,) segment of each node: patches joined where their shared boundary is mostly convex.
+
+    concavity: (E,) per edge, the sine of the larger of its two elevations. Two patches join
+    when the ``convex_share`` quantile of their boundary's concavity (linearly interpolated, so
+    a tie between convex and concave edges is settled by how concave they are) is below the
+    concavity angle.
+    """
     n_patches = int(patches.max()) + 1
     a, b = patches[edges[:, 0]], patches[edges[:, 1]]
     between = a != b
     pair = np.minimum(a, b)[between].astype(np.int64) * n_patches + np.maximum(a, b)[between]
-    pairs, pair_of_edge = np.unique(pair, return_inverse=True)
-    boundary = np.bincount(pair_of_edge, minlength=pairs.size)
-    convex_count = np.bincount(pair_of_edge, weights=convex[between], minlength=pairs.size)
+    values = concavity[between]
+    order = np.lexsort((values, pair))
+    pair, values = pair[order], values[order]
+    pairs, start, boundary = np.unique(pair, return_index=True, return_counts=True)
+    position = params.convex_share * (boundary - 1)
+    low = np.floor(position).astype(np.int64)
+    high = np.minimum(low + 1, boundary - 1)
+    fraction = position - low
+    quantile = values[start + low] * (1.0 - fraction) + values[start + high] * fraction
     join = (boundary >= params.min_boundary_edges) & (
-        convex_count >= params.convex_share * boundary)
+        quantile < _sine(params.concavity_angle_deg))
     joined = np.stack([pairs[join] // n_patches, pairs[join] % n_patches], axis=1)
     return connected_component_labels(n_patches, joined)[patches]
 

@@ -1,6 +1,13 @@
 """The paper's synthetic data sets (Section 3.1, Figure 7) with ground-truth labels.
 
 Positions are multiplied by the scale factor ``scl``; colours stay on the 0-255 scale.
+
+Colour model: each region has one base colour, and every point's colour is that base colour plus
+independent Gaussian noise of standard deviation ``color_noise`` on each of R, G and B, clipped to
+0-255 (a camera's within-region variation: shading, texture, sensor noise). ``color_noise=0``
+gives flat colours. The noise is drawn after everything else, so positions and labels do not
+depend on the level. The default level is the one that best reproduces the paper's Tables 2-3 for
+GNG and GNG-W (``gngdt eval paper``; see services/evaluation/README.md).
 """
 
 from __future__ import annotations
@@ -33,32 +40,45 @@ CYLINDER_CENTRE = np.array([210.0, 150.0])
 CYLINDER_RADIUS = 40.0
 OBJECT_HEIGHT = 100.0
 
+#: default standard deviation of the per-channel colour noise (0-255 units), both data sets: the
+#: level whose GNG and GNG-W best reproduce the paper's Tables 2-3 (a grid of 0-30, see
+#: services/evaluation/README.md)
+COLOR_NOISE = 3.0
+
 
 def make_data1(
-    scl: float = 1.0, n_points: int = 10_000, random_state: int | np.random.Generator | None = None
+    scl: float = 1.0,
+    n_points: int = 10_000,
+    random_state: int | np.random.Generator | None = None,
+    color_noise: float = COLOR_NOISE,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Data1: uniform points in a 300 x 300 square of four 150 x 150 red/green rectangles.
 
-    Returns positions (N, 2) float64 (times ``scl``), colors (N, 3) float64 in 0-255, labels (N,)
-    int64 rectangle index 0..3 (centres ``DATA1_CENTRES * scl``).
+    Returns positions (N, 2) float64 (times ``scl``), colors (N, 3) float64 in 0-255 (base colour
+    plus ``color_noise``, see the module docstring), labels (N,) int64 rectangle index 0..3
+    (centres ``DATA1_CENTRES * scl``).
     """
-    _check(scl, n_points)
+    _check(scl, n_points, color_noise)
     rng = np.random.default_rng(random_state)
     positions = rng.uniform(0.0, DATA1_SIDE, size=(n_points, 2))
     labels = (positions[:, 0] >= 150.0).astype(np.int64) + 2 * (positions[:, 1] >= 150.0)
-    return positions * scl, DATA1_COLOURS[labels].copy(), labels
+    colors = _add_noise(rng, DATA1_COLOURS[labels], color_noise)
+    return positions * scl, colors, labels
 
 
 def make_data2(
-    scl: float = 1.0, n_points: int = 112_500, random_state: int | np.random.Generator | None = None
+    scl: float = 1.0,
+    n_points: int = 112_500,
+    random_state: int | np.random.Generator | None = None,
+    color_noise: float = COLOR_NOISE,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Data2: a half square prism and a half cylinder standing on a floor (see module docstring).
 
-    Returns positions (N, 3) float64 (times ``scl``), colors (N, 3) float64 in 0-255, labels (N,)
-    int64: ``DATA2_FLOOR``, ``DATA2_PRISM_RED_FACE``, ``DATA2_PRISM_BROWN_FACE``,
-    ``DATA2_CYLINDER``.
+    Returns positions (N, 3) float64 (times ``scl``), colors (N, 3) float64 in 0-255 (base colour
+    plus ``color_noise``), labels (N,) int64: ``DATA2_FLOOR``, ``DATA2_PRISM_RED_FACE``,
+    ``DATA2_PRISM_BROWN_FACE``, ``DATA2_CYLINDER``.
     """
-    _check(scl, n_points)
+    _check(scl, n_points, color_noise)
     rng = np.random.default_rng(random_state)
     face_area = PRISM_SIDE * OBJECT_HEIGHT
     cylinder_area = np.pi * CYLINDER_RADIUS * OBJECT_HEIGHT
@@ -76,14 +96,25 @@ def make_data2(
     labels = np.repeat(np.arange(4, dtype=np.int64), counts)
     colors = np.repeat(np.array(colours), counts, axis=0)
     shuffle = rng.permutation(n_points)
-    return positions[shuffle] * scl, colors[shuffle], labels[shuffle]
+    colors = _add_noise(rng, colors[shuffle], color_noise)
+    return positions[shuffle] * scl, colors, labels[shuffle]
 
 
-def _check(scl: float, n_points: int) -> None:
+def _check(scl: float, n_points: int, color_noise: float) -> None:
     if not np.isfinite(scl) or scl <= 0:
         raise ValueError(f"scl must be a positive finite number, got {scl!r}")
     if n_points < 1:
         raise ValueError(f"n_points must be >= 1, got {n_points!r}")
+    if not np.isfinite(color_noise) or color_noise < 0:
+        raise ValueError(f"color_noise must be a finite number >= 0, got {color_noise!r}")
+
+
+def _add_noise(rng: np.random.Generator, colors: np.ndarray, color_noise: float) -> np.ndarray:
+    """colors (N, 3) 0-255 plus N(0, color_noise^2) per channel, clipped; a copy."""
+    if color_noise == 0:
+        return np.array(colors, dtype=np.float64)
+    noisy = colors + rng.normal(0.0, color_noise, size=colors.shape)
+    return np.clip(noisy, 0.0, 255.0)
 
 
 def _floor(rng: np.random.Generator, count: int) -> np.ndarray:

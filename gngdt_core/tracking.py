@@ -54,6 +54,11 @@ class ClusterTracker:
         """Clusters currently remembered (seen in the last ``memory_frames`` labellings)."""
         return len(self._tracks)
 
+    def forget(self) -> None:
+        """Drop every remembered cluster (a new network: its node ids mean other nodes); ids
+        already given are never given again."""
+        self._tracks = []
+
     def update(self, node_ids: np.ndarray, labels: np.ndarray) -> np.ndarray:
         """(K,) int64 persistent id of each label 0..K-1 of this labelling.
 

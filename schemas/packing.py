@@ -75,6 +75,19 @@ CLOUD_POINT_STRIDE = 15
 #: Largest image a decoder accepts (width * height), 64 megapixels.
 MAX_IMAGE_PIXELS = 64 * 1024 * 1024
 
+#: Largest cloud a learner accepts by default and a capture publishes: 30 MB on the wire,
+#: within zenoh's message limit (services.zenoh_session.MAX_MESSAGE_BYTES).
+MAX_CLOUD_POINTS = 2_000_000
+
+#: What a GNG-DT learner can send, enforced before anything is allocated: a node keeps at most
+#: 16 neighbours (``gngdt_core._kernels.MAX_DEGREE``), so an edge set holds at most 8 edges a
+#: node; a learner publishes a handful of named edge sets and clusterings.
+MAX_TOPOLOGY_NODES = 1_000_000
+MAX_EDGES_PER_NODE = 8
+MAX_EDGE_SETS = 16
+MAX_CLUSTERINGS = 16
+MAX_NAME_LENGTH = 64
+
 _MessageT = TypeVar("_MessageT", bound=Message)
 
 
@@ -652,15 +665,25 @@ def encode_topology(
 
 
 def decode_topology(
-    message: gngdt_pb2.Topology | bytes, max_nodes: int = 1_000_000
+    message: gngdt_pb2.Topology | bytes, max_nodes: int = MAX_TOPOLOGY_NODES
 ) -> TopologySnapshot:
     """Decode and validate a ``gngdt.Topology`` (consistent N, edge indices < N, label lengths).
 
-    At most ``max_nodes`` nodes and 64 edges per node per property are accepted.
+    At most ``max_nodes`` nodes, ``MAX_EDGES_PER_NODE`` edges per node in each of at most
+    ``MAX_EDGE_SETS`` edge sets, and ``MAX_CLUSTERINGS`` clusterings, names of at most
+    ``MAX_NAME_LENGTH`` characters, are accepted: what a learner really sends.
     """
     message = parse_message(gngdt_pb2.Topology, message)
     if not message.HasField("positions"):
         raise MessageError("topology has no positions")
+    if len(message.edges) > MAX_EDGE_SETS or len(message.clusterings) > MAX_CLUSTERINGS:
+        raise MessageError(f"topology has {len(message.edges)} edge sets and "
+                           f"{len(message.clusterings)} clusterings; at most {MAX_EDGE_SETS} and "
+                           f"{MAX_CLUSTERINGS} are accepted")
+    names = [edge_set.property for edge_set in message.edges]
+    names += [clustering.name for clustering in message.clusterings]
+    if any(len(name) > MAX_NAME_LENGTH for name in names):
+        raise MessageError(f"topology has a name longer than {MAX_NAME_LENGTH} characters")
     positions = unpack_array(
         message.positions, dtype=np.float32, ndim=2, max_elements=3 * max_nodes, name="positions"
     )
@@ -688,9 +711,8 @@ def decode_topology(
         label = f"edges[{edge_set.property!r}]"
         if edge_set.property in edges:
             raise MessageError(f"{label} appears twice")
-        pairs = unpack_array(
-            edge_set.pairs, dtype=np.uint32, ndim=2, max_elements=128 * max(count, 1), name=label
-        )
+        pairs = unpack_array(edge_set.pairs, dtype=np.uint32, ndim=2,
+                             max_elements=2 * MAX_EDGES_PER_NODE * count, name=label)
         if pairs.shape[1] != 2:
             raise MessageError(f"{label}: shape {pairs.shape}, expected (E, 2)")
         if pairs.size and int(pairs.max()) >= count:
@@ -758,6 +780,13 @@ class LearnerStatusInfo:
     latency_p99_ms: float = 0.0
     quantization_error: dict[str, float] = field(default_factory=dict)
     cluster_counts: dict[str, int] = field(default_factory=dict)
+    #: after the stream ended: how learning on its last frame stopped ("" while streaming)
+    settled: str = ""
+    seen_nodes: int = 0
+    ghost_share: float = 0.0
+    ghost_distance_m: float = 0.0
+    nodes_forgotten: int = 0
+    frames_other_frame: int = 0
 
 
 @dataclass

@@ -2,6 +2,8 @@
 
 Foxglove messages have no frame-sequence field, so every zenoh sample carries a 16-byte
 attachment: frame sequence (uint64) and capture time (int64 nanoseconds), little-endian.
+Sequences are below 2**63 (what every consumer's signed counters and rerun's timelines hold) and
+capture times are after the epoch; anything else is refused as malformed.
 """
 
 from __future__ import annotations
@@ -22,6 +24,12 @@ ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
 
 _ATTACHMENT = struct.Struct("<Qq")
 
+#: largest frame sequence accepted (signed 64-bit, as rerun's ``sequence`` timeline)
+MAX_SEQUENCE = 2**63 - 1
+#: a capture time further than this from the receiver's clock is impossible, not late: one
+#: such stamp would poison every latency statistic for the next thousand frames
+MAX_CLOCK_OFFSET_NS = 24 * 3600 * 1_000_000_000
+
 
 def topic(camera: str, name: str) -> str:
     """Key expression of one stream of one camera: ``topic("camera", "points")``."""
@@ -37,15 +45,27 @@ class FrameStamp:
     sequence: int
     capture_time_ns: int
 
+    def __post_init__(self) -> None:
+        if not 0 <= self.sequence <= MAX_SEQUENCE:
+            raise ValueError(f"frame sequence {self.sequence} is outside 0..2**63-1")
+        if self.capture_time_ns <= 0:
+            raise ValueError(f"capture time {self.capture_time_ns} ns is not after the epoch")
+
     def to_attachment(self) -> bytes:
         return _ATTACHMENT.pack(self.sequence, self.capture_time_ns)
 
     @classmethod
     def from_attachment(cls, data: bytes | None) -> FrameStamp:
-        """Parse an attachment; raises ``ValueError`` when absent or malformed."""
+        """Parse an attachment; raises ``ValueError`` when absent, malformed or out of range."""
         if data is None or len(data) != _ATTACHMENT.size:
             raise ValueError("missing or malformed frame attachment")
         sequence, capture_time_ns = _ATTACHMENT.unpack(data)
         if sequence >= 2**63:  # timelines (rerun's, MCAP's) hold signed 64-bit sequences
             raise ValueError(f"frame sequence {sequence} is out of range")
         return cls(sequence, capture_time_ns)
+
+    def check_clock(self, now_ns: int) -> None:
+        """Raise ``ValueError`` when the capture time is more than a day from ``now_ns``."""
+        if abs(now_ns - self.capture_time_ns) > MAX_CLOCK_OFFSET_NS:
+            raise ValueError(f"impossible capture time {self.capture_time_ns} ns "
+                             f"({(self.capture_time_ns - now_ns) / 1e9:+.3g} s from this clock)")

@@ -4,13 +4,18 @@ Each frame is stamped with a monotonically increasing sequence number and the wa
 at which it is replayed (its "capture time" as a live camera would give it), so latency downstream
 is measured against the moment the frame entered the pipeline. After the last frame an
 end-of-stream message (``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
+
+When the recording has camera poses (``/tf``, see ``services.recording.reader``), each cloud is
+published with its pose: points in the camera frame, ``frame_id`` the fixed frame
+(``--fixed-frame``, default the first of world/map/odom found), ``pose`` the camera's pose in
+it. A frame the transforms do not cover (the recording has poses, only not at that time)
+publishes its images but no cloud, warned: a camera-frame cloud would not fit the map.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -20,6 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from schemas.packing import MAX_CLOUD_POINTS
 from schemas.wire import (
     DEFAULT_CAMERA,
     ENCODING_CALIBRATION,
@@ -29,7 +35,9 @@ from schemas.wire import (
     FrameStamp,
     topic,
 )
+from services import lifecycle
 from services.pointcloud import Deprojector, cap_points, voxel_downsample
+from services.recording.reader import ReadLimits
 from services.zenoh_session import (
     ZenohSetupError,
     add_zenoh_arguments,
@@ -54,6 +62,8 @@ EXAMPLES = """examples:
 #: colour and depth of one frame may differ by this much in a ROS 2 bag (half a 60 Hz period;
 #: gngdt's own recordings stamp both identically)
 DEFAULT_MAX_SKEW_MS = 8.0
+#: longest wait between two frames at the recorded rate
+DEFAULT_MAX_GAP_S = 5.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -71,10 +81,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres"
     )
     parser.add_argument(
+        "--drop-veil",
+        type=float,
+        default=0.0,
+        metavar="RATIO",
+        help="drop veil points: pixels whose depth jumps from a neighbour's by more than RATIO "
+        "of the nearer depth (mixed pixels along depth edges; 0.03 for a Kinect, see "
+        "config/kinect.toml); default 0: keep every pixel",
+    )
+    parser.add_argument(
         "--max-points",
         type=int,
         default=0,
-        help="publish a random subset of at most this many points per frame (default 0: all)",
+        help="publish a random subset of at most this many points per frame (default 0: all, "
+        f"up to {MAX_CLOUD_POINTS:,}, what a learner accepts and a zenoh message holds)",
     )
     parser.add_argument(
         "--wait-subscribers",
@@ -90,13 +110,49 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="read only the recording's topics under PREFIX (a bag with several cameras)",
     )
     parser.add_argument(
+        "--fixed-frame",
+        default="auto",
+        metavar="FRAME",
+        help="frame the camera poses are given in (e.g. map, odom); 'auto' (default): world, "
+        "map or odom, whichever the recording's transforms connect to the images; 'none': "
+        "ignore the poses, publish camera-frame clouds",
+    )
+    parser.add_argument(
         "--max-skew-ms",
         type=float,
         default=DEFAULT_MAX_SKEW_MS,
         help="largest stamp difference between a frame's colour and depth images "
         f"(default {DEFAULT_MAX_SKEW_MS:g})",
     )
+    parser.add_argument(
+        "--max-gap",
+        type=float,
+        default=DEFAULT_MAX_GAP_S,
+        metavar="SECONDS",
+        help="longest wait between two frames: a longer gap in the recorded stamps is "
+        f"shortened to this, with a warning (default {DEFAULT_MAX_GAP_S:g})",
+    )
+    limits = parser.add_argument_group(
+        "limits (a recording beyond them is refused, naming the file and the frame)")
+    defaults = ReadLimits()
+    limits.add_argument(
+        "--max-frame-pixels", type=int, default=defaults.max_frame_pixels, metavar="N",
+        help=f"largest image, width x height (default {defaults.max_frame_pixels:,}, 4096x2160); "
+        "a larger one is a bad frame, skipped")
+    limits.add_argument(
+        "--max-chunk-mb", type=int, default=defaults.max_chunk_bytes >> 20, metavar="MB",
+        help="largest MCAP chunk once decompressed, checked before decompressing (default "
+        f"{defaults.max_chunk_bytes >> 20}); a file with a larger one is refused")
+    limits.add_argument(
+        "--max-pending-mb", type=int, default=defaults.max_held_bytes >> 20, metavar="MB",
+        help="images held while waiting for their colour/depth partner or a calibration "
+        f"(default {defaults.max_held_bytes >> 20})")
     add_zenoh_arguments(parser)
+
+
+def read_limits(args: argparse.Namespace) -> ReadLimits:
+    """The reading limits of the command line (``ValueError`` for a non-positive one)."""
+    return ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20, args.max_pending_mb << 20)
 
 
 @dataclass
@@ -107,6 +163,8 @@ class CloudOptions:
     max_depth_m: float = 10.0
     voxel_size_m: float | None = None
     max_points: int | None = None
+    #: drop pixels whose depth jumps by more than this share from a neighbour's (0: keep all)
+    veil_ratio: float = 0.0
 
 
 class FrameToCloud:
@@ -115,21 +173,29 @@ class FrameToCloud:
     def __init__(self, options: CloudOptions, seed: int = 0) -> None:
         if options.voxel_size_m is not None and options.voxel_size_m <= 0:
             raise ValueError(f"--voxel must be positive, got {options.voxel_size_m}")
+        if not options.veil_ratio >= 0:
+            raise ValueError(f"--drop-veil must be >= 0, got {options.veil_ratio}")
         if options.max_points is not None and options.max_points <= 0:
             raise ValueError(
                 f"--max-points must be positive (0 for all points), got {options.max_points}"
             )
         self.options = options
+        self._max_points = min(options.max_points or MAX_CLOUD_POINTS, MAX_CLOUD_POINTS)
         self._deproject = Deprojector(options.min_depth_m, options.max_depth_m)
         self._rng = np.random.default_rng(seed)
 
     def __call__(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
         """positions (N, 3) float32 metres and colors (N, 3) uint8 of one frame."""
-        positions, colors = self._deproject(frame.depth, frame.color, frame.intrinsics)
+        depth = frame.depth
+        if self.options.veil_ratio > 0:
+            from gngdt_core.frame_segmenter import veil_pixels
+
+            depth = np.where(veil_pixels(depth, self.options.veil_ratio), 0, depth)
+        positions, colors = self._deproject(depth, frame.color, frame.intrinsics)
         if self.options.voxel_size_m is not None:
             positions, colors = voxel_downsample(positions, colors, self.options.voxel_size_m)
-        if self.options.max_points is not None:
-            positions, colors = cap_points(positions, colors, self.options.max_points, self._rng)
+        if len(positions) > self._max_points:
+            positions, colors = cap_points(positions, colors, self._max_points, self._rng)
         assert colors is not None
         return positions, colors
 
@@ -158,8 +224,10 @@ class CapturePublisher:
         self._last_intrinsics: CameraIntrinsics | None = None
 
     def publish_frame(
-        self, frame: Frame, stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray
+        self, frame: Frame, stamp: FrameStamp, positions: np.ndarray | None,
+        colors: np.ndarray | None
     ) -> None:
+        """Calibration (when new), colour, depth, and the cloud unless ``positions`` is None."""
         from schemas.packing import cloud_to_msg, image_to_raw, intrinsics_to_calibration
 
         attachment = stamp.to_attachment()
@@ -174,7 +242,12 @@ class CapturePublisher:
         self.color.put(color.SerializeToString(), attachment=attachment)
         depth = image_to_raw(frame.depth, timestamp_ns=time_ns, frame_id=self.camera)
         self.depth.put(depth.SerializeToString(), attachment=attachment)
-        cloud = cloud_to_msg(positions, colors, timestamp_ns=time_ns, frame_id=self.camera)
+        if positions is None:  # no pose for a frame of a posed recording: images only
+            return
+        pose = frame.pose
+        cloud = cloud_to_msg(positions, colors, timestamp_ns=time_ns,
+                             frame_id=self.camera if pose is None else pose.frame_id,
+                             pose=None if pose is None else pose.matrix)
         self.points.put(cloud.SerializeToString(), attachment=attachment)
 
     def publish_end(self, frames_sent: int, last_sequence: int, recording: str) -> None:
@@ -198,80 +271,118 @@ def log_bad_frame(error: Exception) -> None:
     log.error("%s; skipped, continuing with the next good frame", error)
 
 
-def replay_frames(
-    path: Path,
-    loop: bool,
-    stop: threading.Event,
-    topic_prefix: str | None = None,
-    max_skew_ms: float = DEFAULT_MAX_SKEW_MS,
-) -> Iterator[Frame]:
-    """Frames of the recording (forever with ``loop``).
+class Replay:
+    """Frames of a recording (forever with ``loop``), and what went wrong reading it.
 
-    A bad frame is logged and skipped; damage to the file itself ends a pass, logged.
+    A bad frame is logged and skipped; damage to the file itself ends a pass, logged, and is
+    kept in ``error``: with not a single frame read, the capture fails (exit 2).
     """
-    from services.recording.reader import RecordingError, read_frames
 
-    max_skew_ns = round(max_skew_ms * 1e6)
-    while not stop.is_set():
-        yielded = 0
-        try:
-            frames = read_frames(
-                path, topic_prefix, max_skew_ns=max_skew_ns, on_bad_frame=log_bad_frame
-            )
-            for frame in frames:
-                yielded += 1
-                yield frame
-        except RecordingError as error:
-            log.error("%s (continuing after %d good frames of this pass)", error, yielded)
-        if not loop or yielded == 0:
-            return
+    def __init__(self, path: Path, loop: bool, stop: threading.Event,
+                 topic_prefix: str | None = None,
+                 max_skew_ms: float = DEFAULT_MAX_SKEW_MS,
+                 limits: ReadLimits | None = None,
+                 fixed_frame: str | None = "auto") -> None:
+        self.path = path
+        self.limits = limits
+        self.fixed_frame = fixed_frame
+        self.loop = loop
+        self.stop = stop
+        self.topic_prefix = topic_prefix
+        self.max_skew_ns = round(max_skew_ms * 1e6)
+        self.error: Exception | None = None
+        self.frames_read = 0
+
+    def __iter__(self) -> Iterator[Frame]:
+        from services.recording.reader import RecordingError, read_frames
+
+        while not self.stop.is_set():
+            yielded = 0
+            try:
+                frames = read_frames(self.path, self.topic_prefix, max_skew_ns=self.max_skew_ns,
+                                     on_bad_frame=log_bad_frame, limits=self.limits,
+                                     fixed_frame=self.fixed_frame)
+                for frame in frames:
+                    yielded += 1
+                    self.frames_read += 1
+                    yield frame
+            except RecordingError as error:
+                self.error = error
+                if yielded:
+                    log.error("%s (continuing after %d good frames of this pass)", error, yielded)
+            if not self.loop or yielded == 0:
+                return
 
 
 class ReplayClock:
-    """Sleeps so that frames leave at their recorded spacing divided by ``rate``."""
+    """Sleeps so that frames leave at their recorded spacing divided by ``rate``.
 
-    def __init__(self, rate: float | None) -> None:
+    A gap between two frames longer than ``max_gap_s`` (after the rate) is shortened to it, with a
+    warning: a recording with a jump in its stamps must not stall the pipeline for days.
+    """
+
+    def __init__(self, rate: float | None, max_gap_s: float = DEFAULT_MAX_GAP_S) -> None:
         if rate is not None and rate <= 0:
             raise ValueError(f"--rate must be positive, got {rate}")
+        if max_gap_s <= 0:
+            raise ValueError(f"--max-gap must be positive, got {max_gap_s}")
         self.rate = rate
-        self._first_recorded_ns: int | None = None
-        self._start = 0.0
+        self.max_gap_s = max_gap_s
+        self._due = 0.0
         self._previous_ns: int | None = None
 
-    def wait_for(self, recorded_ns: int, stop: threading.Event) -> None:
+    def wait_for(self, recorded_ns: int, stop: threading.Event, frame_index: int = 0) -> None:
         if self.rate is None:
             return
-        if self._first_recorded_ns is None or (
-            self._previous_ns is not None and recorded_ns < self._previous_ns
-        ):  # first frame, or a loop restarted the recording
-            self._first_recorded_ns = recorded_ns
-            self._start = time.monotonic()
+        if self._previous_ns is None or recorded_ns < self._previous_ns:
+            # first frame, or a loop restarted the recording
+            self._due = time.monotonic()
+        else:
+            gap_s = (recorded_ns - self._previous_ns) * 1e-9 / self.rate
+            if gap_s > self.max_gap_s:
+                log.warning("frame %d is stamped %.3g s after the previous one; waiting %g s "
+                            "instead (--max-gap)", frame_index, gap_s, self.max_gap_s)
+                gap_s = self.max_gap_s
+            self._due += gap_s
         self._previous_ns = recorded_ns
-        due = self._start + (recorded_ns - self._first_recorded_ns) * 1e-9 / self.rate
-        delay = due - time.monotonic()
-        if delay > 0:
-            stop.wait(delay)
+        delay = self._due - time.monotonic()
+        if delay > 1.0:
+            log.info("waiting %.1f s for frame %d (its recorded time)", delay, frame_index)
+        while delay > 0 and not stop.wait(min(delay, 0.5)):  # short waits: see lifecycle
+            delay = self._due - time.monotonic()
+
+
+def describe_recording(path: Path, rate: float | None, loop: bool) -> str:
+    """One line saying what is replayed, from the recording's index when it has one."""
+    from services.recording.reader import RecordingError, recording_info
+
+    speed = "as fast as possible" if rate is None else f"at {rate:g}x the recorded rate"
+    how = f"{speed}{', looping' if loop else ''}"
+    try:
+        info = recording_info(path)
+    except RecordingError:
+        return f"replaying {path} {how} (no index: a damaged or unfinished file?)"
+    return (f"replaying {path}: {info['frames']} frames over {info['duration_s']:.1f} s, "
+            f"{info['size_bytes'] / 1e6:.1f} MB, {how}")
 
 
 def main(args: argparse.Namespace) -> int:
-    if not args.recording.is_file():
-        log.error("recording %s: no such file", args.recording)
-        return 2
+    from services.recording.reader import RecordingError, check_recording
+
     try:
+        check_recording(args.recording)
         to_cloud = FrameToCloud(
-            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None),
+            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None,
+                         args.drop_veil),
             args.seed,
         )
-        clock = ReplayClock(None if args.fast else args.rate)
+        clock = ReplayClock(None if args.fast else args.rate, args.max_gap)
+        limits = read_limits(args)
         if args.max_skew_ms < 0:
             raise ValueError(f"--max-skew-ms must be >= 0, got {args.max_skew_ms}")
-    except ValueError as error:
+    except (ValueError, RecordingError) as error:
         log.error("%s", error)
         return 2
-
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
 
     try:
         session = open_session(args)
@@ -281,31 +392,52 @@ def main(args: argparse.Namespace) -> int:
     try:
         publisher = CapturePublisher(session, args.cam)
         token = session.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive")
-        if not wait_for_subscribers(publisher.points, args.wait_subscribers):
-            log.warning("no subscriber on %s after %.1f s; publishing anyway",
-                        topic(args.cam, "points"), args.wait_subscribers)
-        frames_sent = 0  # also the next frame's sequence: only published frames are numbered
-        frames = replay_frames(args.recording, args.loop, stop, args.topics, args.max_skew_ms)
-        for frame in frames:
-            clock.wait_for(frame.timestamp_ns, stop)
-            if stop.is_set():
-                break
-            capture_time_ns = time.time_ns()
-            try:
-                positions, colors = to_cloud(frame)
-            except ValueError as error:
-                log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
-                continue
-            publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
-                                    positions, colors)
-            log.debug("frame %d: %d points", frames_sent, len(positions))
-            frames_sent += 1
-        if not stop.is_set() or not args.loop:
-            # with nothing sent, frame 0 is named and frames_sent = 0 says it never came
-            publisher.publish_end(frames_sent, max(frames_sent - 1, 0), args.recording.name)
-            log.info("sent %d frames of %s, end of stream", frames_sent, args.recording)
+        with lifecycle.graceful() as stop:
+            fixed_frame = None if args.fixed_frame.lower() == "none" else args.fixed_frame
+            replay = Replay(args.recording, args.loop, stop, args.topics, args.max_skew_ms,
+                            limits, fixed_frame)
+            if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
+                log.warning("no subscriber on %s after %.1f s; publishing anyway",
+                            topic(args.cam, "points"), args.wait_subscribers)
+            log.info("%s", describe_recording(args.recording, clock.rate, args.loop))
+            frames_sent = publish(args, replay, clock, to_cloud, publisher, stop)
+            if not stop.is_set() or not args.loop:
+                # with nothing sent, frame 0 is named and frames_sent = 0 says it never came
+                publisher.publish_end(frames_sent, max(frames_sent - 1, 0), args.recording.name)
+                log.info("sent %d frames of %s, end of stream", frames_sent, args.recording)
         time.sleep(0.2)  # let BLOCK puts drain to the router before the session closes
         token.undeclare()
     finally:
         session.close()
+    if replay.frames_read == 0 and replay.error is not None:
+        log.error("%s", replay.error)
+        return 2
     return 0
+
+
+def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_cloud: FrameToCloud,
+            publisher: CapturePublisher, stop: threading.Event) -> int:
+    """Publish every frame of the replay at the clock's pace; the number of frames sent."""
+    frames_sent = 0  # also the next frame's sequence: only published frames are numbered
+    without_pose = 0
+    for frame in replay:
+        clock.wait_for(frame.timestamp_ns, stop, frame.index)
+        if stop.is_set():
+            break
+        capture_time_ns = time.time_ns()
+        try:
+            positions, colors = to_cloud(frame)
+        except ValueError as error:
+            log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
+            continue
+        if "pose_error" in frame.extras:  # the reader warned; the cloud would not fit the map
+            positions = colors = None
+            without_pose += 1
+        publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
+                                positions, colors)
+        log.debug("frame %d: %d points", frames_sent, 0 if positions is None else len(positions))
+        frames_sent += 1
+    if without_pose:
+        log.warning("%d frames had no camera pose: their clouds were not published",
+                    without_pose)
+    return frames_sent

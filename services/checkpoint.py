@@ -7,13 +7,15 @@ or corrupted files and edits that did not recompute it (an integrity check, not 
 whoever may write the file may rewrite the digest, so keep checkpoints where only the learner
 writes). Loading is all or nothing: nothing is returned unless every check passes. It
 never unpickles or evaluates anything, and refuses archives whose declared size is beyond
-``MAX_CHECKPOINT_BYTES`` before reading them.
+``MAX_CHECKPOINT_BYTES``, and arrays whose ``.npy`` header promises more data than the archive
+holds, before reading them.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import tempfile
 import zipfile
@@ -28,6 +30,8 @@ _DIGEST_KEY = "sha256"
 FORMAT_VERSION = 2
 #: largest uncompressed checkpoint accepted (a 1,000,000-node model is ~100 MB)
 MAX_CHECKPOINT_BYTES = 2 * 1024**3
+#: largest metadata JSON accepted (a real one is well under a kilobyte)
+MAX_METADATA_BYTES = 1024**2
 
 
 class CheckpointError(ValueError):
@@ -92,7 +96,9 @@ def load_checkpoint(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
             }
     except CheckpointError:
         raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError) as error:
+    except RecursionError as error:  # JSON nested deeper than the interpreter recurses
+        raise CheckpointError(f"checkpoint {path}: metadata nested too deeply") from error
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, KeyError, MemoryError) as error:
         raise CheckpointError(f"checkpoint {path}: unreadable ({error})") from error
     if not isinstance(metadata, dict) or _DIGEST_KEY not in metadata:
         raise CheckpointError(f"checkpoint {path}: metadata has no {_DIGEST_KEY}")
@@ -109,14 +115,97 @@ def load_checkpoint(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
 
 
 def _check_declared_size(path: Path) -> None:
-    """Refuse an archive that declares more than ``MAX_CHECKPOINT_BYTES`` (e.g. a zip bomb)."""
+    """Refuse an archive that declares more than ``MAX_CHECKPOINT_BYTES`` (e.g. a zip bomb), or
+    holds an array whose ``.npy`` header does not match the bytes stored for it."""
     if not path.is_file():
         raise CheckpointError(f"checkpoint {path}: no such file")
     if not zipfile.is_zipfile(path):
         raise CheckpointError(f"checkpoint {path}: not a zip (.npz) archive; torn or foreign file")
     with zipfile.ZipFile(path) as archive:
-        declared = sum(item.file_size for item in archive.infolist())
-    if declared > MAX_CHECKPOINT_BYTES:
+        members = archive.infolist()
+        declared = sum(item.file_size for item in members)
+        if declared > MAX_CHECKPOINT_BYTES:
+            raise CheckpointError(
+                f"checkpoint {path}: declares {declared} bytes, more than {MAX_CHECKPOINT_BYTES}"
+            )
+        for member in members:
+            _check_npy_header(path, archive, member)
+
+
+def _check_npy_header(path: Path, archive: zipfile.ZipFile, member: zipfile.ZipInfo) -> None:
+    """The array's header (shape x itemsize) must account for exactly the member's bytes."""
+    name = member.filename.removesuffix(".npy")
+    try:
+        with archive.open(member) as file:
+            version = np.lib.format.read_magic(file)
+            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                           else np.lib.format.read_array_header_2_0)
+            shape, _, dtype = read_header(file)
+            header_bytes = file.tell()
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError) as error:
+        raise CheckpointError(f"checkpoint {path}: array {name!r} has no valid header "
+                              f"({error})") from error
+    if dtype.hasobject:
+        raise CheckpointError(f"checkpoint {path}: array {name!r} holds Python objects")
+    data_bytes = math.prod(shape) * dtype.itemsize
+    if data_bytes != member.file_size - header_bytes:
         raise CheckpointError(
-            f"checkpoint {path}: declares {declared} bytes, more than {MAX_CHECKPOINT_BYTES}"
-        )
+            f"checkpoint {path}: array {name!r} declares {shape} {dtype} ({data_bytes} bytes) "
+            f"but holds {member.file_size - header_bytes}")
+    if name == _METADATA_KEY and data_bytes > MAX_METADATA_BYTES:
+        raise CheckpointError(f"checkpoint {path}: metadata of {data_bytes} bytes is larger "
+                              f"than {MAX_METADATA_BYTES}")
+
+
+def remove_stale_temporaries(path: Path) -> list[Path]:
+    """Delete the temporaries an interrupted :func:`save_checkpoint` of ``path`` left behind
+    (``kill -9`` mid-write); call it while holding the :class:`CheckpointLock`."""
+    path = Path(path)
+    removed = []
+    for temporary in path.parent.glob(f".{path.name}.*.tmp"):
+        try:
+            temporary.unlink()
+        except OSError:
+            continue
+        removed.append(temporary)
+    return removed
+
+
+class CheckpointLock:
+    """An exclusive lock on a checkpoint path, so that two learners never share one file.
+
+    ``flock`` on ``.<name>.lock`` beside the checkpoint: released by the kernel when the holder
+    exits, however it exits, so a killed learner never leaves a stale lock.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.lock_path = self.path.with_name(f".{self.path.name}.lock")
+        self._file: Any = None
+
+    def acquire(self) -> CheckpointLock:
+        """Take the lock; ``CheckpointError`` naming the holder's pid when another has it."""
+        import fcntl
+
+        self.lock_path.parent.mkdir(parents=True, exist_ok=True)
+        file = open(self.lock_path, "a+")  # kept open while the lock is held
+        try:
+            fcntl.flock(file.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            file.seek(0)
+            holder = file.read().strip() or "?"
+            file.close()
+            raise CheckpointError(
+                f"checkpoint {self.path} is in use by another learner (pid {holder}); "
+                "give each learner its own --checkpoint") from None
+        file.seek(0)
+        file.truncate()
+        file.write(f"{os.getpid()}\n")
+        file.flush()
+        self._file = file
+        return self
+
+    def release(self) -> None:
+        if self._file is not None:
+            self._file.close()  # closing the descriptor releases the flock
+            self._file = None

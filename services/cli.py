@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 #: subcommand -> (module, one-line help). Order is the order shown by ``gngdt --help``.
@@ -20,6 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "log": ("services.logger", "log every gngdt stream to rerun"),
     "router": ("services.router", "run a zenoh router for standalone services"),
     "record": ("services.recording.cli", "make recordings: synthetic scenes or real RGB-D frames"),
+    "segment": ("services.segment", "segment RGB-D frames: a label image per frame"),
     "eval": ("services.evaluation.cli", "evaluate: the paper's tables, recordings, logged runs"),
 }
 
@@ -27,6 +29,7 @@ EPILOG = """examples:
   gngdt run recordings/tabletop.mcap                 # whole pipeline, writes runs/*.rrd
   gngdt record synth --scene tabletop --frames 30 --out my.mcap
   gngdt router & gngdt capture my.mcap --loop & gngdt learn & gngdt log --save out.rrd
+  gngdt segment recordings/tabletop.mcap --out seg/tabletop
   gngdt eval paper --trials 5 --out report/
 """
 
@@ -59,13 +62,34 @@ def build_parser() -> argparse.ArgumentParser:
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )
         module.add_arguments(sub)
-        add_common_arguments(sub)
+        for leaf in leaf_parsers(sub):
+            add_common_arguments(leaf)
         sub.set_defaults(_module=module)
     return parser
 
 
+def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    """The parsers that take options: ``parser`` itself, or those of its sub-subcommands."""
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return [leaf for sub in dict.fromkeys(action.choices.values())
+                    for leaf in leaf_parsers(sub)]
+    return [parser]
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    from services import lifecycle
+
+    lifecycle.install()  # first: a signal during the imports below must stop us too
+    try:
+        from schemas.packing import MAX_IMAGE_PIXELS
+
+        # before OpenCV loads: the largest image it may decode, rather than its own 2**30
+        # pixels (3 GB for a few kilobytes of PNG)
+        os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(MAX_IMAGE_PIXELS))
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        return 130
     logging.basicConfig(
         level=getattr(logging, args.log_level),
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",

@@ -2,14 +2,24 @@
 
 Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
-memory stays bounded. After each learned frame the learner publishes the topology (edges per
-property, the clusterings ``pos``, ``col``, ``nor``, ``col+nor`` with persistent cluster ids, and
-persistent node ids), the objects (one per cluster of ``objects_from``, as a foxglove
+memory stays bounded.
+
+The network lives in the frame of the first cloud it learns (its ``frame_id``): a cloud whose
+pose places it in a fixed frame (``world``, ``map``) is learned there, pose applied, so a moving
+camera builds one map; a cloud without a pose is learned in the camera frame as it is. A later
+cloud in another frame is skipped, counted and warned about, naming both frames. The learner's
+profile turns forgetting on (``LEARNER_MODEL_DEFAULTS``): nodes the camera could see but that no
+longer stand for anything are removed, the out-of-view map is kept. Each status reports the
+ghost share of the frame just learned (seen nodes farther than ``ghost_distance_m`` from it).
+
+After each learned frame the learner publishes the topology (edges per property, the
+clusterings ``pos``, ``col``, ``nor``, ``col+nor`` and ``segments`` with persistent cluster ids,
+and persistent node ids), the objects (one per cluster of ``objects_from``, as a foxglove
 SceneUpdate) and a status message, and every ``scene_every_frames`` frames the whole scene as a
 foxglove SceneUpdate; a queryable on the topology key answers a late joiner with the latest
 topology. Objects and scene are published latest-wins (congestion control DROP): a consumer that
-cannot keep up misses updates, and never slows the learner down. The model is
-checkpointed periodically and on SIGINT/SIGTERM, and resumed from the checkpoint on start.
+cannot keep up misses updates, and never slows the learner down. The model is checkpointed
+periodically and on SIGINT/SIGTERM, and resumed from the checkpoint on start.
 """
 
 from __future__ import annotations
@@ -18,14 +28,13 @@ import argparse
 import inspect
 import json
 import logging
-import signal
 import threading
 import time
 import tomllib
 from collections import deque
 from dataclasses import dataclass, field, fields
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -37,6 +46,7 @@ from schemas.wire import (
     FrameStamp,
     topic,
 )
+from services import lifecycle
 from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
 
 if TYPE_CHECKING:
@@ -52,6 +62,16 @@ EXAMPLES = """examples:
   gngdt learn --params config/learner.toml --checkpoint runs/learner.npz
   gngdt learn --cam left --samples-per-frame 20000 --max-nodes 2000
 """
+
+#: GNG-U's removal threshold the learner uses (see `GNGDT`); measured in issue 11's note
+DEFAULT_UTILITY_K = 1000.0
+#: the learner's profile over GNGDT's defaults (the paper's): forgetting on, for a camera that
+#: moves and a scene that changes. A params file's ``utility_k = 0`` turns it off.
+LEARNER_MODEL_DEFAULTS: dict[str, Any] = {"utility_k": DEFAULT_UTILITY_K}
+#: settling after the stream ends: steps between checks, and the relative change of the
+#: position error below which the network counts as settled
+SETTLE_CHUNK = 20_000
+SETTLED_CHANGE = 0.01
 
 #: topologies published as edge sets, and clusterings (properties combined with "+")
 EDGE_PROPERTIES = ("pos", "col", "nor")
@@ -75,8 +95,15 @@ class LearnerOptions:
     #: points of the frame sampled to compute the quantization error (eq. 17)
     quantization_sample: int = 2_000
     #: largest cloud accepted; a bigger one is counted as malformed before anything is allocated
-    max_points: int = 2_000_000
+    max_points: int = 2_000_000  # schemas.packing.MAX_CLOUD_POINTS (not imported: --help)
+    #: when the stream ends, learning goes on with its last frame until the network is settled
+    #: (node budget reached, quantization error steady) or this many more steps; 0: never
+    settle_max_steps: int = 2_000_000
     seed: int | None = 0
+    #: a node the sensor could see farther than this (metres) from the frame is a ghost
+    ghost_distance_m: float = 0.05
+    #: points of each frame the ghost share is measured against (0: not measured)
+    ghost_sample: int = 10_000
     #: clustering whose clusters are published as objects ("pos" when it is not published)
     objects_from: str = "segments"
     #: publish the scene (nodes, edges, clusters) every this many learned frames; 0: never
@@ -96,10 +123,12 @@ class LearnerOptions:
             value = getattr(self, name)
             if value <= 0:
                 raise ValueError(f"learner option {name} must be positive, got {value}")
-        if self.checkpoint_every_seconds <= 0:
-            raise ValueError("learner option checkpoint_every_seconds must be positive")
-        if self.scene_every_frames < 0:
-            raise ValueError("learner option scene_every_frames must be >= 0 (0: never)")
+        for name in ("checkpoint_every_seconds", "ghost_distance_m"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"learner option {name} must be positive")
+        for name in ("settle_max_steps", "ghost_sample", "scene_every_frames"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"learner option {name} must be >= 0")
         if not self.objects_from:
             raise ValueError("learner option objects_from must name a clustering")
 
@@ -107,12 +136,15 @@ class LearnerOptions:
 #: accepted types of each option (TOML integers are accepted where floats are)
 _OPTION_TYPES: dict[str, tuple[type, ...]] = {
     "samples_per_frame": (int,),
+    "settle_max_steps": (int,),
     "min_cluster_size": (int,),
     "checkpoint_every_frames": (int,),
     "checkpoint_every_seconds": (int, float),
     "quantization_sample": (int,),
     "max_points": (int,),
     "seed": (int, type(None)),
+    "ghost_distance_m": (int, float),
+    "ghost_sample": (int,),
     "objects_from": (str,),
     "scene_every_frames": (int,),
 }
@@ -122,10 +154,14 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
 class LearnerConfig:
     """GNG-DT constructor arguments, learner options and segmentation parameters."""
 
-    model: dict[str, Any] = field(default_factory=dict)
+    model: dict[str, Any] = field(default_factory=lambda: dict(LEARNER_MODEL_DEFAULTS))
     options: LearnerOptions = field(default_factory=LearnerOptions)
     #: `SegmentationParams` keys (validated when loaded)
     segmentation: dict[str, Any] = field(default_factory=dict)
+    #: `FrameSchedule` keys of a sensor profile's [frames] table (validated when loaded); with
+    #: one, frames are learned through `gngdt_core.stream.StreamLearner` (attention, scene cuts,
+    #: ``steps_first_frame``), ``samples_per_frame`` steps per later frame
+    frames: dict[str, Any] | None = None
 
 
 def model_parameter_names() -> set[str]:
@@ -139,8 +175,9 @@ def model_parameter_names() -> set[str]:
 
 def load_params(path: Path | None) -> LearnerConfig:
     """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt],
-    [learner]), segmentation parameters ([segmentation]); a sensor profile's [frames] table
-    (for `gngdt segment`) is checked and otherwise not used here.
+    [learner]), segmentation parameters ([segmentation]) and a sensor profile's frame schedule
+    ([frames]; its ``steps_per_frame`` and ``veil_ratio`` are `gngdt segment`'s and capture's,
+    the learner's steps per frame stay ``samples_per_frame``).
 
     ``lambda`` is accepted for ``lambda_``. Unknown keys raise ``ValueError`` naming key and file.
     """
@@ -159,8 +196,8 @@ def load_params(path: Path | None) -> LearnerConfig:
         if isinstance(value, dict) and key in ("gngdt", "learner"):
             flat.update(value)
         elif isinstance(value, dict) and key in ("segmentation", "frames"):
-            from gngdt_core.frame_segmenter import FrameSchedule
             from gngdt_core.segmentation import SegmentationParams
+            from gngdt_core.stream import FrameSchedule
 
             schema = SegmentationParams if key == "segmentation" else FrameSchedule
             try:
@@ -169,12 +206,16 @@ def load_params(path: Path | None) -> LearnerConfig:
                 raise ValueError(f"--params {path}: [{key}]: {error}") from error
             if key == "segmentation":
                 config.segmentation = dict(value)
+            else:
+                config.frames = dict(value)
         else:
             flat[key] = value
     model_names = model_parameter_names()
     option_names = {item.name for item in fields(LearnerOptions)}
     for key, value in flat.items():
         name = "lambda_" if key == "lambda" else key
+        if name == "utility_k" and value == 0:
+            value = None  # forgetting off: the paper's GNG-DT
         if name in model_names:
             config.model[name] = value
         elif name in option_names:
@@ -192,7 +233,9 @@ def load_params(path: Path | None) -> LearnerConfig:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
     parser.add_argument("--params", type=Path, metavar="FILE.toml",
-                        help="GNG-DT parameters and learner options (see config/learner.toml)")
+                        help="GNG-DT parameters and learner options; config/learner.toml "
+                        "documents every key (installed with gngdt: `python -m gngdt_config` "
+                        "prints where)")
     parser.add_argument("--checkpoint", type=Path, metavar="PATH",
                         help="checkpoint file (.npz): resumed from if present, saved periodically "
                         "and on shutdown")
@@ -249,6 +292,13 @@ class LatencyWindow:
         return float(np.percentile(np.fromiter(self._values, float), q)) if self._values else 0.0
 
 
+#: counters saturate here (the status message's uint64 fields, the checkpoint's int64)
+MAX_COUNTER = 2**63 - 1
+#: frames one can drop between two received frames: a year at 30 fps; a larger jump in the
+#: sequence is a new stream (a restarted or foreign capture), not frames lost
+MAX_SEQUENCE_GAP = 30 * 3600 * 24 * 365
+
+
 @dataclass
 class Counters:
     """What the learner has seen, published in every status (and kept in checkpoints)."""
@@ -257,13 +307,22 @@ class Counters:
     frames_used: int = 0
     frames_dropped: int = 0
     malformed_messages: int = 0
+    #: clouds skipped because their frame is not the one the network is learned in
+    frames_other_frame: int = 0
     learning_seconds: float = 0.0
+    #: learning steps run in ``learning_seconds`` (frames differ: a new scene learns longer)
+    learning_steps: int = 0
     last_sequence: int = -1
 
     def note_sequence(self, sequence: int) -> None:
-        """Count the frames skipped since the last one; a lower sequence is a new stream."""
-        if self.last_sequence >= 0 and sequence > self.last_sequence + 1:
-            self.frames_dropped += sequence - self.last_sequence - 1
+        """Count the frames skipped since the last one; a lower sequence, or a jump no camera
+        could make (``MAX_SEQUENCE_GAP``), is a new stream, not dropped frames."""
+        gap = sequence - self.last_sequence - 1
+        if self.last_sequence >= 0 and 0 < gap <= MAX_SEQUENCE_GAP:
+            self.frames_dropped = min(self.frames_dropped + gap, MAX_COUNTER)
+        elif self.last_sequence >= 0 and gap > MAX_SEQUENCE_GAP:
+            log.warning("frame sequence jumped from %d to %d; taken as a new stream",
+                        self.last_sequence, sequence)
         self.last_sequence = sequence
 
 
@@ -283,8 +342,24 @@ def counters_from_metadata(path: Path, saved: Any) -> Counters:
                 expected is int and not isinstance(value, int)):
             raise CheckpointError(
                 f"checkpoint {path}: counter {item.name} is {value!r}, expected a number")
+        low = -1 if item.name == "last_sequence" else 0
+        if not low <= value <= MAX_COUNTER:
+            raise CheckpointError(
+                f"checkpoint {path}: counter {item.name} is {value!r}, outside {low}..2**63-1")
         values[item.name] = expected(value)
     return Counters(**values)
+
+
+class OtherFrameError(ValueError):
+    """A cloud is in another frame than the one the network is learned in."""
+
+
+@dataclass
+class Ghosts:
+    """The ghost measure of the last learned frame (see `gngdt_core.metrics.ghost_nodes`)."""
+
+    seen_nodes: int = 0
+    ghost_share: float = 0.0
 
 
 @dataclass
@@ -298,12 +373,16 @@ class LearnedFrame:
 
 
 class Learner:
-    """One GNG-DT model fed frame by frame; builds the topology, objects, scene and status."""
+    """One GNG-DT model fed frame by frame; builds the topology, objects, scene and status.
+
+    ``frame_id``: the frame the network is learned in, set by the first cloud (None before).
+    """
 
     def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
-                 counters: Counters | None = None) -> None:
+                 counters: Counters | None = None, frame_id: str | None = None) -> None:
         from gngdt_core import GNGDT
         from gngdt_core.segmentation import SegmentationParams
+        from gngdt_core.stream import FrameSchedule, StreamLearner
 
         self.camera = camera
         self.options = config.options
@@ -312,24 +391,95 @@ class Learner:
             model = GNGDT(**model_args)
         self.model = model
         self.segmentation = SegmentationParams.from_dict(config.segmentation)
+        #: with a sensor profile's schedule: attention, scene cuts, a first frame learned longer
+        self.stream: StreamLearner | None = None
+        if config.frames is not None:
+            schedule = FrameSchedule.from_dict(
+                {**config.frames, "steps_per_frame": config.options.samples_per_frame})
+            self.stream = StreamLearner(config.model, self.segmentation, schedule,
+                                        config.options.seed)
+            if model.n_nodes_ > 0:  # resumed: carry the checkpoint's network on
+                self.stream.model_ = model
+        #: the segmentation of the last learned frame (None: compute when publishing)
+        self.last_segmentation: Any = None
         self.counters = counters or Counters()
         self.latencies = LatencyWindow()
+        self.frame_id = frame_id
+        #: the pose of the last cloud learned (None: it was in the network's frame as it is)
+        self.last_pose: np.ndarray | None = None
+        self.ghosts = Ghosts()
         self._rng = np.random.default_rng(config.options.seed)
         self._trackers: dict[str, ClusterTracker] = {}
 
-    def learn(self, positions: np.ndarray, colors: np.ndarray | None) -> None:
-        """Run ``samples_per_frame`` learning steps on one cloud: (N, 3) f32 m, (N, 3) u8."""
+    def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
+              pose: np.ndarray | None = None) -> None:
+        """Learn one cloud: (N, 3) f32 m, (N, 3) u8, in its own (camera) frame; ``pose``
+        (4, 4) maps it into ``frame_id`` — ``samples_per_frame`` steps, or through the sensor
+        profile's schedule (which may start a new network on a new scene). Raises
+        `OtherFrameError` (counted) for a cloud in another frame than the network's."""
+        frame_id = frame_id or self.camera
+        if self.frame_id is None:
+            log.info("learning in frame %r%s", frame_id,
+                     " (clouds carry camera poses)" if pose is not None else "")
+            self.frame_id = frame_id
+        elif frame_id != self.frame_id:
+            self.counters.frames_other_frame += 1
+            raise OtherFrameError(
+                f"cloud in frame {frame_id!r}, but this network is learned in {self.frame_id!r} "
+                f"(a capture without poses, or with another fixed frame, than the first one; "
+                f"start the learner afresh to learn in {frame_id!r})")
+        self.last_pose = pose
         started = time.perf_counter()
-        self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame)
+        if self.stream is None:
+            self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame,
+                                   camera_pose=pose)
+            self.last_segmentation = None
+            steps = self.options.samples_per_frame
+        else:
+            in_range = self.stream.in_depth_range(positions)
+            learned = self.stream.learn_frame(positions[in_range],
+                                              None if colors is None else colors[in_range],
+                                              camera_pose=pose)
+            if learned.from_scratch and self.model.n_nodes_:
+                log.info("frame %d shows a new scene: learning a new network",
+                         self.counters.frames_used)
+                for tracker in self._trackers.values():
+                    tracker.forget()  # new nodes, new ids: no cluster carries over
+            self.model = self.stream.model_
+            self.last_segmentation = learned.segmentation
+            steps = learned.steps
         self.counters.learning_seconds += time.perf_counter() - started
+        self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
         self.counters.frames_used += 1
+        self.ghosts = self.measure_ghosts(positions, pose)
+
+    def measure_ghosts(self, positions: np.ndarray, pose: np.ndarray | None) -> Ghosts:
+        """Seen and ghost nodes against ``ghost_sample`` random points of the frame."""
+        from gngdt_core.metrics import ghost_nodes
+
+        count = min(len(positions), self.options.ghost_sample)
+        if count == 0 or self.model.n_nodes_ == 0:
+            return Ghosts()
+        chosen = positions[self._rng.choice(len(positions), size=count, replace=False)]
+        margin = getattr(self.model, "view_depth_margin", 0.05)
+        seen, ghost = ghost_nodes(self.model.positions_, chosen, pose,
+                                  self.options.ghost_distance_m, margin)
+        return Ghosts(int(seen.sum()), float(ghost.sum() / seen.sum()) if seen.any() else 0.0)
+
+    def placed(self, positions: np.ndarray) -> np.ndarray:
+        """Points of the last learned cloud (its own frame) in the network's frame."""
+        pose = self.last_pose
+        if pose is None:
+            return positions
+        return np.asarray(positions, dtype=np.float64) @ pose[:3, :3].T + pose[:3, 3]
 
     def quantization_error(self, positions: np.ndarray, colors: np.ndarray | None) -> dict:
+        """Eq. 17 on a sample of the last learned cloud (``positions`` in its own frame)."""
         count = min(len(positions), self.options.quantization_sample)
         if count == 0 or colors is None:
             return {}
         chosen = self._rng.choice(len(positions), size=count, replace=False)
-        errors = self.model.quantization_error(positions[chosen], colors[chosen])
+        errors = self.model.quantization_error(self.placed(positions[chosen]), colors[chosen])
         return {name: float(value) for name, value in errors.items()}
 
     def learned_frame(self) -> LearnedFrame:
@@ -339,7 +489,7 @@ class Learner:
 
         model = self.model
         min_size = self.options.min_cluster_size
-        segmentation = model.segmentation(self.segmentation)
+        segmentation = self.last_segmentation or model.segmentation(self.segmentation)
         edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
         edges[CONVEXITY_PROPERTY] = edges["pos"][segmentation.convex]
         labels = {name: model.clusters(*name.split("+"), min_size=min_size)
@@ -369,7 +519,7 @@ class Learner:
             steps=int(model.n_steps_),
             frame_sequence=stamp.sequence,
             timestamp_ns=stamp.capture_time_ns,
-            frame_id=self.camera,
+            frame_id=self.frame_id or self.camera,
             quantization_error=quantization_error,
             node_ids=model.node_ids_,
             cluster_ids=learned.cluster_ids,
@@ -400,7 +550,7 @@ class Learner:
             ids=objects.ids, centers=objects.centers, quaternions_xyzw=objects.quaternions_xyzw,
             sizes=objects.sizes, colors=id_colors(objects.ids), node_counts=objects.node_counts,
             centroids=objects.centroids, mean_colors=objects.colors, normals=objects.normals,
-            timestamp_ns=stamp.capture_time_ns, frame_id=self.camera)
+            timestamp_ns=stamp.capture_time_ns, frame_id=self.frame_id or self.camera)
 
     def scene_update(self, stamp: FrameStamp, learned: LearnedFrame) -> Any:
         """Nodes in their learned colours and every clustering's edges coloured by cluster, as a
@@ -421,10 +571,48 @@ class Learner:
         return topology_to_scene_update(
             positions=positions, colors=np.clip(np.rint(self.model.colors_), 0, 255),
             node_size=0.5 * spacing, edge_layers=layers, timestamp_ns=stamp.capture_time_ns,
-            frame_id=self.camera)
+            frame_id=self.frame_id or self.camera)
 
-    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any) -> Any:
-        """The ``gngdt.LearnerStatus`` after publishing ``topology``."""
+    def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
+        """Learn the stream's last frame on until the network is settled: the node budget
+        reached and eq. 17's position error changing by less than ``SETTLED_CHANGE`` over
+        ``SETTLE_CHUNK`` steps, or ``settle_max_steps`` more steps (0: none). Returns how it
+        stopped (the final status says it, and the logger waits for it)."""
+        limit = self.options.settle_max_steps
+        sample = self.placed(positions[self._rng.choice(len(positions),
+                                                        min(len(positions), 5_000),
+                                                        replace=False)])
+        steps = 0
+        previous = self.model.quantization_error(sample)["pos"]
+        started = time.perf_counter()
+        while steps < limit:
+            chunk = min(SETTLE_CHUNK, limit - steps)
+            if self.stream is None:
+                self.model.partial_fit(positions, colors, n_steps=chunk,
+                                       camera_pose=self.last_pose)
+            else:
+                self.stream.refine(positions, colors, chunk, camera_pose=self.last_pose)
+            steps += chunk
+            error = self.model.quantization_error(sample)["pos"]
+            change = abs(previous - error) / previous if previous > 0 else 0.0
+            previous = error
+            if self.model.n_nodes_ >= self.model.max_nodes and change < SETTLED_CHANGE:
+                reason = (f"settled after {steps:,} more steps on the last frame: node budget "
+                          f"reached, position error changed {change:.2%} over the last {chunk:,}")
+                break
+        else:
+            reason = (f"stopped after {steps:,} more steps on the last frame (settle_max_steps): "
+                      f"{self.model.n_nodes_} of {self.model.max_nodes} nodes")
+        self.counters.learning_seconds += time.perf_counter() - started
+        self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
+        self.last_segmentation = None
+        log.info("%s", reason)
+        return reason
+
+    def status(self, stamp: FrameStamp, latency_ms: float, topology: Any,
+               settled: str = "") -> Any:
+        """The ``gngdt.LearnerStatus`` after publishing ``topology``; ``settled``: how learning
+        on the stream's last frame stopped."""
         from schemas.packing import encode_status
 
         counters = self.counters
@@ -434,8 +622,7 @@ class Learner:
             frame_sequence=stamp.sequence,
             frame_id=self.camera,
             steps=int(self.model.n_steps_),
-            steps_per_second=(counters.frames_used * self.options.samples_per_frame / seconds
-                              if seconds > 0 else 0.0),
+            steps_per_second=counters.learning_steps / seconds if seconds > 0 else 0.0,
             nodes=int(self.model.n_nodes_),
             frames_received=counters.frames_received,
             frames_used=counters.frames_used,
@@ -446,6 +633,12 @@ class Learner:
             latency_p99_ms=self.latencies.percentile(99),
             quantization_error=dict(topology.quantization_error),
             cluster_counts={c.name: c.cluster_count for c in topology.clusterings},
+            seen_nodes=self.ghosts.seen_nodes,
+            ghost_share=self.ghosts.ghost_share,
+            ghost_distance_m=self.options.ghost_distance_m,
+            nodes_forgotten=int(getattr(self.model, "n_forgotten_", 0)),
+            frames_other_frame=counters.frames_other_frame,
+            settled=settled,
         )
 
     def save(self, path: Path) -> bool:
@@ -456,12 +649,13 @@ class Learner:
         counters = {item.name: getattr(self.counters, item.name) for item in fields(Counters)}
         try:
             save_checkpoint(path, self.model.get_state(),
-                            {"camera": self.camera, "counters": counters})
+                            {"camera": self.camera, "counters": counters,
+                             "frame_id": self.frame_id})
         except OSError as error:
             log.error("checkpoint %s not written: %s", path, error)
             return False
-        log.info("checkpoint %s: %d nodes, %d steps", path, self.model.n_nodes_,
-                 self.model.n_steps_)
+        log.debug("checkpoint %s: %d nodes, %d steps", path, self.model.n_nodes_,
+                  self.model.n_steps_)
         return True
 
     @classmethod
@@ -471,6 +665,11 @@ class Learner:
         from services.checkpoint import CheckpointError, load_checkpoint
 
         state, metadata = load_checkpoint(path)
+        saved_camera = metadata.get("camera", camera)
+        if saved_camera != camera:
+            raise CheckpointError(
+                f"checkpoint {path} holds what camera {saved_camera!r} learned, not {camera!r}; "
+                f"resume it with --cam {saved_camera} or give this camera its own --checkpoint")
         try:
             model = GNGDT.from_state(state)
         except (KeyError, ValueError, TypeError) as error:
@@ -483,8 +682,12 @@ class Learner:
         if ignored:  # the learned network carries its parameters; changing them mid-life is not
             log.warning("resuming %s with its own parameters; ignoring the requested %s", path,
                         ", ".join(f"{name}={config.model[name]!r}" for name in ignored))
-        log.info("resumed from %s: %d nodes, %d steps", path, model.n_nodes_, model.n_steps_)
-        return cls(camera, config, model=model, counters=counters)
+        frame_id = metadata.get("frame_id")
+        if frame_id is not None and not isinstance(frame_id, str):
+            raise CheckpointError(f"checkpoint {path}: frame_id is {frame_id!r}, not a name")
+        log.info("resumed from %s: %d nodes, %d steps, in frame %r", path, model.n_nodes_,
+                 model.n_steps_, frame_id)
+        return cls(camera, config, model=model, counters=counters, frame_id=frame_id)
 
 
 def finite_points(
@@ -499,28 +702,48 @@ def finite_points(
     return positions[finite], None if colors is None else colors[finite]
 
 
-def decode_points(
-    payload: bytes, attachment: bytes | None, max_points: int = LearnerOptions.max_points
-) -> tuple[FrameStamp, np.ndarray, np.ndarray]:
-    """The learner's decode path for one ``points`` sample: stamp, finite positions, colours.
+class PointsMessage(NamedTuple):
+    """One decoded ``points`` sample: positions (N, 3) float32 metres in the cloud's own
+    (camera) frame, colors (N, 3) uint8, the frame they are placed in and the (4, 4) pose that
+    places them there (None: the identity, the points are in ``frame_id`` as they are)."""
 
-    positions: (N, 3) float32 metres, N >= 1; colors: (N, 3) uint8. Raises ``ValueError``
-    (``MessageError`` for the payload) for a missing/malformed attachment, an undecodable or
-    oversized cloud (``max_points``, checked before allocation), a cloud without colour fields
-    (DESIGN's points carry red, green, blue: a colourless model could learn nothing else) or
-    without a single finite point.
+    stamp: FrameStamp
+    positions: np.ndarray
+    colors: np.ndarray
+    frame_id: str
+    pose: np.ndarray | None
+
+
+def decode_points(
+    payload: bytes, attachment: bytes | None, max_points: int = LearnerOptions.max_points,
+    now_ns: int | None = None,
+) -> PointsMessage:
+    """The learner's decode path for one ``points`` sample.
+
+    positions: N >= 1 finite points. Raises ``ValueError`` (``MessageError`` for the payload)
+    for a missing/malformed attachment, a capture time more than a day from ``now_ns``
+    (default: this clock), an undecodable or oversized cloud (``max_points``, checked before
+    allocation), a cloud without colour fields (DESIGN's points carry red, green, blue: a
+    colourless model could learn nothing else) or without a single finite point, and a pose
+    that is not a rigid transform (non-unit quaternion, NaN), naming the frame.
     """
-    from schemas.packing import MessageError, msg_to_cloud
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+    from schemas.packing import MessageError, cloud_pose, msg_to_cloud, parse_message
 
     stamp = FrameStamp.from_attachment(attachment)
+    stamp.check_clock(time.time_ns() if now_ns is None else now_ns)
+    message = parse_message(PointCloud, payload)
     # views into the payload: learning samples only samples_per_frame of its points
-    positions, colors = msg_to_cloud(payload, max_points=max_points, copy=False)
+    positions, colors = msg_to_cloud(message, max_points=max_points, copy=False)
     if colors is None:
         raise MessageError("cloud has no red/green/blue fields; the learner needs colour")
     positions, colors = finite_points(positions, colors)
     if len(positions) == 0:
         raise MessageError("no finite points in the cloud")
-    return stamp, positions, colors
+    pose = cloud_pose(message)
+    return PointsMessage(stamp, positions, colors, message.frame_id,
+                         None if np.array_equal(pose, np.eye(4)) else pose)
 
 
 def warm_up(config: LearnerConfig) -> None:
@@ -531,15 +754,25 @@ def warm_up(config: LearnerConfig) -> None:
     rng = np.random.default_rng(0)
     positions = rng.random((500, 3), dtype=np.float32)
     colors = rng.integers(0, 256, (500, 3), dtype=np.uint8)
+    positions[:, 2] += 1.0  # in front of the camera, as a depth camera's points are
     model = GNGDT(**{**config.model, "random_state": 0})
-    model.partial_fit(positions, colors, n_steps=2_000)
+    pose = np.eye(4)
+    pose[:3, 3] = 0.1
+    model.partial_fit(positions, colors, n_steps=2_000, camera_pose=pose)
     model.quantization_error(positions, colors)
-    learner = Learner(DEFAULT_CAMERA, config, model=model)
+    learner = Learner("warm-up", config, model=model)
+    learner.measure_ghosts(positions, pose)
     learned = learner.learned_frame()
-    stamp = FrameStamp(0, 0)
+    stamp = FrameStamp(0, 1)
     learner.topology(stamp, {}, learned)
     learner.objects_update(stamp, learner.objects(learned))
     learner.scene_update(stamp, learned)
+
+
+def warn_other_frame(error: OtherFrameError, count: int) -> None:
+    """Warn about clouds in another frame: the first, then every 100th (counted in status)."""
+    if count == 1 or count % 100 == 0:
+        log.warning("points message skipped (%d so far): %s", count, error)
 
 
 class EndOfStream:
@@ -584,26 +817,115 @@ class LatestTopology:
 
 
 def main(args: argparse.Namespace) -> int:
-    import zenoh
+    from services.checkpoint import CheckpointError, CheckpointLock
 
-    from schemas.packing import MessageError, decode_stream_end
-    from services.checkpoint import CheckpointError
-
+    lock = None
     try:
         config = config_from_args(args)
         topic(args.cam, "points")
+        if args.checkpoint is not None:
+            lock = CheckpointLock(args.checkpoint).acquire()
+            clean_checkpoint_directory(args.checkpoint)
         if args.checkpoint is not None and args.checkpoint.exists():
             learner = Learner.resume(args.checkpoint, args.cam, config)
         else:
             learner = Learner(args.cam, config)
+        started = time.monotonic()
+        log.info("preparing the learning kernels (the first run on a machine compiles them "
+                 "with numba, ~20 s; later runs load them from its cache)")
         warm_up(config)
+        log.info("kernels ready in %.1f s", time.monotonic() - started)
+        return serve(args, config, learner)
     except (ValueError, CheckpointError) as error:
         log.error("%s", error)
         return 2
+    finally:
+        if lock is not None:
+            lock.release()
 
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
+
+def clean_checkpoint_directory(path: Path) -> None:
+    """Remove the temporaries a killed learner left beside ``path`` (under its lock)."""
+    from services.checkpoint import remove_stale_temporaries
+
+    removed = remove_stale_temporaries(path)
+    if removed:
+        log.warning("removed %d stale checkpoint temporaries left by an interrupted write: %s",
+                    len(removed), ", ".join(item.name for item in removed))
+
+
+class DuplicateLearnerError(ValueError):
+    """Another learner already learns this camera."""
+
+
+class LearnerInstances:
+    """Every learner announces itself on ``gngdt/<cam>/learner/instance/<zenoh id>``; two on one
+    camera would interleave their topologies, so a second one refuses to start, and of two that
+    start at the same moment the one with the larger id stops."""
+
+    def __init__(self, session: zenoh.Session, camera: str) -> None:
+        self.camera = camera
+        self.own_id = str(session.zid())
+        self._prefix = f"gngdt/{camera}/learner/instance"
+        self.conflict = threading.Event()
+        self.other_id = ""
+        others = [str(reply.ok.key_expr).rsplit("/", 1)[-1]
+                  for reply in session.liveliness().get(f"{self._prefix}/*", timeout=2.0)
+                  if reply.ok is not None]
+        if others:
+            raise DuplicateLearnerError(
+                f"another learner (zenoh id {others[0]}) already learns camera {camera!r}; "
+                "stop it, or give this one another --cam")
+        self._token = session.liveliness().declare_token(f"{self._prefix}/{self.own_id}")
+        self._subscriber = session.liveliness().declare_subscriber(
+            f"{self._prefix}/*", self._on_token, history=True)
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        other = str(sample.key_expr).rsplit("/", 1)[-1]
+        if other == self.own_id or sample.kind != zenoh.SampleKind.PUT:
+            return
+        log.error("a second learner (zenoh id %s) learns camera %r too: their topologies "
+                  "would interleave", other, self.camera)
+        if other < self.own_id:
+            self.other_id = other
+            self.conflict.set()
+
+    def close(self) -> None:
+        self._subscriber.undeclare()
+        self._token.undeclare()
+
+
+def _payload_bytes(sample: zenoh.Sample, limit: int) -> bytes:
+    """The sample's payload, refused (``MessageError``) before any copy when over ``limit``."""
+    from schemas.packing import MessageError
+
+    size = len(sample.payload)
+    if size > limit:
+        raise MessageError(f"{size} bytes, more than the limit of {limit}")
+    return sample.payload.to_bytes()
+
+
+def _attachment_bytes(sample: zenoh.Sample) -> bytes | None:
+    attachment = sample.attachment
+    if attachment is None or len(attachment) > 64:
+        return None
+    return attachment.to_bytes()
+
+
+#: bytes a stream-end message may take (a real one is under 200)
+MAX_EOS_BYTES = 64 * 1024
+#: bytes per point a foreign cloud layout may use (gngdt's own uses 15)
+MAX_POINT_STRIDE_BYTES = 64
+
+
+def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> int:
+    """Subscribe, learn and publish until stopped, the end of the stream (``--exit-on-eos``) or
+    a second learner on the camera; checkpoint on the way out."""
+    import zenoh
+
+    from schemas.packing import MessageError, decode_stream_end
 
     counters = learner.counters
     end = EndOfStream()
@@ -611,7 +933,7 @@ def main(args: argparse.Namespace) -> int:
 
     def on_eos(sample: zenoh.Sample) -> None:
         try:
-            end.set(decode_stream_end(sample.payload.to_bytes()).last_frame_sequence)
+            end.set(decode_stream_end(_payload_bytes(sample, MAX_EOS_BYTES)).last_frame_sequence)
         except MessageError as error:
             counters.malformed_messages += 1
             log.warning("malformed end-of-stream skipped: %s", error)
@@ -621,6 +943,11 @@ def main(args: argparse.Namespace) -> int:
     except ZenohSetupError as error:
         log.error("%s", error)
         return 1
+    try:
+        instances = LearnerInstances(session, args.cam)
+    except DuplicateLearnerError:
+        session.close()
+        raise
     block = zenoh.CongestionControl.BLOCK
     points = session.declare_subscriber(topic(args.cam, "points"), zenoh.handlers.RingChannel(1))
     eos_subscriber = session.declare_subscriber(topic(args.cam, "eos"), on_eos)
@@ -638,62 +965,91 @@ def main(args: argparse.Namespace) -> int:
     token = session.liveliness().declare_token(f"gngdt/{args.cam}/learner/alive")
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
              config.options.samples_per_frame)
+    max_cloud_bytes = config.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
+
+    def publish(stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray | None,
+                settled: str = "") -> float:
+        """Publish the topology and status after learning a frame, then its objects and (every
+        ``scene_every_frames`` frames, and the settled last one) the scene; the latency in ms."""
+        learned = learner.learned_frame()
+        topology = learner.topology(stamp, learner.quantization_error(positions, colors),
+                                    learned)
+        payload = topology.SerializeToString()
+        attachment = stamp.to_attachment()
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        topology_publisher.put(payload, attachment=attachment)
+        latest.set(payload, attachment)
+        status = learner.status(stamp, latency_ms, topology, settled)
+        status_publisher.put(status.SerializeToString(), attachment=attachment)
+        objects = learner.objects_update(stamp, learner.objects(learned))
+        objects_publisher.put(objects.SerializeToString(), attachment=attachment)
+        scene_every = config.options.scene_every_frames
+        if scene_every and (settled or counters.frames_used % scene_every == 1 % scene_every):
+            scene = learner.scene_update(stamp, learned)
+            scene_publisher.put(scene.SerializeToString(), attachment=attachment)
+        return latency_ms
 
     frames_since_checkpoint = 0
     last_checkpoint = time.monotonic()
     learned_sequence = -1
+    #: the last learned frame (stamp, positions, colours), kept to settle on at the stream's end
+    last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
+    settled_end = 0.0  # the end of stream (its arrival time) already settled on
+    exit_code = 0
     try:
-        while not stop.is_set():
-            sample = points.try_recv()
-            if sample is None:
-                if args.exit_on_eos and end.finished(learned_sequence):
+        with lifecycle.graceful() as stop:
+            while not stop.is_set():
+                if instances.conflict.is_set():
+                    log.error("stopping: learner %s came first on camera %r", instances.other_id,
+                              args.cam)
+                    exit_code = 2
                     break
-                time.sleep(0.002)
-                continue
-            counters.frames_received += 1
-            try:
-                stamp, positions, colors = decode_points(
-                    sample.payload.to_bytes(),
-                    sample.attachment.to_bytes() if sample.attachment is not None else None,
-                    config.options.max_points)
-                counters.note_sequence(stamp.sequence)
-                received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-                learner.learn(positions, colors)  # ValueError: e.g. colours missing mid-stream
-            except ValueError as error:  # MessageError is a ValueError
-                counters.malformed_messages += 1
-                log.warning("points message skipped: %s", error)
-                continue
-            learned = learner.learned_frame()
-            topology = learner.topology(stamp, learner.quantization_error(positions, colors),
-                                        learned)
-            payload = topology.SerializeToString()
-            attachment = stamp.to_attachment()
-            latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-            topology_publisher.put(payload, attachment=attachment)
-            latest.set(payload, attachment)
-            learner.latencies.add(latency_ms)
-            status = learner.status(stamp, latency_ms, topology)
-            status_publisher.put(status.SerializeToString(), attachment=attachment)
-            objects = learner.objects_update(stamp, learner.objects(learned))
-            objects_publisher.put(objects.SerializeToString(), attachment=attachment)
-            scene_every = config.options.scene_every_frames
-            if scene_every and counters.frames_used % scene_every == 1 % scene_every:
-                scene = learner.scene_update(stamp, learned)
-                scene_publisher.put(scene.SerializeToString(), attachment=attachment)
-            learned_sequence = stamp.sequence
-            log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
-                      stamp.sequence, len(positions), received_ms, latency_ms)
-            frames_since_checkpoint += 1
-            if args.checkpoint is not None and (
-                frames_since_checkpoint >= config.options.checkpoint_every_frames
-                or time.monotonic() - last_checkpoint >= config.options.checkpoint_every_seconds
-            ):
-                learner.save(args.checkpoint)
-                frames_since_checkpoint, last_checkpoint = 0, time.monotonic()
+                sample = points.try_recv()
+                if sample is None:
+                    if end.finished(learned_sequence):
+                        if last_frame is not None and end.received_at != settled_end:
+                            # the stream's last frame: learn it on until the network settles
+                            publish(*last_frame, settled=learner.settle(*last_frame[1:]))
+                            settled_end = end.received_at
+                        if args.exit_on_eos:
+                            break
+                    time.sleep(0.002)
+                    continue
+                counters.frames_received += 1
+                try:
+                    stamp, positions, colors, frame_id, pose = decode_points(
+                        _payload_bytes(sample, max_cloud_bytes), _attachment_bytes(sample),
+                        config.options.max_points)
+                    counters.note_sequence(stamp.sequence)
+                    received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+                    # ValueError: e.g. colours missing mid-stream, or a cloud in another frame
+                    learner.learn(positions, colors, frame_id, pose)
+                except OtherFrameError as error:  # counted by the learner, warned sparingly
+                    warn_other_frame(error, counters.frames_other_frame)
+                    continue
+                except ValueError as error:  # MessageError is a ValueError
+                    counters.malformed_messages += 1
+                    log.warning("points message skipped: %s", error)
+                    continue
+                latency_ms = publish(stamp, positions, colors)
+                learner.latencies.add(latency_ms)
+                last_frame = (stamp, positions, colors)
+                learned_sequence = stamp.sequence
+                log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
+                          stamp.sequence, len(positions), received_ms, latency_ms)
+                frames_since_checkpoint += 1
+                if args.checkpoint is not None and (
+                    frames_since_checkpoint >= config.options.checkpoint_every_frames
+                    or time.monotonic() - last_checkpoint
+                    >= config.options.checkpoint_every_seconds
+                ):
+                    learner.save(args.checkpoint)
+                    frames_since_checkpoint, last_checkpoint = 0, time.monotonic()
     finally:
         if args.checkpoint is not None and counters.frames_used > 0:
             learner.save(args.checkpoint)
         token.undeclare()
+        instances.close()
         for entity in (queryable, eos_subscriber, points, objects_publisher, scene_publisher):
             entity.undeclare()
         time.sleep(0.1)  # let the last BLOCK puts reach the router
@@ -701,4 +1057,4 @@ def main(args: argparse.Namespace) -> int:
     log.info("learned %d frames (%d dropped, %d malformed), %d nodes, %d steps",
              counters.frames_used, counters.frames_dropped, counters.malformed_messages,
              learner.model.n_nodes_, learner.model.n_steps_)
-    return 0
+    return exit_code

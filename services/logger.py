@@ -17,9 +17,10 @@ write ~1 GB a minute. Metrics and objects are logged for every frame; images, to
 clouds for every Nth frame (by frame sequence), colour as JPEG, clouds capped in points.
 ``--keep-everything`` logs every frame in full.
 
-The logger stops on its own once every camera it heard of has ended its stream (eos) and the
-topology of its last frame has arrived, or ``--eos-drain`` seconds after that eos, and no new
-camera has appeared for ``STOP_GRACE_SECONDS`` (a second camera whose capture started late).
+The logger stops on its own once every camera it knows of (from its first message, or from its
+capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of
+its last frame has arrived, or ``--eos-drain`` seconds after that eos (or after its capture left
+without one).
 
 Crash safety: the ``.rrd`` is flushed every ``FLUSH_EVERY_SECONDS``, so a logger killed outright
 (``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which only makes
@@ -31,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import threading
 import time
 from collections import deque
@@ -43,7 +43,13 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from schemas.wire import DEFAULT_CAMERA, FrameStamp
-from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
+from services import lifecycle
+from services.zenoh_session import (
+    MAX_MESSAGE_BYTES,
+    ZenohSetupError,
+    add_zenoh_arguments,
+    open_session,
+)
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -72,8 +78,9 @@ RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
 #: how often the .rrd is flushed to disk: what a killed logger can lose at most
 FLUSH_EVERY_SECONDS = 1.0
-#: once every camera heard of has finished, how long to wait for one not heard of yet
-STOP_GRACE_SECONDS = 2.0
+DEFAULT_MAX_CAMERAS = 16
+#: 100 times the learner's default node budget
+DEFAULT_MAX_TOPOLOGY_NODES = 100_000
 
 
 def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
@@ -93,7 +100,23 @@ def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
                         help="Log data to standard output, to be piped into a Rerun Viewer")
 
 
+def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
+    """Where ``--serve`` listens (shared with `gngdt run`)."""
+    from services.rerun_output import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT
+
+    group = parser.add_argument_group("serving (--serve)")
+    group.add_argument("--bind", default=DEFAULT_BIND, metavar="ADDRESS",
+                       help=f"address the served viewer listens on (default {DEFAULT_BIND}, this "
+                       "machine only; 0.0.0.0 opens it to the network, with no authentication)")
+    group.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, metavar="PORT",
+                       help=f"port of the gRPC server logs go to (default {DEFAULT_GRPC_PORT})")
+    group.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, metavar="PORT",
+                       help=f"port of the web viewer (default {DEFAULT_WEB_PORT})")
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from services.rerun_output import DEFAULT_MAX_RRD_MB, DEFAULT_MIN_FREE_MB
+
     add_viewer_arguments(parser)
     add_rate_arguments(parser)
     parser.add_argument("--mcap", type=Path, metavar="PATH",
@@ -105,6 +128,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "topology (default 10)")
     parser.add_argument("--keep-running", action="store_true",
                         help="do not stop at end-of-stream (only on SIGINT/SIGTERM)")
+    add_serve_arguments(parser)
+    limits = parser.add_argument_group("limits (what arrives beyond them is refused, counted)")
+    limits.add_argument("--max-rrd-mb", type=int, default=DEFAULT_MAX_RRD_MB, metavar="MB",
+                        help="stop writing the .rrd (a complete file) once it is this large and "
+                        f"go on running (default {DEFAULT_MAX_RRD_MB}; 0: no cap)")
+    limits.add_argument("--min-free-mb", type=int, default=DEFAULT_MIN_FREE_MB, metavar="MB",
+                        help="stop writing the .rrd when less than this is free on its disk "
+                        f"(default {DEFAULT_MIN_FREE_MB}); a failed write stops it too")
+    limits.add_argument("--max-cameras", type=int, default=DEFAULT_MAX_CAMERAS, metavar="N",
+                        help=f"cameras logged at most (default {DEFAULT_MAX_CAMERAS})")
+    limits.add_argument("--max-topology-nodes", type=int, default=DEFAULT_MAX_TOPOLOGY_NODES,
+                        metavar="N", help="largest topology logged, in nodes (default "
+                        f"{DEFAULT_MAX_TOPOLOGY_NODES:,}; a learner sends its --max-nodes)")
+    limits.add_argument("--max-queue-mb", type=int, default=DEFAULT_QUEUE_MB, metavar="MB",
+                        help="messages held while the logger is busy, in MB (default "
+                        f"{DEFAULT_QUEUE_MB}); the oldest make room")
     add_zenoh_arguments(parser)
 
 
@@ -269,40 +308,58 @@ METRIC_PLOTS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("learning speed (steps/s)", ("steps_per_second",)),
     ("latency, capture to topology (ms)", ("latency_ms",)),
     ("frames dropped (count)", ("frames_dropped",)),
+    ("ghost share of the seen nodes", ("ghost_share",)),
+    ("nodes forgotten (count)", ("nodes_forgotten",)),
 )
 #: clusters (segments) of fewer nodes are drawn grey, as the learner's own minimum cluster size
 DISPLAY_MIN_NODES = 5
-EYE_UP = (0.0, -1.0, 0.0)
 
 
 @dataclass(frozen=True)
 class Framing:
-    """Where a camera's 3D views start, in its frame (RDF: at the origin, looking along +z):
-    the topology views from the camera itself, looking along its axis at the scene's median
-    depth, so that they show the nodes as the colour image shows the scene (rerun's views are
-    wider than a depth camera's field of view, so a little smaller); the overview from behind and
-    above the camera, so that the camera (frustum and image) is in sight with the scene beyond.
+    """Where a camera's 3D views start. In the camera's own frame (RDF: at the origin, looking
+    along +z), the topology views start from the camera itself, looking along its axis at the
+    scene's median depth, so that they show the nodes as the colour image shows the scene
+    (rerun's views are wider than a depth camera's field of view, so a little smaller); the
+    overview starts behind and above the camera, so that the camera (frustum and image) is in
+    sight with the scene beyond. With camera poses the same places are taken from the camera's
+    pose when the views were framed, in the fixed frame.
     """
 
     depth: float = 1.5
+    #: camera-to-frame pose (4, 4), row-major, as a tuple (identity: the camera's own frame)
+    pose: tuple[float, ...] = tuple(np.eye(4).ravel())
+
+    def _place(self, x: float, y: float, z: float) -> tuple[float, float, float]:
+        pose = np.asarray(self.pose).reshape(4, 4)
+        return tuple(float(v) for v in pose[:3, :3] @ (x, y, z) + pose[:3, 3])
 
     @property
     def target(self) -> tuple[float, float, float]:
-        return (0.0, 0.0, self.depth)
+        return self._place(0.0, 0.0, self.depth)
 
     @property
     def camera_eye(self) -> tuple[float, float, float]:
-        return (0.0, 0.0, 0.0)
+        return self._place(0.0, 0.0, 0.0)
 
     @property
     def overview_eye(self) -> tuple[float, float, float]:
-        return (0.0, -0.2 * self.depth, -0.15 * self.depth)
+        return self._place(0.0, -0.2 * self.depth, -0.15 * self.depth)
+
+    @property
+    def up(self) -> tuple[float, float, float]:
+        """The camera's up (-y in RDF) in the frame."""
+        rotation = np.asarray(self.pose).reshape(4, 4)[:3, :3]
+        return tuple(float(v) for v in rotation @ (0.0, -1.0, 0.0))
 
     @classmethod
-    def of(cls, positions: np.ndarray) -> Framing:
-        """Framing the nodes ``positions`` (N, 3), metres: their median depth."""
-        depth = float(np.median(positions[:, 2]))
-        return cls(depth if depth > 0.05 else cls.depth)
+    def of(cls, positions: np.ndarray, pose: np.ndarray | None = None) -> Framing:
+        """Framing the nodes ``positions`` (N, 3), metres, seen by a camera at ``pose``
+        (camera-to-frame (4, 4); None: the nodes are in the camera's frame)."""
+        pose = np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
+        local = (np.asarray(positions, dtype=np.float64) - pose[:3, 3]) @ pose[:3, :3]
+        depth = float(np.median(local[:, 2]))
+        return cls(depth if depth > 0.05 else cls.depth, tuple(pose.ravel()))
 
 
 def _spatial_view(name: str, origin: str, contents: list[str], framing: Framing,
@@ -312,7 +369,8 @@ def _spatial_view(name: str, origin: str, contents: list[str], framing: Framing,
 
     return rrb.Spatial3DView(
         name=name, origin=origin, contents=contents,
-        eye_controls=rrb.EyeControls3D(position=eye, look_target=framing.target, eye_up=EYE_UP),
+        eye_controls=rrb.EyeControls3D(position=eye, look_target=framing.target,
+                                       eye_up=framing.up),
         background=rrb.Background(color=[22, 24, 28]))
 
 
@@ -353,7 +411,7 @@ def blueprint(cameras: list[str], framings: dict[str, Framing] | None = None) ->
         for title, names in METRIC_PLOTS
     ]
     return rrb.Blueprint(
-        rrb.Vertical(*rows, rrb.Grid(*plots, grid_columns=4),
+        rrb.Vertical(*rows, rrb.Grid(*plots, grid_columns=5),
                      row_shares=[3] * len(rows) + [1.4]),
         rrb.TimePanel(timeline="frame", play_state="following", state="collapsed"),
         collapse_panels=True)
@@ -370,7 +428,10 @@ class RerunLog:
         self._last_logged: dict[tuple[str, str], int] = {}
         #: per camera, where its views start, once its first topology showed the scene
         self.framings: dict[str, Framing] = {}
+        #: per camera, its latest camera-to-world pose (moving cameras only)
+        self.poses: dict[str, np.ndarray] = {}
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
+        self._world_up = False
 
     def due(self, paths: EntityPaths, stream: str, sequence: int, every: int) -> bool:
         """Whether frame ``sequence`` of ``stream`` is logged: ``every`` frames after the last
@@ -420,13 +481,30 @@ class RerunLog:
 
         self.rec.log(paths.depth, rr.DepthImage(depth_mm, meter=1000.0))
 
-    def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None) -> None:
+    def camera_pose(self, paths: EntityPaths, pose: np.ndarray) -> None:
+        """A moving camera's pose (camera-to-world (4, 4)): the camera follows it."""
+        import rerun as rr
+
+        if not self._world_up:  # a fixed frame (world/map/odom): z up, as ROS and our scenes
+            self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+            self._world_up = True
+        self.poses[paths.camera] = pose
+        self.rec.log(paths.pinhole, rr.Transform3D(translation=pose[:3, 3], mat3x3=pose[:3, :3]))
+
+    def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None,
+               pose: np.ndarray | None = None) -> None:
+        """The cloud at ``world/points``, at most ``max_cloud_points``; with a ``pose``
+        (camera-to-world, the cloud was taken by a moving camera) the points are put in the
+        world."""
         import rerun as rr
 
         cap = self.rates.max_cloud_points or len(positions)
         stride = max(1, -(-len(positions) // cap))
+        shown = positions[::stride]
+        if pose is not None:
+            shown = shown @ pose[:3, :3].T.astype(np.float32) + pose[:3, 3].astype(np.float32)
         self.rec.log(paths.points, rr.Points3D(
-            positions[::stride], colors=None if colors is None else colors[::stride],
+            shown, colors=None if colors is None else colors[::stride],
             radii=rr.Radius.ui_points(1.5)))
 
     def topology(self, paths: EntityPaths, snapshot: TopologySnapshot, draw: bool) -> None:
@@ -446,7 +524,8 @@ class RerunLog:
 
         positions = snapshot.positions
         if paths.camera not in self.framings and snapshot.node_count >= 50:
-            framing = self.framings[paths.camera] = Framing.of(positions)
+            framing = self.framings[paths.camera] = Framing.of(
+                positions, self.poses.get(paths.camera))
             # a small frustum near the camera: the image on it stays a thumbnail in the
             # overview instead of covering the scene
             self.rec.log(paths.pinhole, rr.Pinhole.from_fields(
@@ -480,6 +559,8 @@ class RerunLog:
         self.scalar(paths, "steps_per_second", status.steps_per_second)
         self.scalar(paths, "latency_ms", status.latency_ms)
         self.scalar(paths, "frames_dropped", status.frames_dropped)
+        self.scalar(paths, "ghost_share", status.ghost_share)
+        self.scalar(paths, "nodes_forgotten", status.nodes_forgotten)
 
     def scalar(self, paths: EntityPaths, name: str, value: float) -> None:
         import rerun as rr
@@ -487,45 +568,104 @@ class RerunLog:
         self.rec.log(paths.metric(name), rr.Scalars(float(value)))
 
 
+#: bytes a sample of each stream may take; larger ones are refused before they are copied
+#: (images, clouds and topologies: zenoh's own message limit)
+STREAM_BYTE_LIMITS = {
+    "calibration": 64 * 1024,
+    "learner/status": 64 * 1024,
+    "eos": 64 * 1024,
+    "color": MAX_MESSAGE_BYTES,
+    "depth": MAX_MESSAGE_BYTES,
+    "points": MAX_MESSAGE_BYTES,
+    "topology": MAX_MESSAGE_BYTES,
+}
+#: streams not in STREAM_BYTE_LIMITS
+OTHER_STREAM_BYTE_LIMIT = 4 * 1024 * 1024
+#: bytes the inbox may hold while the logger is busy
+DEFAULT_QUEUE_MB = 256
+
+
+def stream_of(key: str) -> str:
+    """``learner/status`` of ``gngdt/<cam>/learner/status``."""
+    return key.split("/", 2)[2] if key.count("/") >= 2 else ""
+
+
 class Inbox:
     """Samples handed over from zenoh's threads; the callbacks never block.
 
     Images and clouds keep only the newest sample per key (older ones are counted as dropped);
-    the other streams (calibration, topology, status, eos) queue in arrival order, bounded.
+    the other streams (calibration, topology, status) queue in arrival order. What it holds is
+    bounded in bytes (``max_bytes``): a sample over its stream's limit (``STREAM_BYTE_LIMITS``)
+    is refused before it is copied, and when the inbox is full the oldest queued samples make
+    room; each is counted. Ends of stream are kept apart and never evicted (64 at most).
     """
 
-    def __init__(self, max_queued: int = 1024) -> None:
+    def __init__(self, max_bytes: int = DEFAULT_QUEUE_MB * 1024 * 1024) -> None:
         self._lock = threading.Lock()
         self._latest: dict[str, tuple[bytes, bytes | None]] = {}
         self._queued: deque[tuple[str, bytes, bytes | None]] = deque()
-        self._max_queued = max_queued
+        self._ends: list[tuple[str, bytes, bytes | None]] = []
+        self._bytes = 0
+        self.max_bytes = max_bytes
         self.dropped = 0
+        self.oversized = 0
         self.arrived = threading.Event()
 
     def put(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
-        if key.rsplit("/", 1)[-1] in NOT_LOGGED_STREAMS:
+        stream = stream_of(key)
+        if stream in NOT_LOGGED_STREAMS:
+            return
+        size = len(sample.payload)
+        if size > STREAM_BYTE_LIMITS.get(stream, OTHER_STREAM_BYTE_LIMIT) or size > self.max_bytes:
+            with self._lock:
+                self.oversized += 1
             return
         payload = sample.payload.to_bytes()
-        attachment = sample.attachment.to_bytes() if sample.attachment is not None else None
+        attachment = sample.attachment
+        attachment = attachment.to_bytes() if attachment is not None and len(attachment) <= 64 \
+            else None
         with self._lock:
-            if key.rsplit("/", 1)[-1] in LATEST_ONLY_STREAMS:
-                self.dropped += key in self._latest
-                self._latest[key] = (payload, attachment)
-            else:
-                if len(self._queued) >= self._max_queued:
-                    self._queued.popleft()
+            if stream == "eos":
+                if len(self._ends) < 64:
+                    self._ends.append((key, payload, attachment))
+                else:
                     self.dropped += 1
+            elif stream in LATEST_ONLY_STREAMS:
+                previous = self._latest.pop(key, None)
+                if previous is not None:
+                    self.dropped += 1
+                    self._bytes -= len(previous[0])
+                if self._make_room(size):
+                    self._latest[key] = (payload, attachment)
+                    self._bytes += size
+            elif self._make_room(size):
                 self._queued.append((key, payload, attachment))
+                self._bytes += size
         self.arrived.set()
 
+    def _make_room(self, size: int) -> bool:
+        """Evict the oldest queued samples until ``size`` more bytes fit; False (the new sample
+        is dropped) if they cannot."""
+        while self._bytes + size > self.max_bytes and self._queued:
+            self._bytes -= len(self._queued.popleft()[1])
+            self.dropped += 1
+        if self._bytes + size > self.max_bytes:
+            self.dropped += 1
+            return False
+        return True
+
     def take(self) -> list[tuple[str, bytes, bytes | None]]:
-        """Everything waiting: queued messages first (calibration before images), then latest."""
+        """Everything waiting: queued messages first (calibration before images), then latest,
+        then the ends of stream."""
         with self._lock:
             taken = list(self._queued)
             taken += [(key, *value) for key, value in self._latest.items()]
+            taken += self._ends
             self._queued.clear()
             self._latest.clear()
+            self._ends = []
+            self._bytes = 0
             self.arrived.clear()
         return taken
 
@@ -537,24 +677,62 @@ class CameraProgress:
     last_topology_sequence: int = -1
     eos_last_sequence: int | None = None
     eos_at: float = 0.0
+    #: when the camera's capture left without an end of stream (its liveliness token went)
+    capture_gone_at: float | None = None
+    #: the learner said how learning on the stream's last frame stopped (its final network)
+    settled: bool = False
 
     def finished(self, drain_seconds: float) -> bool:
         if self.eos_last_sequence is None:
-            return False
-        return (self.last_topology_sequence >= self.eos_last_sequence
+            return (self.capture_gone_at is not None
+                    and time.monotonic() - self.capture_gone_at > drain_seconds)
+        return ((self.last_topology_sequence >= self.eos_last_sequence and self.settled)
                 or time.monotonic() - self.eos_at > drain_seconds)
 
 
-class Dispatcher:
-    """Decodes one sample by stream name and logs it; malformed messages are counted, skipped."""
+class CaptureWatch:
+    """Captures coming and going (their liveliness tokens ``gngdt/<cam>/capture/alive``): a
+    camera is expected from its capture's start, not only from its first message."""
 
-    def __init__(self, rerun_log: RerunLog, on_new_layout: Any = None) -> None:
-        """``on_new_layout(cameras)`` is called when a camera appears or its views are framed."""
+    KEY = "gngdt/*/capture/alive"
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._events: list[tuple[str, bool]] = []
+
+    def on_token(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        camera = str(sample.key_expr).split("/")[1]
+        with self._lock:
+            self._events.append((camera, sample.kind == zenoh.SampleKind.PUT))
+
+    def take(self) -> list[tuple[str, bool]]:
+        """(camera, capture alive) events since the last call."""
+        with self._lock:
+            events, self._events = self._events, []
+        return events
+
+
+class Dispatcher:
+    """Decodes one sample by stream name and logs it; malformed messages are counted, skipped.
+
+    A camera becomes known with its first valid message (or its capture's token), up to
+    ``max_cameras``; messages of further cameras are refused and counted, so that garbage on
+    made-up camera names cannot grow the recording or its blueprint.
+    """
+
+    def __init__(self, rerun_log: RerunLog, on_new_camera: Any = None,
+                 max_cameras: int = DEFAULT_MAX_CAMERAS,
+                 max_topology_nodes: int = DEFAULT_MAX_TOPOLOGY_NODES) -> None:
         self.rerun_log = rerun_log
         self.cameras: dict[str, CameraProgress] = {}
         self.malformed = 0
+        self.refused = 0
+        self.max_cameras = max_cameras
+        self.max_topology_nodes = max_topology_nodes
         self.last_status: dict[str, LearnerStatusInfo] = {}
-        self._on_new_layout = on_new_layout
+        self._on_new_camera = on_new_camera
 
     def handle(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         from schemas import packing
@@ -571,33 +749,83 @@ class Dispatcher:
                 paths, packing.calibration_to_intrinsics(payload)),
             "color": lambda: rerun_log.color(paths, packing.raw_to_image(payload)),
             "depth": lambda: rerun_log.depth(paths, packing.raw_to_image(payload)),
-            # views: the logger decimates, so only the logged points are copied
-            "points": lambda: rerun_log.points(paths, *packing.msg_to_cloud(payload, copy=False)),
-            "topology": lambda: self._topology(camera, paths, packing.decode_topology(payload),
-                                               stamp),
+            "points": lambda: self._points(paths, payload, stamp),
+            "topology": lambda: self._topology(camera, paths, packing.decode_topology(
+                payload, max_nodes=self.max_topology_nodes), stamp),
             "objects": lambda: rerun_log.objects(paths, decode_object_boxes(payload)),
             "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
             "eos": lambda: self._eos(camera, packing.decode_stream_end(payload)),
         }
-        #: streams thinned for the .rrd, and how (topologies always give their metrics)
-        thinned = {"color": rates.image_every, "depth": rates.depth_every,
-                   "points": rates.cloud_every}
+        #: images thinned for the .rrd, skipped before they are decoded (clouds and topologies
+        #: are thinned after: their poses and metrics are logged for every frame)
+        thinned = {"color": rates.image_every, "depth": rates.depth_every}
         handler = handlers.get(stream)
         if handler is None:
             return
+        new_camera = camera not in self.cameras
+        if new_camera and not self._admit(camera):
+            return
         try:
             stamp = FrameStamp.from_attachment(attachment)
+            stamp.check_clock(time.time_ns())
             if stream in thinned and not rerun_log.due(paths, stream, stamp.sequence,
                                                        thinned[stream]):
                 return
-            if camera not in self.cameras:
+            if new_camera:
                 self.cameras[camera] = CameraProgress()
-                self._layout_changed()
-            rerun_log.set_time(stamp)
+            self.rerun_log.set_time(stamp)
             handler()
-        except ValueError as error:  # MessageError is a ValueError
+        except (ValueError, OverflowError) as error:  # MessageError is a ValueError
+            if new_camera:  # a camera is made by a valid message, not by garbage
+                self.cameras.pop(camera, None)
             self.malformed += 1
             log.warning("%s: malformed message skipped: %s", key, error)
+            return
+        if new_camera:
+            self._layout_changed()
+
+    def _layout_changed(self) -> None:
+        """A camera appeared or its views were framed: a new blueprint."""
+        if self._on_new_camera is not None:
+            self._on_new_camera(list(self.cameras))
+
+    def _admit(self, camera: str) -> bool:
+        """Room for one more camera? Refusals are counted, the first one logged."""
+        if len(self.cameras) < self.max_cameras:
+            return True
+        if self.refused == 0:
+            log.warning("more than %d cameras (--max-cameras): messages of %r and further "
+                        "cameras are refused", self.max_cameras, camera)
+        self.refused += 1
+        return False
+
+    def _points(self, paths: EntityPaths, payload: bytes, stamp: FrameStamp) -> None:
+        from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+        from schemas import packing
+
+        rerun_log = self.rerun_log
+        message = packing.parse_message(PointCloud, payload)
+        pose = packing.cloud_pose(message)
+        moving = not np.array_equal(pose, np.eye(4))
+        if moving:  # the camera's pose: every frame, whether its cloud is logged or not
+            rerun_log.camera_pose(paths, pose)
+        if rerun_log.due(paths, "points", stamp.sequence, rerun_log.rates.cloud_every):
+            # views: the logger decimates, so only the logged points are copied
+            positions, colors = packing.msg_to_cloud(message, copy=False)
+            rerun_log.points(paths, positions, colors, pose if moving else None)
+
+    def capture_seen(self, camera: str, alive: bool) -> None:
+        """A capture of ``camera`` started (``alive``) or left."""
+        self._expect(camera)
+        if camera in self.cameras:
+            self.cameras[camera].capture_gone_at = None if alive else time.monotonic()
+
+    def _expect(self, camera: str) -> None:
+        if camera not in self.cameras and self._admit(camera):
+            self.cameras[camera] = CameraProgress()
+            if self._on_new_camera is not None:
+                self._on_new_camera(list(self.cameras))
 
     def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot,
                   stamp: FrameStamp) -> None:
@@ -611,18 +839,17 @@ class Dispatcher:
         progress.last_topology_sequence = max(progress.last_topology_sequence,
                                               snapshot.frame_sequence)
 
-    def _layout_changed(self) -> None:
-        if self._on_new_layout is not None:
-            self._on_new_layout(list(self.cameras))
-
     def _status(self, camera: str, paths: EntityPaths, status: LearnerStatusInfo) -> None:
         self.rerun_log.status(paths, status)
         self.last_status[camera] = status
+        if status.settled:
+            self.cameras[camera].settled = True
 
     def _eos(self, camera: str, end: Any) -> None:
         progress = self.cameras[camera]
         progress.eos_last_sequence = end.last_frame_sequence
         progress.eos_at = time.monotonic()
+        progress.settled = False  # the learner settles on this stream's last frame after it
         log.info("%s: end of stream after %d frames", camera, end.frames_sent)
 
     def all_finished(self, drain_seconds: float) -> bool:
@@ -630,38 +857,57 @@ class Dispatcher:
             progress.finished(drain_seconds) for progress in self.cameras.values())
 
 
-def open_recording(args: argparse.Namespace, default_name: str = "log") -> tuple[Any, str]:
-    """The rerun stream, its sink chosen by rerun's own options, and where it goes."""
+def open_recording(args: argparse.Namespace, default_name: str = "log"
+                   ) -> tuple[Any, str, Path | None, Any]:
+    """The rerun stream, its sink chosen by rerun's own options, where it goes (a description
+    and, for a file, its path) and the viewer server ``--serve`` started (or None)."""
     import rerun as rr
+
+    from services.rerun_output import ViewerServer
 
     rec = rr.RecordingStream("gngdt")
     rr.set_log_time_enabled(False, recording=rec)  # reproducible files: capture time is logged
     initial = blueprint([DEFAULT_CAMERA])
     if args.stdout:
         rec.stdout(default_blueprint=initial)
-        return rec, "stdout"
+        return rec, "stdout", None, None
     if args.serve:
-        url = rec.serve_grpc(default_blueprint=initial)
-        rr.serve_web_viewer(open_browser=False, connect_to=url)
-        return rec, f"serving {url}"
+        server = ViewerServer(args.bind, args.grpc_port, args.web_port)
+        try:
+            server.wait_ready()
+        except OSError:
+            server.stop()
+            raise
+        rec.connect_grpc(server.grpc_url, default_blueprint=initial)
+        return rec, f"serving a web viewer at {server.web_url} (logs {server.grpc_url})", \
+            None, server
     if args.connect:
         rec.connect_grpc(args.url, default_blueprint=initial)
-        return rec, f"connected to {args.url or 'the default viewer'}"
+        return rec, f"connected to {args.url or 'the default viewer'}", None, None
     requested = Path(args.save) if args.save else default_rrd_path(default_name)
     path = unused_rrd_path(requested)
     if path != requested:
         log.warning("%s exists (an earlier run); writing %s instead", requested, path)
     path.parent.mkdir(parents=True, exist_ok=True)
     rec.save(str(path), default_blueprint=initial)
-    return rec, str(path)
+    return rec, str(path), path, None
 
 
 def main(args: argparse.Namespace) -> int:
     from services.mcap_recorder import McapRecorder
+    from services.rerun_output import RrdFile, exit_now_if_stuck
 
+    for name in ("max_rrd_mb", "min_free_mb", "max_queue_mb"):
+        if getattr(args, name) < 0:
+            log.error("--%s must be >= 0, got %s", name.replace("_", "-"), getattr(args, name))
+            return 2
+    for name in ("max_cameras", "max_topology_nodes"):
+        if getattr(args, name) < 1:
+            log.error("--%s must be >= 1, got %s", name.replace("_", "-"), getattr(args, name))
+            return 2
     try:
         rates = rates_from_args(args)
-        rec, destination = open_recording(args)
+        rec, destination, path, server = open_recording(args)
         rerun_log = RerunLog(rec, rates)
         recorder = McapRecorder(unused_rrd_path(args.mcap)) if args.mcap else None
     except (ValueError, OSError) as error:
@@ -671,54 +917,67 @@ def main(args: argparse.Namespace) -> int:
         print(f"logging to {destination}", flush=True)
         if recorder is not None:
             print(f"recording to {recorder.path}", flush=True)
+    output = None if path is None else RrdFile(
+        rerun_log, path, args.max_rrd_mb * 10**6, args.min_free_mb * 10**6, FLUSH_EVERY_SECONDS)
 
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-
-    inbox = Inbox()
-    dispatcher = Dispatcher(rerun_log,
-                            on_new_layout=lambda cams: rec.send_blueprint(
-                                blueprint(cams, rerun_log.framings)))
+    inbox = Inbox(args.max_queue_mb * 1024 * 1024)
+    dispatcher = Dispatcher(
+        rerun_log, on_new_camera=lambda cams: rerun_log.rec.send_blueprint(
+            blueprint(cams, rerun_log.framings)),
+        max_cameras=args.max_cameras, max_topology_nodes=args.max_topology_nodes)
     try:
         session = open_session(args)
     except ZenohSetupError as error:
         log.error("%s", error)
         rec.disconnect()
+        if server is not None:
+            server.stop()
         if recorder is not None:
             recorder.close()
         return 1
     subscriber = session.declare_subscriber("gngdt/**", inbox.put)
     recording = (session.declare_subscriber("gngdt/**", recorder.put)
                  if recorder is not None else None)
+    captures = CaptureWatch()
+    capture_tokens = session.liveliness().declare_subscriber(
+        CaptureWatch.KEY, captures.on_token, history=True)
     token = session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}")
     last_flush = time.monotonic()
-    finished_at: float | None = None
     try:
-        while not stop.is_set():
-            inbox.arrived.wait(0.05)
-            for key, payload, attachment in inbox.take():
-                dispatcher.handle(key, payload, attachment)
-            if time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
-                rec.flush()
-                last_flush = time.monotonic()
-            if args.keep_running or not dispatcher.all_finished(args.eos_drain):
-                finished_at = None  # a camera still streams (or a new one appeared)
-            elif finished_at is None:
-                finished_at = time.monotonic()
-            elif time.monotonic() - finished_at >= STOP_GRACE_SECONDS:
-                break
+        with lifecycle.graceful() as stop:
+            while not stop.is_set():
+                inbox.arrived.wait(0.05)
+                for key, payload, attachment in inbox.take():
+                    dispatcher.handle(key, payload, attachment)
+                for camera, alive in captures.take():
+                    dispatcher.capture_seen(camera, alive)
+                if output is not None:
+                    output.tick()
+                elif time.monotonic() - last_flush >= FLUSH_EVERY_SECONDS:
+                    rerun_log.rec.flush()
+                    last_flush = time.monotonic()
+                if not args.keep_running and dispatcher.all_finished(args.eos_drain):
+                    break
     finally:
         token.undeclare()
+        capture_tokens.undeclare()
         subscriber.undeclare()
         if recording is not None:
             recording.undeclare()
         session.close()
         for key, payload, attachment in inbox.take():
             dispatcher.handle(key, payload, attachment)
-        rec.flush()
-        rec.disconnect()  # writes the .rrd footer
+        if output is not None:
+            output.close()
+        else:
+            rec.flush()
+            rec.disconnect()  # writes the .rrd footer
+        if server is not None:
+            server.stop()
         if recorder is not None:
             recorder.close()  # writes the MCAP index and footer
-    log.info("logger done: %d malformed, %d dropped", dispatcher.malformed, inbox.dropped)
-    return 0
+    log.info("logger done: %d malformed, %d dropped, %d oversized, %d refused (cameras beyond "
+             "--max-cameras)%s", dispatcher.malformed, inbox.dropped, inbox.oversized,
+             dispatcher.refused,
+             f"; the .rrd stopped early: {output.stopped}" if output and output.stopped else "")
+    return exit_now_if_stuck(output, 0)

@@ -57,7 +57,36 @@ class Deprojector:
         Returns positions (N, 3) float32 metres and colors (N, 3) uint8 (or None), row-major
         pixel order.
         """
+        z, valid = self._depth_metres(depth_mm, color, intrinsics)
         slope_x, slope_y = self.slopes_for(intrinsics)
+        # Flat indices and take() are ~10x faster than boolean indexing of the (H, W, k) arrays.
+        z_valid = z.take(valid)
+        positions = np.empty((valid.size, 3), dtype=np.float32)
+        positions[:, 0] = slope_x.take(valid) * z_valid
+        positions[:, 1] = slope_y.take(valid) * z_valid
+        positions[:, 2] = z_valid
+        if color is None:
+            return positions, None
+        colors = np.asarray(color, dtype=np.uint8).reshape(-1, 3).take(valid, axis=0)
+        return positions, colors
+
+    def organized(self, depth_mm: np.ndarray, intrinsics: CameraIntrinsics) -> np.ndarray:
+        """Every pixel of a depth image as a point, in image layout: (H, W, 3) float32 metres,
+        NaN where the depth is dropped (0, NaN or outside [min_depth, max_depth])."""
+        z, valid = self._depth_metres(depth_mm, None, intrinsics)
+        slope_x, slope_y = self.slopes_for(intrinsics)
+        points = np.full((z.size, 3), np.nan, dtype=np.float32)
+        z_valid = z.take(valid)
+        points[valid, 0] = slope_x.take(valid) * z_valid
+        points[valid, 1] = slope_y.take(valid) * z_valid
+        points[valid, 2] = z_valid
+        return points.reshape(intrinsics.height, intrinsics.width, 3)
+
+    def _depth_metres(
+        self, depth_mm: np.ndarray, color: np.ndarray | None, intrinsics: CameraIntrinsics
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Flat (H*W,) float32 depth in metres and the flat indices of the kept pixels; checks
+        that depth, colour and calibration sizes agree."""
         if depth_mm.shape != (intrinsics.height, intrinsics.width):
             raise ValueError(
                 f"depth image {depth_mm.shape[1]}x{depth_mm.shape[0]} does not match "
@@ -69,18 +98,9 @@ class Deprojector:
                 f"depth {depth_mm.shape[1]}x{depth_mm.shape[0]}"
             )
         z = depth_mm.reshape(-1).astype(np.float32) * np.float32(0.001)
-        # NaN compares False, so it is dropped with the out-of-range depths. Flat indices and
-        # take() are ~10x faster than boolean indexing of the (H, W, k) arrays.
+        # NaN compares False, so it is dropped with the out-of-range depths.
         valid = np.flatnonzero((z >= max(self.min_depth_m, 1e-6)) & (z <= self.max_depth_m))
-        z_valid = z.take(valid)
-        positions = np.empty((valid.size, 3), dtype=np.float32)
-        positions[:, 0] = slope_x.take(valid) * z_valid
-        positions[:, 1] = slope_y.take(valid) * z_valid
-        positions[:, 2] = z_valid
-        if color is None:
-            return positions, None
-        colors = np.asarray(color, dtype=np.uint8).reshape(-1, 3).take(valid, axis=0)
-        return positions, colors
+        return z, valid
 
 
 def voxel_keys(positions: np.ndarray, voxel_size_m: float) -> np.ndarray:

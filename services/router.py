@@ -4,9 +4,8 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
-import threading
 
+from services import lifecycle
 from services.zenoh_session import (
     DEFAULT_ENDPOINT,
     ZenohSetupError,
@@ -44,12 +43,12 @@ def main(args: argparse.Namespace) -> int:
     except ZenohSetupError as error:
         log.error("%s", error)
         return 1
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-    print(f"zenoh router listening on {', '.join(listen)} (Ctrl-C to stop)", flush=True)
-    while not stop.wait(0.5):
-        pass
-    session.close()
-    log.info("router stopped")
+    try:
+        with lifecycle.graceful() as stop:
+            print(f"zenoh router listening on {', '.join(listen)} (Ctrl-C to stop)", flush=True)
+            while not stop.wait(0.5):  # with a timeout: a signal zenoh's threads received
+                pass                       # runs its Python handler only when we wake up
+    finally:
+        session.close()
+    log.info("router stopped (%s)", lifecycle.stop_reason())
     return 0

@@ -1,17 +1,22 @@
 """Run the whole pipeline on one recording: a loopback router, then learner, logger and capture.
 
 The router is this process's own zenoh session (mode router, a free port on 127.0.0.1, scouting
-off); the three services are child processes connected to it. ``run`` starts the learner and the
-logger, waits for their liveliness tokens, starts the capture, waits for the end of the stream,
-lets the learner finish its last frame and the logger flush, then prints a summary. SIGINT and
-SIGTERM stop everything cleanly. Exit status is non-zero when a service failed.
+off) and admits only this run's children: they authenticate with a user and password made for
+the run (zenoh's usrpwd), so a neighbour on the machine can neither publish into the run (a
+forged end of stream) nor listen. ``run`` starts the learner and the logger, waits for their
+liveliness tokens, starts the capture, waits for the end of the stream, lets the learner finish
+its last frame and the logger flush, then prints a summary. SIGINT, SIGTERM and SIGHUP stop
+everything cleanly, and the children die with ``run`` however it ends. Exit status is non-zero
+when the recording is unusable, a service failed, or the stream ended before the recording did.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import os
+import secrets
 import shutil
 import signal
 import subprocess
@@ -24,15 +29,23 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from schemas.wire import DEFAULT_CAMERA, topic
+from services import lifecycle
 from services.logger import (
     LIVELINESS_KEY,
     add_rate_arguments,
+    add_serve_arguments,
     default_rrd_path,
     rate_arguments,
     rates_from_args,
     unused_rrd_path,
 )
-from services.zenoh_session import ZenohSetupError, free_tcp_port, open_config, router_config
+from services.zenoh_session import (
+    ZenohSetupError,
+    client_settings,
+    free_tcp_port,
+    open_config,
+    router_config,
+)
 
 if TYPE_CHECKING:
     import zenoh
@@ -60,8 +73,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     viewer.add_argument("--save", type=Path, metavar="PATH",
                         help="write the rerun recording here (default runs/<recording>-<time>.rrd)")
     viewer.add_argument("--connect", action="store_true", help="log to a running rerun viewer")
-    viewer.add_argument("--serve", action="store_true", help="serve a web viewer")
+    viewer.add_argument("--serve", action="store_true",
+                        help="serve a web viewer (on this machine only unless --bind says)")
     parser.add_argument("--url", help="rerun viewer URL for --connect")
+    add_serve_arguments(parser)
     parser.add_argument("--mcap", type=Path, metavar="PATH",
                         help="also record every gngdt stream (images, clouds, topology, scene, "
                         "objects, status) into this MCAP file for Foxglove or rerun")
@@ -76,7 +91,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "clouds). The learner samples 10,000 points a frame by default and the logger shows "
         "50,000, so the cap changes neither; on 2 cores at 30 fps it cuts dropped frames from "
         "~30%% to ~5%%")
-    parser.add_argument("--params", type=Path, metavar="FILE.toml", help="learner parameters")
+    parser.add_argument("--params", type=Path, metavar="FILE.toml",
+                        help="learner parameters (see `gngdt learn --help`)")
     parser.add_argument("--checkpoint", type=Path, metavar="PATH", help="learner checkpoint")
     parser.add_argument("--samples-per-frame", type=int, help="learning steps per frame")
     parser.add_argument("--max-nodes", type=int, help="learner node budget")
@@ -163,22 +179,62 @@ class Observed:
             return any(key.startswith(prefix) for key in self.alive)
 
 
+class RunAccess:
+    """This run's zenoh credentials: the router's password file and the children's config, in
+    the run's private (0700) folder."""
+
+    USER = "gngdt-run"
+
+    def __init__(self, endpoint: str, folder: Path) -> None:
+        self.endpoint = endpoint
+        password = secrets.token_urlsafe(24)
+        self.users_file = folder / "router-users.txt"
+        self.client_file = folder / "zenoh-client.json5"
+        for path, text in (
+            (self.users_file, f"{self.USER}:{password}\n"),
+            (self.client_file, json.dumps(self._client_settings(password), indent=2)),
+        ):
+            path.touch(mode=0o600)
+            path.write_text(text)
+
+    def _client_settings(self, password: str) -> dict:
+        """The children's zenoh configuration as a nested mapping (a JSON5 file's content)."""
+        settings = {**client_settings([self.endpoint]),
+                    "transport/auth/usrpwd": {"user": self.USER, "password": password}}
+        nested: dict = {}
+        for key, value in settings.items():
+            *parents, leaf = key.split("/")
+            branch = nested
+            for name in parents:
+                branch = branch.setdefault(name, {})
+            branch[leaf] = value
+        return nested
+
+    def router(self) -> zenoh.Config:
+        config = router_config([self.endpoint])
+        config.insert_json5("transport/auth/usrpwd/dictionary_file",
+                            json.dumps(str(self.users_file)))
+        return config
+
+
 class Pipeline:
     """The child processes of one run."""
 
-    def __init__(self, endpoint: str, log_dir: Path, log_level: str) -> None:
-        self.endpoint = endpoint
+    def __init__(self, access: RunAccess, log_dir: Path, log_level: str) -> None:
+        self.access = access
         self.log_dir = log_dir
         self.log_level = log_level
         self.children: list[Child] = []
         self.interrupted = False
 
     def start(self, name: str, arguments: list[str]) -> Child:
-        command = [sys.executable, "-m", "services.cli", name, *arguments,
-                   "--zenoh-connect", self.endpoint, "--log-level", self.log_level]
+        # -P: the user's current folder, which may hold its own services/ or schemas/, is not
+        # put first on the children's import path
+        command = [sys.executable, "-P", "-m", "services.cli", name, *arguments,
+                   "--zenoh-config", str(self.access.client_file), "--log-level", self.log_level]
         stderr_path = self.log_dir / f"{name}.log"
         stderr_file = open(stderr_path, "wb")  # closed in Pipeline.close()
-        env = dict(os.environ)
+        env = lifecycle.child_environment()  # the child dies with this process
         env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO_ROOT),
                                                           env.get("PYTHONPATH")]))
         log.debug("starting %s", " ".join(command))
@@ -230,13 +286,25 @@ def learner_arguments(args: argparse.Namespace) -> list[str]:
     return arguments
 
 
-def capture_arguments(args: argparse.Namespace) -> list[str]:
+def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None) -> list[str]:
+    """Capture's command line; ``veil_ratio`` from the sensor profile (`sensor_veil_ratio`)."""
     arguments = [str(args.recording), "--cam", args.cam]
     arguments += ["--fast"] if args.fast else ["--rate", str(args.rate)]
-    for flag, value in (("--voxel", args.voxel), ("--max-points", args.max_points)):
+    for flag, value in (("--voxel", args.voxel), ("--max-points", args.max_points),
+                        ("--drop-veil", veil_ratio)):
         if value is not None:
             arguments += [flag, str(value)]
     return arguments
+
+
+def sensor_veil_ratio(params: Path | None) -> float | None:
+    """The veil ratio of a sensor profile's [frames] table (capture drops those pixels)."""
+    if params is None:
+        return None
+    from services.learner import load_params
+
+    frames = load_params(params).frames
+    return None if frames is None else frames.get("veil_ratio")
 
 
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
@@ -247,7 +315,8 @@ def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
     if args.connect:
         return [*arguments, "--connect", *(["--url", args.url] if args.url else [])]
     if args.serve:
-        return [*arguments, "--serve", "--keep-running"]
+        return [*arguments, "--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
+                str(args.grpc_port), "--web-port", str(args.web_port)]
     return [*arguments, "--save", str(rrd_path)]
 
 
@@ -259,9 +328,16 @@ def file_size(path: Path | None) -> str:
 
 
 def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
-                   destination: str, outputs: list[str] | None = None) -> str:
-    """The lines ``run`` prints at the end."""
-    lines = [f"frames sent:        {end.frames_sent if end else 'no end of stream'}"]
+                   destination: str, recorded_frames: int | None = None,
+                   early_end: str = "", outputs: list[str] | None = None) -> str:
+    """The lines ``run`` prints at the end; ``early_end`` says why the stream ended before the
+    recording did."""
+    sent = str(end.frames_sent) if end else "no end of stream"
+    if end and recorded_frames is not None:
+        sent += f" of {recorded_frames} in the recording"
+    lines = [f"frames sent:        {sent}"]
+    if early_end:
+        lines.append(f"ended early:        {early_end}")
     if status is None:
         lines.append("learner:            no status received")
     else:
@@ -272,6 +348,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"{status.malformed_messages} malformed)",
             f"learning steps:     {status.steps} ({status.steps_per_second:,.0f} steps/s)",
             f"nodes:              {status.nodes}",
+            *([f"last frame:         {status.settled}"] if status.settled else []),
             f"clusters:           {clusters}",
             f"latency:            p50 {status.latency_p50_ms:.1f} ms, "
             f"p99 {status.latency_p99_ms:.1f} ms",
@@ -281,12 +358,31 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
     return "\n".join(lines)
 
 
+def recorded_frames(path: Path) -> int | None:
+    """Frames in the recording by its index (None without one)."""
+    from services.recording.reader import RecordingError, recording_info
+
+    try:
+        return int(recording_info(path)["frames"])
+    except RecordingError:
+        return None
+
+
 def main(args: argparse.Namespace) -> int:
-    if not args.recording.is_file():
-        log.error("recording %s: no such file", args.recording)
+    from services.recording.reader import RecordingError, check_recording
+
+    try:
+        check_recording(args.recording)
+    except RecordingError as error:
+        log.error("%s", error)
         return 2
     if args.url and not args.connect:
         log.error("--url needs --connect")
+        return 2
+    try:
+        veil_ratio = sensor_veil_ratio(args.params)
+    except ValueError as error:  # a wrong params file: say so before starting anything
+        log.error("%s", error)
         return 2
     topic(args.cam, "points")  # validates the camera name
     try:
@@ -306,13 +402,10 @@ def main(args: argparse.Namespace) -> int:
     else:
         destination = "rerun viewer"
 
-    stop = threading.Event()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
-
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))  # 0700: holds the run's password
+    access = RunAccess(f"tcp/127.0.0.1:{free_tcp_port()}", log_dir)
     try:
-        router = open_config(router_config([endpoint]), what="router")
+        router = open_config(access.router(), what="router")
     except ZenohSetupError as error:
         log.error("%s", error)
         return 1
@@ -322,33 +415,16 @@ def main(args: argparse.Namespace) -> int:
         router.declare_subscriber(topic(args.cam, "learner/status"), observed.on_status),
         router.declare_subscriber(topic(args.cam, "eos"), observed.on_eos),
     ]
-    log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))
-    pipeline = Pipeline(endpoint, log_dir, args.log_level)
+    pipeline = Pipeline(access, log_dir, args.log_level)
     failure: Child | None = None
+    early_end = ""
     try:
-        pipeline.start("learn", learner_arguments(args))
-        pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
-        ready = wait_until(
-            lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
-            and observed.has_alive(LIVELINESS_KEY),
-            args.startup_timeout, stop, pipeline)
-        if not ready and not stop.is_set() and pipeline.failed() is None:
-            log.error("learner and logger did not come up within %.0f s; their logs: %s",
-                      args.startup_timeout, log_dir)
-            pipeline.interrupt_all()
-            for child in pipeline.children:
-                child.stop(args.drain_timeout)
-            return 1
-        if ready:
-            capture = pipeline.start("capture", capture_arguments(args))
-            wait_until(lambda: capture.process.poll() is not None, float("inf"), stop, pipeline)
-        if stop.is_set() or pipeline.failed() is not None:
-            log.info("%s; stopping the services",
-                     "interrupted" if stop.is_set() else "a service failed")
-            pipeline.interrupt_all()
-        for child in pipeline.children:
-            child.stop(args.drain_timeout)
+        with lifecycle.graceful() as stop:
+            early_end = supervise(args, pipeline, observed, stop, rrd_path, veil_ratio,
+                                  mcap_path)
         failure = pipeline.failed()
+    except StartupTimeout:
+        return 1
     finally:
         pipeline.close()
         for entity in declared:
@@ -356,16 +432,71 @@ def main(args: argparse.Namespace) -> int:
         router.close()
     with observed.lock:
         status, end = observed.status, observed.end
+    if stop.is_set():
+        early_end = early_end or f"interrupted ({lifecycle.stop_reason()})"
     outputs = [f"  in the .rrd:      {rates.describe()}"]
     if rrd_path is not None:
         outputs[0:0] = [f"  .rrd size:        {file_size(rrd_path)}"]
     if mcap_path is not None:
         outputs.append(f"mcap:               {mcap_path} ({file_size(mcap_path)}; every stream, "
                        "for Foxglove or `rerun`)")
-    print(format_summary(status, end, destination, outputs), flush=True)
+    try:  # after a SIGHUP the terminal may be gone: nothing more to say then
+        print(format_summary(status, end, destination, recorded_frames(args.recording),
+                             early_end, outputs), flush=True)
+        if failure is not None:
+            print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"
+                  f"{failure.stderr_tail()}", file=sys.stderr)
+    except OSError:
+        pass
     if failure is not None:
-        print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"
-              f"{failure.stderr_tail()}", file=sys.stderr)
-        return 1
+        return 2 if failure.name == "capture" and failure.process.returncode == 2 else 1
     shutil.rmtree(log_dir, ignore_errors=True)
-    return 130 if stop.is_set() else 0
+    if stop.is_set():
+        return 130
+    return 1 if early_end else 0
+
+
+class StartupTimeout(Exception):
+    """The learner and the logger did not come up in time."""
+
+
+def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
+              stop: threading.Event, rrd_path: Path | None,
+              veil_ratio: float | None = None, mcap_path: Path | None = None) -> str:
+    """Start the services and see the stream through; why it ended early, or ``""``."""
+    log.info("starting the learner and the logger (the first run on a machine compiles the "
+             "learning kernels, ~20 s)")
+    learner = pipeline.start("learn", learner_arguments(args))
+    logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
+    ready = wait_until(
+        lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
+        and observed.has_alive(LIVELINESS_KEY),
+        args.startup_timeout, stop, pipeline)
+    early_end = ""
+    if not ready and not stop.is_set() and pipeline.failed() is None:
+        log.error("learner and logger did not come up within %.0f s; their logs: %s",
+                  args.startup_timeout, pipeline.log_dir)
+        pipeline.interrupt_all()
+        for child in pipeline.children:
+            child.stop(args.drain_timeout)
+        raise StartupTimeout
+    if ready:
+        log.info("replaying %s", args.recording)
+        capture = pipeline.start("capture", capture_arguments(args, veil_ratio))
+        wait_until(lambda: capture.process.poll() is not None
+                   or learner.process.poll() is not None or logger.process.poll() is not None,
+                   float("inf"), stop, pipeline)
+        with observed.lock:
+            stream_ended = observed.end is not None  # only this run's capture can send it
+        if (capture.process.poll() is None and not stream_ended and not stop.is_set()
+                and pipeline.failed() is None):
+            quitter = learner if learner.process.poll() is not None else logger
+            early_end = (f"the {'learner' if quitter is learner else 'logger'} stopped while "
+                         "capture was still replaying")
+    if stop.is_set() or pipeline.failed() is not None or early_end:
+        log.info("%s; stopping the services",
+                 "interrupted" if stop.is_set() else early_end or "a service failed")
+        pipeline.interrupt_all()
+    for child in pipeline.children:
+        child.stop(args.drain_timeout)
+    return early_end

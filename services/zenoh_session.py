@@ -4,6 +4,12 @@ Secure defaults (DESIGN.md "Rendezvous"): services are zenoh *clients* of a rout
 ``tcp/127.0.0.1:7447``; they listen nowhere and multicast/gossip scouting is off, so nothing is
 exposed beyond loopback. ``--zenoh-config FILE.json5`` replaces these defaults entirely (remote
 routers, TLS, access control); ``--zenoh-connect ENDPOINT`` only changes where to connect.
+
+A service started before its router waits for it (``--router-wait``, retrying and saying so), as
+ROS 2 nodes wait for rmw_zenohd; once connected, zenoh reconnects by itself after a router
+restart, retrying every ``RECONNECT_PERIOD_MS`` at most. Messages larger than
+``MAX_MESSAGE_BYTES`` are dropped by zenoh on receipt (routers and services alike). zenoh's own
+log goes to stderr at the level ``RUST_LOG`` names (default: errors only).
 """
 
 from __future__ import annotations
@@ -11,7 +17,9 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import re
 import socket
+import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -22,6 +30,14 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+#: how long a service waits for its router at start by default
+DEFAULT_ROUTER_WAIT_S = 30.0
+#: the largest zenoh message accepted (larger ones are dropped on receipt): above every
+#: legitimate gngdt message (a 2,000,000-point cloud, the learner's limit, is 30 MB; a 4K
+#: colour image 25 MB), far below what would threaten a process's memory
+MAX_MESSAGE_BYTES = 32 * 1024 * 1024
+#: the longest pause between two attempts to reach a lost router
+RECONNECT_PERIOD_MS = 1000
 
 
 class ZenohSetupError(RuntimeError):
@@ -44,11 +60,44 @@ def add_zenoh_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="ENDPOINT",
         help=f"router endpoint to connect to (repeatable; default {DEFAULT_ENDPOINT})",
     )
+    group.add_argument(
+        "--router-wait",
+        type=float,
+        default=DEFAULT_ROUTER_WAIT_S,
+        metavar="SECONDS",
+        help="at start, how long to wait for the router, retrying twice a second "
+        f"(default {DEFAULT_ROUTER_WAIT_S:g}; 0: fail at once)",
+    )
+
+
+#: settings of every default session: no scouting, no oversized message
+_SECURE_DEFAULTS: dict[str, Any] = {
+    "scouting/multicast/enabled": False,
+    "scouting/gossip/enabled": False,
+    "transport/link/rx/max_message_size": MAX_MESSAGE_BYTES,
+}
 
 
 def _secure_defaults(config: zenoh.Config) -> None:
-    config.insert_json5("scouting/multicast/enabled", "false")
-    config.insert_json5("scouting/gossip/enabled", "false")
+    _insert(config, _SECURE_DEFAULTS)
+
+
+def _insert(config: zenoh.Config, settings: dict[str, Any]) -> None:
+    for key, value in settings.items():
+        config.insert_json5(key, json.dumps(value))
+
+
+def client_settings(connect: list[str] | None = None) -> dict[str, Any]:
+    """A default service session's settings (zenoh key path -> value): client of ``connect``
+    (default the loopback router), listening nowhere, scouting off."""
+    return {
+        "mode": "client",
+        "connect/endpoints": list(connect or [DEFAULT_ENDPOINT]),
+        "connect/retry": {"period_init_ms": 100, "period_max_ms": RECONNECT_PERIOD_MS,
+                          "period_increase_factor": 2},
+        "listen/endpoints": [],
+        **_SECURE_DEFAULTS,
+    }
 
 
 def client_config(
@@ -57,8 +106,7 @@ def client_config(
     """Configuration of a service session.
 
     With ``config_file`` the file is used as is (only ``connect`` endpoints, when given, are set).
-    Otherwise: client mode, connect to ``connect`` (default the loopback router), listen nowhere,
-    scouting off.
+    Otherwise :func:`client_settings`.
     """
     import zenoh
 
@@ -68,10 +116,7 @@ def client_config(
             config.insert_json5("connect/endpoints", json.dumps(list(connect)))
         return config
     config = zenoh.Config()
-    config.insert_json5("mode", '"client"')
-    config.insert_json5("connect/endpoints", json.dumps(list(connect or [DEFAULT_ENDPOINT])))
-    config.insert_json5("listen/endpoints", "[]")
-    _secure_defaults(config)
+    _insert(config, client_settings(connect))
     return config
 
 
@@ -99,32 +144,86 @@ def _load_config_file(path: Path) -> zenoh.Config:
         raise ZenohSetupError(f"--zenoh-config: {path}: {error}") from error
 
 
-def open_config(config: zenoh.Config, what: str = "session") -> zenoh.Session:
-    """Open a session, turning zenoh's connection failure into a clear ``ZenohSetupError``."""
+def init_zenoh_logging() -> None:
+    """Route zenoh's own log to stderr at ``RUST_LOG``'s level, errors only by default (as
+    zenoh's examples do); once per process."""
     import zenoh
 
-    try:
-        return zenoh.open(config)
-    except zenoh.ZError as error:
-        endpoints: Any = _endpoints(config)
-        raise ZenohSetupError(
-            f"cannot open zenoh {what} (endpoints {endpoints}): {error}; "
-            "is a router running? start one with `gngdt router`"
-        ) from error
+    global _zenoh_logging
+    if not _zenoh_logging:
+        zenoh.init_log_from_env_or("error")
+        _zenoh_logging = True
 
 
-def _endpoints(config: zenoh.Config) -> Any:
+_zenoh_logging = False
+
+
+def open_config(config: zenoh.Config, what: str = "session",
+                wait_s: float = 0.0) -> zenoh.Session:
+    """Open a session, turning zenoh's failure into a clear ``ZenohSetupError``.
+
+    ``wait_s``: keep retrying (logged) this long while no router answers.
+    """
+    import zenoh
+
+    init_zenoh_logging()
+    started = time.monotonic()
+    attempts = 0
+    while True:
+        try:
+            session = zenoh.open(config)
+        except zenoh.ZError as error:
+            waited = time.monotonic() - started
+            if waited >= wait_s:
+                raise ZenohSetupError(_open_failure(config, what, error)) from error
+            if attempts % 20 == 0:  # the first failure, then every ten seconds
+                log.warning("no zenoh router at %s yet (%s); retrying for %.0f s more",
+                            ", ".join(_endpoints(config)), _short(error), wait_s - waited)
+            attempts += 1
+            time.sleep(min(0.5, max(wait_s - waited, 0.0)))
+            continue
+        if attempts:
+            log.info("connected to the zenoh router after %.1f s", time.monotonic() - started)
+        return session
+
+
+def _short(error: Exception) -> str:
+    """zenoh's error text without the Rust source locations it appends."""
+    return re.sub(r"\s*at \S+\.rs:\d+\.?", "", str(error)).strip()
+
+
+def _open_failure(config: zenoh.Config, what: str, error: Exception) -> str:
+    reason = _short(error)
+    if _setting(config, "mode") == "router":
+        listen = ", ".join(_setting(config, "listen/endpoints") or [])
+        hint = ("another process (a router?) already listens there; pick a free port with "
+                "--listen" if "in use" in reason else "check --listen and --zenoh-config")
+        return f"cannot open a zenoh router on {listen}: {reason}; {hint}"
+    endpoints = ", ".join(_endpoints(config)) or "no endpoint"
+    return (f"cannot open zenoh {what} (router {endpoints}): {reason}; is a router running? "
+            "start one with `gngdt router`")
+
+
+def _setting(config: zenoh.Config, key: str) -> Any:
     try:
-        return json.loads(config.get_json("connect/endpoints"))
-    except Exception:  # only used to word an error message
-        return "?"
+        return json.loads(config.get_json(key))
+    except Exception:  # only used to word messages
+        return None
+
+
+def _endpoints(config: zenoh.Config) -> list[str]:
+    return [str(endpoint) for endpoint in _setting(config, "connect/endpoints") or []]
 
 
 def open_session(args: argparse.Namespace) -> zenoh.Session:
-    """Open the process's one zenoh session from the parsed ``--zenoh-*`` options."""
+    """Open the process's one zenoh session from the parsed ``--zenoh-*`` options, waiting up
+    to ``--router-wait`` seconds for the router."""
     connect = getattr(args, "zenoh_connect", None)
     config = client_config(connect, getattr(args, "zenoh_config", None))
-    return open_config(config)
+    wait_s = getattr(args, "router_wait", 0.0)
+    if wait_s < 0:
+        raise ZenohSetupError(f"--router-wait must be >= 0, got {wait_s}")
+    return open_config(config, wait_s=wait_s)
 
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:
@@ -134,10 +233,12 @@ def free_tcp_port(host: str = "127.0.0.1") -> int:
         return int(sock.getsockname()[1])
 
 
-def wait_for_subscribers(publisher: zenoh.Publisher, timeout_s: float) -> bool:
-    """Wait until a subscriber matches ``publisher``; False when ``timeout_s`` ran out."""
+def wait_for_subscribers(publisher: zenoh.Publisher, timeout_s: float,
+                         stop: threading.Event | None = None) -> bool:
+    """Wait until a subscriber matches ``publisher``; False when ``timeout_s`` ran out (or
+    ``stop`` was set)."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
+    while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
         if publisher.matching_status.matching:
             return True
         time.sleep(0.01)

@@ -13,10 +13,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from services.zenoh_session import client_config, free_tcp_port, open_config, router_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+
+# One Hypothesis profile everywhere: with CI=true Hypothesis would otherwise switch to its "ci"
+# profile (derandomised, no database) while developers ran randomised tests whose failures the
+# .hypothesis/ database then replayed. Derandomised and database-free, every machine runs the
+# same examples; widen the search by hand with `pytest --hypothesis-seed=N`.
+settings.register_profile(
+    "gngdt",
+    derandomize=True,
+    database=None,
+    deadline=None,
+    print_blob=True,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
+)
+settings.load_profile("gngdt")
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -62,6 +77,12 @@ def data2_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def one_frame_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A single 320x240 frame of the tabletop scene: a static input."""
+    return _render_recording(tmp_path_factory.mktemp("one_frame"), "tabletop", 1)
+
+
+@pytest.fixture(scope="session")
 def tabletop_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An 8-frame 320x240 synthetic tabletop recording (rendered once per session)."""
     return _render_recording(tmp_path_factory.mktemp("recordings"), "tabletop", 8)
@@ -94,9 +115,11 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
 
 @dataclass
 class CaptureOutput:
-    """What one capture run published: decoded clouds, end-of-stream messages, its log."""
+    """What one capture run published: decoded clouds (and each one's frame_id and pose),
+    end-of-stream messages, its log."""
 
     clouds: list = field(default_factory=list)
+    poses: list = field(default_factory=list)
     ends: list = field(default_factory=list)
     log: str = ""
 
@@ -104,20 +127,28 @@ class CaptureOutput:
 @pytest.fixture
 def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureOutput]:
     """``run_capture(RECORDING, *OPTIONS)`` runs `gngdt capture RECORDING --fast OPTIONS` to its
-    end against ``router_endpoint`` and returns what it published on the default camera."""
-    from schemas.packing import decode_stream_end, msg_to_cloud
+    end against ``router_endpoint`` (expecting exit status ``exit_code``) and returns what it
+    published on the default camera."""
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-    def run(recording: Path, *options: str) -> CaptureOutput:
+    from schemas.packing import cloud_pose, decode_stream_end, msg_to_cloud
+
+    def on_points(output: CaptureOutput, payload: bytes) -> None:
+        message = PointCloud.FromString(payload)
+        output.clouds.append(msg_to_cloud(message))
+        output.poses.append((message.frame_id, cloud_pose(message)))
+
+    def run(recording: Path, *options: str, exit_code: int = 0) -> CaptureOutput:
         output = CaptureOutput()
         session = open_config(client_config([router_endpoint]))
-        session.declare_subscriber("gngdt/camera/points", lambda sample: output.clouds.append(
-            msg_to_cloud(sample.payload.to_bytes())))
+        session.declare_subscriber("gngdt/camera/points", lambda sample: on_points(
+            output, sample.payload.to_bytes()))
         session.declare_subscriber("gngdt/camera/eos", lambda sample: output.ends.append(
             decode_stream_end(sample.payload.to_bytes())))
         try:
             capture = spawn("capture", str(recording), "--fast",
                             "--zenoh-connect", router_endpoint, *options)
-            assert capture.wait(60) == 0, Path(capture.log_path).read_text()
+            assert capture.wait(60) == exit_code, Path(capture.log_path).read_text()
             deadline = time.monotonic() + 10
             while not output.ends and time.monotonic() < deadline:
                 time.sleep(0.05)

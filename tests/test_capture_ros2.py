@@ -40,7 +40,8 @@ def test_unsynchronised_ros2_bag_is_replayed_frame_by_frame(
 def test_a_skew_below_the_bags_pairs_nothing_and_says_so(
     run_capture: Callable, tmp_path: Path
 ) -> None:
-    output = run_capture(realsense_bag(tmp_path / "realsense.mcap"), "--max-skew-ms", "1")
+    output = run_capture(realsense_bag(tmp_path / "realsense.mcap"), "--max-skew-ms", "1",
+                         exit_code=2)  # not a single frame: the capture failed
 
     assert output.clouds == []
     assert len(output.ends) == 1 and output.ends[0].frames_sent == 0

@@ -75,3 +75,10 @@ def test_router_listens_only_inside_the_compose_network():
     assert "ports" not in SERVICES["router"], "the router must not be published on the host"
     config = (REPO / "config/compose/zenoh-router.json5").read_text()
     assert "multicast: { enabled: false }" in config and "gossip: { enabled: false }" in config
+
+
+def test_old_docker_compose_v1_accepts_the_top_level_keys():
+    # docker-compose 1.x (still what many distributions ship) refuses any other top-level key,
+    # e.g. `name:`; extension fields (x-...) are fine from file format 3.4
+    v1_keys = {"version", "services", "networks", "volumes", "secrets", "configs"}
+    assert {key for key in COMPOSE if not key.startswith("x-")} <= v1_keys

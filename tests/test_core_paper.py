@@ -102,3 +102,35 @@ def test_data2_normal_topology_separates_floor_from_objects():
         main = np.bincount(face_labels + 1).argmax() - 1
         assert main >= 0 and main != floor_cluster
         assert (face_labels == main).mean() > 0.5
+
+
+@pytest.mark.parametrize("make_data", [make_data1, make_data2], ids=["data1", "data2"])
+def test_colour_noise_is_the_stated_model_and_zero_is_flat(make_data):
+    flat_positions, flat, labels = make_data(n_points=20_000, random_state=0, color_noise=0)
+    positions, noisy, same_labels = make_data(n_points=20_000, random_state=0, color_noise=20.0)
+    # the noise is drawn last: positions and labels do not depend on its level
+    np.testing.assert_array_equal(positions, flat_positions)
+    np.testing.assert_array_equal(labels, same_labels)
+    for label in np.unique(labels):
+        region = labels == label
+        assert len(np.unique(flat[region], axis=0)) == 1  # one flat colour per region
+        residual = noisy[region] - flat[region]
+        inside = (flat[region] > 80) & (flat[region] < 175)  # channels clipping cannot reach
+        if inside.any():
+            assert residual[inside].std() == pytest.approx(20.0, rel=0.05)
+            assert abs(residual[inside].mean()) < 1.0
+    assert noisy.min() >= 0.0 and noisy.max() <= 255.0
+    assert np.any(noisy == 255.0) or np.any(noisy == 0.0)  # clipped, not wrapped
+
+
+def test_colour_noise_default_and_validation():
+    from gngdt_core.synthetic import COLOR_NOISE
+
+    _, default, _ = make_data1(n_points=1_000, random_state=0)
+    _, explicit, _ = make_data1(n_points=1_000, random_state=0, color_noise=COLOR_NOISE)
+    np.testing.assert_array_equal(default, explicit)
+    assert COLOR_NOISE > 0
+    with pytest.raises(ValueError, match="color_noise"):
+        make_data2(n_points=10, color_noise=-1.0)
+    with pytest.raises(ValueError, match="color_noise"):
+        make_data1(n_points=10, color_noise=float("nan"))

@@ -93,11 +93,12 @@ def wait_for_log_line(process: subprocess.Popen, text: str, timeout_s: float) ->
 
 
 def assert_learned_to_the_end(snapshots: list[TopologySnapshot], camera: str,
-                              last_sequence: int) -> None:
-    """The camera's topologies grew, were published for its last frame, with every clustering."""
+                              last_sequence: int, frame_id: str | None = None) -> None:
+    """The camera's topologies grew, were published for its last frame, with every clustering,
+    in ``frame_id`` (default: the camera's own frame, a recording without poses)."""
     assert snapshots, f"no topology from the {camera} learner"
     last = snapshots[-1]
-    assert last.frame_id == camera
+    assert last.frame_id == (frame_id or camera)
     assert last.frame_sequence == last_sequence, [s.frame_sequence for s in snapshots]
     assert last.node_count > 10
     assert set(last.clusterings) == CLUSTERINGS
@@ -149,8 +150,10 @@ def test_a_client_without_its_router_fails_clearly(
     spawn: Callable, free_port: int, tmp_path: Path
 ) -> None:
     nobody = f"tcp/127.0.0.1:{free_port}"  # free: no router listens there
-    learner = spawn("learn", "--zenoh-config", str(client_config_file(tmp_path, nobody)))
+    learner = spawn("learn", "--zenoh-config", str(client_config_file(tmp_path, nobody)),
+                    "--router-wait", "1")
     assert wait_exit(learner, 45) == 1, log_text(learner)
+    assert f"no zenoh router at {nobody} yet" in log_text(learner)  # it waited, and said so
     assert nobody in log_text(learner)
     assert "gngdt router" in log_text(learner)
 
@@ -159,8 +162,11 @@ def test_a_client_without_its_router_fails_clearly(
 def test_two_cameras_two_learners_one_logger(
     standalone_router: str, data2_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    # different scenes and lengths per camera, so crossed streams cannot go unnoticed
-    recordings = {"left": (SMALL_RECORDING, SMALL_RECORDING_FRAMES), "right": (data2_recording, 8)}
+    # different scenes and lengths per camera, so crossed streams cannot go unnoticed; the
+    # rendered recording has camera poses (its capture first reads /tf, so it starts first: the
+    # logger stops once every camera it has heard of has ended), the bundled one has none
+    recordings = {"right": (data2_recording, 8), "left": (SMALL_RECORDING, SMALL_RECORDING_FRAMES)}
+    frame_ids = {"left": "left", "right": "world"}
     config = ["--zenoh-config", str(client_config_file(tmp_path, standalone_router))]
     rrd_path = tmp_path / "two-cameras.rrd"
     watcher = TopologyWatcher(standalone_router)
@@ -180,7 +186,7 @@ def test_two_cameras_two_learners_one_logger(
 
     assert set(topologies) == set(recordings)
     for cam, (_, frames) in recordings.items():
-        assert_learned_to_the_end(topologies[cam], cam, frames - 1)
+        assert_learned_to_the_end(topologies[cam], cam, frames - 1, frame_ids[cam])
     entities, scalars = rrd_entities_and_scalars(rrd_path)
     for cam in recordings:
         expected = camera_entities(cam)

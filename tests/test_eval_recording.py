@@ -96,7 +96,7 @@ def test_eval_recording_report(tiny_recording, tmp_path) -> None:
     dbscan = data["references"]["dbscan"]
     assert -1.0 <= dbscan["ari"] <= 1.0 and dbscan["points"] <= 4000
     identity = summary["identity"]
-    assert set(identity) == {"pos", "col", "nor", "col+nor"}
+    assert set(identity) == {"pos", "col", "nor", "col+nor", "segments"}
     assert identity["pos"]["id_comparisons"] > 0  # every labelled segment, frame to frame
     assert 0.0 <= identity["pos"]["id_kept"]["mean"] <= 1.0
     markdown = (out / "recording.md").read_text()
@@ -159,6 +159,51 @@ def test_eval_recording_without_labels(tmp_path) -> None:
     assert "ari" not in data["references"]["dbscan"]
     assert data["references"]["dbscan"]["clusters"] >= 1
     assert "ARI" not in (out / "recording.md").read_text().split("## References")[0]
+
+
+@pytest.mark.timeout(300)
+def test_eval_recording_reports_metrics_over_time_for_a_changing_scene(tmp_path) -> None:
+    """tabletop_vanish at 10 fps: the red box vanishes at frame 20; world frame from the poses."""
+    from services.recording.scenes import build_scene
+    from services.recording.synth import SCENE_METADATA, render_scene, scene_metadata
+    from services.recording.writer import RecordingWriter
+
+    path = tmp_path / "vanish.mcap"
+    with RecordingWriter(path) as writer:
+        writer.add_metadata(SCENE_METADATA, scene_metadata(build_scene("tabletop_vanish"), 10.0))
+        for frame in render_scene("tabletop_vanish", 22, width=160, height=120, fps=10.0):
+            writer.write_frame(frame)
+    out = tmp_path / "report"
+    argv = ["eval", "recording", str(path), "--out", str(out), "--method", "gngdt",
+            "--samples-per-frame", "3000", "--max-nodes", "100", "--reference-points", "3000",
+            "--utility-k", "1000", "--reference-every", "10", "--world-sample", "3000",
+            "--no-progress"]
+    assert gngdt_main(argv) == 0
+    data = json.loads((out / "recording.json").read_text())
+    assert data["posed"] is True and data["settings"]["utility_k"] == 1000
+    frames = data["runs"][0]["frames"]
+    for frame in frames:
+        dynamics = frame["dynamics"]
+        assert 0 <= dynamics["ghost_nodes"] <= dynamics["seen_nodes"] <= frame["nodes"]
+        assert 0.0 <= dynamics["ghost_share"] <= 1.0 and 0.0 <= dynamics["stale_share"] <= 1.0
+    # k-means on the world seen so far at frames 9 and 19 and on the last
+    referenced = [f["frame"] for f in frames if "world_ratio_to_kmeans" in f["dynamics"]]
+    assert referenced == [9, 19, 21]
+    assert all(f["dynamics"]["world_ratio_to_kmeans"] > 0.8 for f in frames
+               if f["frame"] in referenced)
+    assert all("old_place_nodes/red_box" in f["dynamics"] for f in frames[20:])
+    over = data["summary"]["GNG-DT"]["over_time"]
+    change = over["changes"]["red_box"]
+    assert change["kind"] == "vanish" and change["settled_frame"] == 20
+    assert change["old_place_nodes_at_change"] >= 0
+    assert over["nodes_max"]["mean"] <= 100
+    markdown = (out / "recording.md").read_text()
+    assert "## Over time" in markdown and "red_box" in markdown and "5 cm" in markdown
+    assert (out / "recording_over_time.png").stat().st_size > 1000
+    # poses ignored (--camera-frame): the camera frame, as the points came
+    settings = RecordingSettings(world_frame=False, max_frames=2)
+    for points in frame_points(path, settings):
+        assert points.pose is None and points.positions is points.camera_positions
 
 
 def test_identity_score_counts_switches_and_kept_tracks() -> None:

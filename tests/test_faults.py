@@ -13,22 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import log_text, wait_for
 
 from schemas.packing import decode_topology
 from services.zenoh_session import ZenohSetupError, client_config, open_config
-
-
-def _log(process) -> str:
-    return Path(process.log_path).read_text(errors="replace")
-
-
-def _wait(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return
-        time.sleep(0.1)
-    raise AssertionError(f"timed out waiting for {what}")
 
 
 def _rrd_entities(path: Path) -> dict[str, int]:
@@ -58,7 +46,26 @@ def _trained_checkpoint(path: Path) -> None:
     save_checkpoint(path, model.get_state(), {"camera": "camera", "counters": {}})
 
 
-@pytest.mark.parametrize("damage", ["torn", "flipped byte", "tampered counters"])
+def _npz(path: Path, members: dict[str, bytes]) -> None:
+    import zipfile
+
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+
+
+def _npy(shape: tuple[int, ...], dtype: str, data: bytes) -> bytes:
+    """An .npy file whose header declares ``shape`` and ``dtype`` whatever ``data`` holds."""
+    import io
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": np.dtype(dtype).str, "fortran_order": False, "shape": shape})
+    return np.lib.format.magic(1, 0) + header.getvalue() + data
+
+
+@pytest.mark.parametrize("damage", ["torn", "flipped byte", "tampered counters",
+                                    "metadata nested 100,000 deep", "header of 2**45 elements"])
 @pytest.mark.timeout(60)
 def test_learner_refuses_a_damaged_checkpoint_with_a_clear_message(
     damage: str, spawn: Callable, tmp_path: Path
@@ -78,16 +85,22 @@ def test_learner_refuses_a_damaged_checkpoint_with_a_clear_message(
         start = largest.header_offset + 30 + len(largest.filename.encode()) + len(largest.extra)
         data[start + largest.file_size - 1] ^= 0xFF
         path.write_bytes(bytes(data))
-    else:
+    elif damage == "tampered counters":
         with np.load(path, allow_pickle=False) as archive:
             arrays = {key: archive[key] for key in archive.files}
         metadata = json.loads(str(arrays["metadata"]))
         metadata["counters"] = {"frames_used": 10**9}
         arrays["metadata"] = np.array(json.dumps(metadata))
         np.savez(path, **arrays)
+    elif damage == "metadata nested 100,000 deep":
+        text = "[" * 100_000 + "]" * 100_000
+        _npz(path, {"metadata.npy": _npy((), f"<U{len(text)}", text.encode("utf-32-le"))})
+    else:  # an array header promising 128 TiB, followed by 8 bytes
+        _npz(path, {"metadata.npy": _npy((), "<U2", "{}".encode("utf-32-le")),
+                    "state/pos.npy": _npy((2**45,), "<f4", b"\x00" * 8)})
     learner = spawn("learn", "--checkpoint", str(path), "--zenoh-connect", "tcp/127.0.0.1:9")
-    assert learner.wait(40) == 2, _log(learner)
-    logged = _log(learner)
+    assert learner.wait(40) == 2, log_text(learner)
+    logged = log_text(learner)
     assert f"checkpoint {path}" in logged
     assert "Traceback" not in logged
 
@@ -100,9 +113,9 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
     rrd_path = tmp_path / "run.rrd"
     connect = ("--zenoh-connect", router_endpoint)
     logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
-    _wait(lambda: "logging to" in _log(logger), 60, "the logger")
+    wait_for(lambda: "logging to" in log_text(logger), 60, "the logger")
     spawn("capture", str(tabletop_recording), "--rate", "0.5", "--loop", *connect)
-    _wait(lambda: rrd_path.exists() and rrd_path.stat().st_size > 200_000, 60, "logged frames")
+    wait_for(lambda: rrd_path.exists() and rrd_path.stat().st_size > 200_000, 60, "logged frames")
     time.sleep(1.5)  # at least one periodic flush after those frames
     logger.send_signal(signal.SIGKILL)
     logger.wait(10)
@@ -112,11 +125,11 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
 
     restarted = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
     second = tmp_path / "run.1.rrd"
-    _wait(lambda: second.exists() and second.stat().st_size > 100_000, 60,
+    wait_for(lambda: second.exists() and second.stat().st_size > 100_000, 60,
           "the restarted logger's frames")
     restarted.send_signal(signal.SIGINT)
-    assert restarted.wait(30) == 0, _log(restarted)
-    assert f"writing {second} instead" in _log(restarted)
+    assert restarted.wait(30) == 0, log_text(restarted)
+    assert f"writing {second} instead" in log_text(restarted)
     assert rrd_path.stat().st_size == size_at_kill  # the first file is untouched
     assert _rrd_entities(rrd_path) == rows
     assert _rrd_entities(second).get("/world/camera/image/rgb", 0) >= 1
@@ -144,7 +157,7 @@ class TopologyWatch:
 
 def _start_router(spawn: Callable, endpoint: str):
     router = spawn("router", "--listen", endpoint)
-    _wait(lambda: "listening on" in _log(router), 30, "the router")
+    wait_for(lambda: "listening on" in log_text(router), 30, "the router")
     return router
 
 
@@ -161,26 +174,26 @@ def test_services_reconnect_after_a_router_restart(
     watch = TopologyWatch(endpoint)
     try:
         capture = spawn("capture", str(tabletop_recording), "--rate", "1", "--loop", *connect)
-        _wait(lambda: watch.count() >= 3, 90, "topologies before the restart")
+        wait_for(lambda: watch.count() >= 3, 90, "topologies before the restart")
 
         router.send_signal(signal.SIGKILL)
         router.wait(10)
         time.sleep(2.0)  # the clients notice the lost router and start retrying
         for process in (learner, logger, capture):
-            assert process.poll() is None, _log(process)
+            assert process.poll() is None, log_text(process)
         before = watch.count()
         router = _start_router(spawn, endpoint)
-        _wait(lambda: watch.count() >= before + 3, 60, "topologies after the restart")
+        wait_for(lambda: watch.count() >= before + 3, 60, "topologies after the restart")
         with watch.lock:
             after_restart = watch.sequences[before:]
         assert max(after_restart) > max(watch.sequences[:before])  # new frames, not replays
         size_before = rrd_path.stat().st_size
-        _wait(lambda: rrd_path.stat().st_size > size_before, 30, "the logger to write again")
+        wait_for(lambda: rrd_path.stat().st_size > size_before, 30, "the logger to write again")
     finally:
         watch.session.close()
     for process in (capture, learner, logger):
         process.send_signal(signal.SIGINT)
-        assert process.wait(30) == 0, _log(process)
+        assert process.wait(30) == 0, log_text(process)
 
 
 def test_no_router_is_a_clear_error_not_a_hang(free_port: int) -> None:

@@ -133,6 +133,24 @@ def test_run_learns_the_scene_and_writes_the_rrd(data2_recording: Path, tmp_path
 
 
 @pytest.mark.timeout(180)
+def test_a_one_frame_recording_grows_a_settled_network(one_frame_recording: Path,
+                                                       tmp_path: Path) -> None:
+    completed = subprocess.run(
+        [sys.executable, "-m", "services.cli", "run", str(one_frame_recording), "--save",
+         str(tmp_path / "one.rrd"), "--max-nodes", "200"],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=150,
+    )
+    assert completed.returncode == 0, completed.stdout + completed.stderr
+    # one frame is 10,000 steps; settling on it grows the network to its budget (200 nodes at
+    # one insertion per 500 steps: >= 100,000 steps) and says so
+    assert re.search(r"nodes:\s+200\n", completed.stdout), completed.stdout
+    steps = int(re.search(r"learning steps:\s+(\d+)", completed.stdout).group(1))
+    assert steps >= 100_000, completed.stdout
+    assert re.search(r"last frame:\s+settled after [\d,]+ more steps on the last frame: node "
+                     r"budget reached", completed.stdout), completed.stdout
+
+
+@pytest.mark.timeout(180)
 def test_late_joiner_gets_the_current_topology(
     router_endpoint: str, tabletop_recording: Path, spawn: Callable
 ) -> None:
@@ -276,7 +294,7 @@ def test_run_reports_a_failed_service_with_its_error(
     tabletop_recording: Path, tmp_path: Path
 ) -> None:
     params = tmp_path / "bad.toml"
-    params.write_text("max_nodez = 10\n")
+    params.write_text("max_nodes = 1\n")  # a known key: only the learner's model refuses it
     completed = subprocess.run(
         [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
          str(tmp_path / "x.rrd"), "--params", str(params)],
@@ -284,7 +302,22 @@ def test_run_reports_a_failed_service_with_its_error(
     )
     assert completed.returncode == 1, completed.stdout + completed.stderr
     assert "learn failed" in completed.stderr
+    assert "max_nodes must be >= 2" in completed.stderr
+
+
+def test_run_refuses_a_wrong_params_file_before_starting(
+    tabletop_recording: Path, tmp_path: Path
+) -> None:
+    params = tmp_path / "bad.toml"
+    params.write_text("max_nodez = 10\n")
+    completed = subprocess.run(
+        [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
+         str(tmp_path / "x.rrd"), "--params", str(params)],
+        cwd=REPO_ROOT, capture_output=True, text=True, timeout=100,
+    )
+    assert completed.returncode == 2, completed.stdout + completed.stderr
     assert "unknown key 'max_nodez'" in completed.stderr
+    assert "learn failed" not in completed.stderr  # nothing was started
 
 
 def _blueprint_only_rrd_bytes(path: Path) -> int:

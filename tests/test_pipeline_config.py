@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from services.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from services.learner import load_params
+from services.learner import LEARNER_MODEL_DEFAULTS, load_params
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -28,8 +28,19 @@ def test_params_accept_flat_keys_and_learner_options(tmp_path: Path) -> None:
     path = tmp_path / "p.toml"
     path.write_text("max_nodes = 300\nlambda_ = 100\nsamples_per_frame = 777\n")
     config = load_params(path)
-    assert config.model == {"max_nodes": 300, "lambda_": 100}
+    assert config.model == {**LEARNER_MODEL_DEFAULTS, "max_nodes": 300, "lambda_": 100}
     assert config.options.samples_per_frame == 777
+
+
+def test_the_learner_forgets_unless_told_not_to(tmp_path: Path) -> None:
+    from gngdt_core import GNGDT
+
+    assert load_params(None).model["utility_k"] == LEARNER_MODEL_DEFAULTS["utility_k"] > 0
+    path = tmp_path / "paper.toml"
+    path.write_text("[gngdt]\nutility_k = 0   # the paper's GNG-DT: no forgetting\n")
+    config = load_params(path)
+    assert config.model["utility_k"] is None
+    assert GNGDT(**config.model).n_forgotten_ == 0
 
 
 def test_unknown_params_key_is_named(tmp_path: Path) -> None:

@@ -44,6 +44,30 @@ def test_invalid_and_out_of_range_depths_are_dropped() -> None:
     np.testing.assert_allclose(sorted(positions[:, 2]), [1.0, 3.0])
 
 
+def test_organized_deprojection_keeps_the_image_layout_with_nan_holes() -> None:
+    depth = np.zeros((3, 4), dtype=np.uint16)
+    depth[1, 0] = 2000
+    depth[2, 3] = 1000
+    deproject = Deprojector(min_depth_m=0.0, max_depth_m=float("inf"))
+    points = deproject.organized(depth, INTRINSICS)
+    assert points.shape == (3, 4, 3) and points.dtype == np.float32
+    np.testing.assert_allclose(points[1, 0], [-1.5, 0.0, 2.0], atol=1e-6)
+    np.testing.assert_allclose(points[2, 3], [0.75, 0.25, 1.0], atol=1e-6)
+    holes = depth == 0
+    assert np.isnan(points[holes]).all() and np.isfinite(points[~holes]).all()
+    # the same points, in the same order, as the unorganized deprojection
+    positions, _ = deproject(depth, None, INTRINSICS)
+    np.testing.assert_array_equal(points[~holes], positions)
+
+
+def test_organized_deprojection_applies_the_depth_range_and_checks_sizes() -> None:
+    depth = np.array([[0, 50, 500, 3000], [11000, 1000, 0, 0], [0, 0, 0, 0]], dtype=np.uint16)
+    points = Deprojector(min_depth_m=0.1, max_depth_m=10.0).organized(depth, INTRINSICS)
+    np.testing.assert_allclose(np.sort(points[np.isfinite(points[..., 2]), 2]), [0.5, 1.0, 3.0])
+    with pytest.raises(ValueError, match="does not match calibration"):
+        Deprojector().organized(np.ones((5, 5), np.uint16), INTRINSICS)
+
+
 def test_size_mismatch_is_a_clear_error() -> None:
     with pytest.raises(ValueError, match="does not match calibration"):
         Deprojector()(np.ones((5, 5), np.uint16), None, INTRINSICS)

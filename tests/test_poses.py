@@ -23,7 +23,12 @@ from test_recording_io import (
 )
 
 from services.recording.reader import read_frames
-from services.recording.transforms import TransformError, TransformTree, pose_to_matrix
+from services.recording.transforms import (
+    TransformError,
+    TransformTree,
+    matrix_to_pose,
+    pose_to_matrix,
+)
 from services.recording.writer import RecordingWriter
 
 SECOND = 1_000_000_000
@@ -282,3 +287,30 @@ def test_a_ros2_bag_gives_poses_through_tf_and_tf_static(tmp_path: Path, caplog)
 def test_pose_matrix_validation_is_shared_with_the_tree():
     with pytest.raises(TransformError, match="norm"):
         pose_to_matrix([0, 0, 0], [0, 0, 0, 0])
+
+
+def test_quaternion_conversions_agree_with_scipy():
+    rng = np.random.default_rng(7)
+    rotations = Rotation.random(200, random_state=7)
+    # also the awkward ones: half turns about each axis, identity, near-half turns
+    special = Rotation.from_rotvec(np.pi * np.eye(3) * (1 - 1e-9)).as_quat()
+    quaternions = np.vstack([rotations.as_quat(), special, [0, 0, 0, 1], [1, 0, 0, 0]])
+    for q in quaternions:
+        translation = rng.normal(size=3)
+        matrix = pose_to_matrix(translation, q)
+        np.testing.assert_allclose(matrix[:3, :3], Rotation.from_quat(q).as_matrix(), atol=1e-12)
+        back_t, back_q = matrix_to_pose(matrix)
+        np.testing.assert_allclose(back_t, translation)
+        np.testing.assert_allclose(Rotation.from_quat(back_q).as_matrix(), matrix[:3, :3],
+                                   atol=1e-12)
+        assert back_q[3] >= 0
+    # interpolation follows scipy's Slerp, the shorter way round
+    tree = TransformTree()
+    q0, q1 = rotations[0].as_quat(), -rotations[1].as_quat()  # opposite sign, same rotation
+    tree.add("map", "camera", 0, [0, 0, 0], q0)
+    tree.add("map", "camera", SECOND, [0, 0, 0], q1)
+    from scipy.spatial.transform import Slerp
+
+    expected = Slerp([0, 1], Rotation.from_quat([q0, q1]))(0.3).as_matrix()
+    np.testing.assert_allclose(tree.lookup("map", "camera", int(0.3 * SECOND))[:3, :3],
+                               expected, atol=1e-9)

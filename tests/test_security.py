@@ -5,21 +5,24 @@ unpickled or evaluated."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
+import signal
 import subprocess
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import bound_sockets, children, wait_for
 
 from services.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from services.zenoh_session import (
     DEFAULT_ENDPOINT,
     ZenohSetupError,
     client_config,
+    free_tcp_port,
     open_config,
     router_config,
 )
@@ -45,43 +48,6 @@ def test_default_configs_listen_on_loopback_only_with_scouting_off() -> None:
         assert setting(config, "scouting/gossip/enabled") is False
 
 
-def _sockets_of(pid: int) -> set[str]:
-    """Socket inodes the process holds open."""
-    inodes = set()
-    for descriptor in Path(f"/proc/{pid}/fd").iterdir():
-        try:
-            target = os.readlink(descriptor)
-        except OSError:
-            continue
-        if target.startswith("socket:["):
-            inodes.add(target[len("socket:["):-1])
-    return inodes
-
-
-def _ipv4(hex_address: str) -> str:
-    address, port = hex_address.split(":")
-    octets = bytes.fromhex(address)[::-1]  # /proc/net is in host (little-endian) order
-    return f"{'.'.join(str(octet) for octet in octets)}:{int(port, 16)}"
-
-
-def _bound_sockets(pid: int) -> list[tuple[str, str, str]]:
-    """(protocol, local address, state) of every TCP listener and UDP socket of ``pid``."""
-    inodes = _sockets_of(pid)
-    found = []
-    for protocol in ("tcp", "tcp6", "udp", "udp6"):
-        lines = Path(f"/proc/net/{protocol}").read_text().splitlines()[1:]
-        for line in lines:
-            columns = line.split()
-            local, state, inode = columns[1], columns[3], columns[9]
-            if inode not in inodes:
-                continue
-            listening = state == "0A"  # TCP_LISTEN
-            if protocol.startswith("udp") or listening:
-                shown = _ipv4(local) if protocol in ("tcp", "udp") else local
-                found.append((protocol, shown, "listen" if listening else "bound"))
-    return found
-
-
 @pytest.mark.timeout(90)
 def test_running_router_and_learner_hold_only_loopback_listeners(
     free_port: int, spawn: Callable
@@ -104,10 +70,46 @@ def test_running_router_and_learner_hold_only_loopback_listeners(
         raise AssertionError(Path(learner.log_path).read_text())
     probe.close()
 
-    router_sockets = _bound_sockets(router.pid)
+    router_sockets = bound_sockets(router.pid)
     assert router_sockets == [("tcp", f"127.0.0.1:{free_port}", "listen")], router_sockets
-    learner_sockets = _bound_sockets(learner.pid)
+    learner_sockets = bound_sockets(learner.pid)
     assert learner_sockets == [], learner_sockets  # a client: no listener, no scouting socket
+
+
+def _descendants(pid: int) -> list[int]:
+    found = []
+    for child in children(pid):
+        found += [child, *_descendants(child)]
+    return found
+
+
+@pytest.mark.timeout(150)
+def test_every_listener_of_run_serve_and_its_services_is_on_loopback(
+    tabletop_recording: Path, tmp_path: Path
+) -> None:
+    """`gngdt run --serve`: its router, learner, logger, capture and the rerun viewer server."""
+    grpc_port, web_port = free_tcp_port(), free_tcp_port()
+    log_path = tmp_path / "run.log"
+    with open(log_path, "wb") as output:
+        run = subprocess.Popen(
+            [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--serve",
+             "--rate", "0.01", "--grpc-port", str(grpc_port), "--web-port", str(web_port)],
+            cwd=REPO_ROOT, stdout=output, stderr=output, start_new_session=True)
+    try:
+        wait_for(lambda: "replaying" in log_path.read_text(), 90, "every service to be up")
+        processes = [run.pid, *_descendants(run.pid)]
+        assert len(processes) >= 5, log_path.read_text()  # run, 3 services, the rerun server
+        found = {pid: bound_sockets(pid) for pid in processes}
+    finally:
+        run.send_signal(signal.SIGINT)
+        run.wait(60)
+    listeners = [address for sockets in found.values() for protocol, address, state in sockets
+                 if state == "listen"]
+    assert f"127.0.0.1:{grpc_port}" in listeners and f"127.0.0.1:{web_port}" in listeners
+    for pid, sockets in found.items():
+        for protocol, address, state in sockets:
+            assert protocol == "tcp" and state == "listen", (pid, sockets)  # no UDP: no scouting
+            assert address.startswith("127.0.0.1:"), (pid, sockets)
 
 
 # ------------------------------------------------------------------ TLS + access control

@@ -23,7 +23,7 @@ def test_moving_scenes_are_listed():
 
 
 def test_a_vanished_object_is_seen_before_and_never_after():
-    fps = 10.0  # the red box vanishes 1 s in: frame 10
+    fps = 5.0  # the red box vanishes 2 s in: frame 10
     frames = list(render_scene("tabletop_vanish", 14, width=WIDTH, height=HEIGHT, fps=fps))
     box_ids = {i for i, name in frames[0].extras["segments"].items() if name.startswith("red_box")}
     seen = [bool(np.isin(f.labels, list(box_ids)).any()) for f in frames]
@@ -36,13 +36,21 @@ def test_a_vanished_object_is_seen_before_and_never_after():
 
 
 def test_a_moved_object_is_where_its_motion_says():
-    fps = 2.0  # moves from 1 s to 2.5 s: frames 2..5
-    frames = list(render_scene("tabletop_move", 7, width=320, height=240, fps=fps))
-    centres = [world_points(f, segment_mask(f, "blue_sphere/surface")).mean(axis=0)
+    fps = 2.0  # moves from 2 s to 3.5 s: frames 4..7
+    frames = list(render_scene("tabletop_move", 9, width=320, height=240, fps=fps))
+    centres = [sphere_centre(world_points(f, segment_mask(f, "blue_sphere/surface")))
                for f in frames]
-    # the visible cap's centroid moves with the sphere's centre (the camera moves a little)
-    np.testing.assert_allclose(centres[6] - centres[0], [0.0, 0.3, 0.0], atol=0.02)
-    np.testing.assert_allclose(centres[1] - centres[0], 0.0, atol=0.01)
+    np.testing.assert_allclose(centres[0], [0.15, 0.15, 0.74 + 0.08], atol=0.01)
+    np.testing.assert_allclose(centres[4] - centres[0], 0.0, atol=0.01)
+    np.testing.assert_allclose(centres[6] - centres[0], [0.0, 0.2, 0.0], atol=0.01)
+    np.testing.assert_allclose(centres[8] - centres[0], [0.0, 0.3, 0.0], atol=0.01)
+
+
+def sphere_centre(points: np.ndarray) -> np.ndarray:
+    """Least-squares sphere centre: |p|^2 = 2 c.p + (r^2 - |c|^2) is linear in c."""
+    design = np.column_stack([2 * points, np.ones(len(points))])
+    solution, *_ = np.linalg.lstsq(design, np.sum(points**2, axis=1), rcond=None)
+    return solution[:3]
 
 
 def test_the_walking_camera_sees_the_crate_then_the_bin_in_a_static_scene():
@@ -81,7 +89,7 @@ def test_a_recording_carries_poses_and_the_scene_description(tmp_path: Path):
     described = recording_metadata(path)[SCENE_METADATA]
     assert described["scene"] == "tabletop_vanish"
     assert json.loads(described["motions"]) == [
-        {"primitive": "red_box", "kind": "vanish", "start_frame": 3, "end_frame": 3,
+        {"primitive": "red_box", "kind": "vanish", "start_frame": 6, "end_frame": 6,
          "offset_m": [0.0, 0.0, 0.0]}
     ]
     segments = json.loads(described["segments"])

@@ -17,11 +17,17 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
-  gngdt eval paper --trials 5 --out report/paper           # the paper's Tables 2-4, Figure 10
-  gngdt eval paper --trials 1 --steps 20000 --max-nodes 60 # a quick look
+  gngdt eval paper --trials 5 --out report/paper      # Tables 2-4, Figures 10-11
+  gngdt eval paper --trials 1 --max-nodes 60          # a quick look
+  gngdt eval paper --frames ../shared/data/rgbd/*/ ../shared/data/labelled/*/   # + Tables 5-6
+  gngdt eval paper --trials 10 --color-noise 0 1 2 3 4 5 6 8 10 15 20 30   # the colour fit
+  gngdt eval paper --stop steps --steps 150000        # learn on past the node budget
   gngdt eval recording recordings/tabletop_small.mcap --out report/tabletop
   gngdt eval recording recordings/data2.mcap --method gngdt --trials 3
+  gngdt eval recording vanish.mcap --method gngdt --utility-k 0   # the paper's, no forgetting
   gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run
+  gngdt eval segmentation ../shared/data/labelled/mosd_learn --out report/mosd
+  gngdt eval segmentation ../shared/data/labelled/ycbv_0000 --independent --online
 """
 
 METHOD_CHOICES = ("gngdt", "gng", "gngw")  # the keys of paper.METHOD_NAMES (kept light for --help)
@@ -41,14 +47,33 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _non_negative_float(text: str) -> float:
+    value = float(text)
+    if not value >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
+    return value
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Register ``paper``, ``recording`` and ``rrd`` sub-subcommands."""
-    from services.evaluation.paper import PaperSettings
+    """Register ``paper``, ``recording``, ``rrd`` and ``segmentation`` sub-subcommands."""
+    from services.evaluation.paper import STOP_RULES, PaperSettings
 
     paper_defaults = PaperSettings(workers=1)
     sub = parser.add_subparsers(dest="eval_command", required=True, metavar="WHAT")
 
-    paper = sub.add_parser("paper", help="the paper's Tables 2-4 and Figure 10 (Section 3.1)")
+    def leaf(name: str, help_text: str, description: str, examples: str):
+        return sub.add_parser(name, help=help_text, description=description,
+                              epilog="examples:\n" + examples,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+
+    paper = leaf(
+        "paper", "the paper's simulation (Tables 2-4, Figs. 10-11) and RGB-D (Tables 5-6) runs",
+        "Run the paper's simulation experiment (Section 3.1): GNG, GNG-W and GNG-DT on Data1 "
+        "and Data2 at every scale and every --color-noise level, over --trials seeds each, each "
+        "run stopping at the node budget; with --frames also its RGB-D experiment (Section 3.3) "
+        "on real frames. Writes paper.md (Tables 2-6, the paper's claims checked), paper.json "
+        "and Figures 8-10 into --out.",
+        "\n".join(line for line in EXAMPLES.splitlines() if " paper " in line) + "\n")
     paper.add_argument(
         "--trials",
         type=_positive_int,
@@ -62,16 +87,50 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="output folder (default: %(default)s)",
     )
     paper.add_argument(
+        "--stop",
+        choices=STOP_RULES,
+        default=paper_defaults.stop,
+        help="budget: a run ends when it has --max-nodes nodes (the paper's Step 10); "
+        "steps: after exactly --steps steps (default: %(default)s)",
+    )
+    paper.add_argument(
         "--steps",
         type=_positive_int,
         default=paper_defaults.steps,
-        help="learning steps per run, the stopping rule (default: %(default)s)",
+        help="learning steps per run with --stop steps (default: %(default)s)",
     )
     paper.add_argument(
         "--max-nodes",
         type=_positive_int,
         default=paper_defaults.max_nodes,
         help="node budget per run (default: %(default)s)",
+    )
+    paper.add_argument(
+        "--color-noise",
+        type=_non_negative_float,
+        nargs="+",
+        default=list(paper_defaults.color_noise),
+        metavar="SIGMA",
+        help="within-region colour noise levels, std per RGB channel on 0-255; the first is the "
+        "main one, the others are reported beside it; 0 = flat colours (default: %(default)s)",
+    )
+    paper.add_argument(
+        "--frames",
+        type=Path,
+        nargs="+",
+        default=[],
+        metavar="DIR",
+        help="real RGB-D image folders (TUM, PCL TIFF or colour/depth layout) for the paper's "
+        "Tables 5-6; the first frame of each (default: none)",
+    )
+    paper.add_argument(
+        "--all-frames", action="store_true", help="every frame of each --frames folder"
+    )
+    paper.add_argument(
+        "--frame-trials",
+        type=_positive_int,
+        default=None,
+        help="trials per real frame and method (default: --trials)",
     )
     paper.add_argument(
         "--data1-points",
@@ -120,9 +179,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="worker processes (default: one per core)",
     )
-    paper.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    paper.add_argument("--no-progress", action="store_true",
+                       help="no progress bar on stderr")
 
-    recording = sub.add_parser("recording", help="replay a recording offline through each method")
+    recording = leaf(
+        "recording", "replay a recording offline through each method",
+        "Replay a recording offline, frame after frame, through each method as the learner "
+        "would (no zenoh). Every frame: quantization errors (eq. 17), nodes, clusters per "
+        "topology and, where the recording has ground-truth labels, the adjusted Rand index; on "
+        "the last frame, k-means, a voxel grid and DBSCAN as references. Writes recording.md, "
+        "recording.json and plots into --out.",
+        "  gngdt eval recording recordings/tabletop_small.mcap --out report/tabletop\n"
+        "  gngdt eval recording recordings/data2.mcap --method gngdt --trials 3\n"
+        "  gngdt eval recording mybag_0.mcap --max-frames 100 --samples-per-frame 20000\n")
     recording.add_argument("path", type=Path, metavar="PATH", help="MCAP recording")
     recording.add_argument(
         "--method",
@@ -168,13 +237,91 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="DBSCAN radius in metres (default: 1.5 x median distance to the 10th neighbour)",
     )
+    recording.add_argument(
+        "--utility-k",
+        type=float,
+        default=None,
+        help="GNG-DT's forgetting threshold (default: the learner's profile; 0: off, the paper)",
+    )
+    recording.add_argument(
+        "--camera-frame",
+        action="store_true",
+        help="ignore the recording's camera poses: learn in the camera frame",
+    )
+    recording.add_argument(
+        "--ghost-distance",
+        type=_positive_float,
+        default=0.05,
+        help="a seen node farther than this (metres) from the frame is a ghost (default 0.05)",
+    )
+    recording.add_argument(
+        "--world-sample",
+        type=_positive_int,
+        default=40_000,
+        help="with poses, points kept of the world seen so far (k-means is fitted on half, "
+        "both errors measured on the other half; default %(default)s)",
+    )
+    recording.add_argument(
+        "--reference-every",
+        type=int,
+        default=10,
+        help="with poses, k-means on the world seen so far every N frames and on the last "
+        "(default 10; 0: last frame only)",
+    )
     recording.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
 
-    rrd = sub.add_parser("rrd", help="what a logged run did, read back from its .rrd")
+    rrd = leaf(
+        "rrd", "what a logged run did, read back from its .rrd",
+        "Read a run logged by `gngdt run` or `gngdt log` back from its .rrd file and report "
+        "what it did: every metrics/ scalar over the frames (nodes, steps/s, latency, "
+        "quantization error, clusters). Writes rrd.md, rrd.json and plots into --out.",
+        "  gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run\n"
+        "  gngdt run recordings/tabletop.mcap --save run.rrd && gngdt eval rrd run.rrd\n")
     rrd.add_argument("path", type=Path, metavar="RUN.rrd", help="rerun recording written by gngdt")
     rrd.add_argument(
         "--out", type=Path, default=None, help="output folder (default: report/<run name>)"
     )
+
+
+    segmentation = sub.add_parser(
+        "segmentation",
+        help="gngdt's segments on labelled real frames, beside the Open3D peer",
+        description="Score gngdt's segmentation on a labelled set (redwood layout + label/: 0 "
+        "= no label, 1 = background, k >= 2 = a segment): per frame and overall mean best IoU, "
+        "recall at IoU >= 0.5 and >= 0.75, segments and time per frame, beside the Open3D peer "
+        "(plane RANSAC + DBSCAN) when open3d is installed (pip install -e '.[peers]').",
+        epilog="examples:\n"
+        "  gngdt eval segmentation ../shared/data/labelled/mosd_learn --out report/mosd\n"
+        "  gngdt eval segmentation ../shared/data/labelled/ycbv_0000 --independent --online\n"
+        "  gngdt eval segmentation SET --params my_profile.toml --no-peer --max-frames 5\n",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    segmentation.add_argument("set_dir", type=Path, metavar="SET_DIR", help="labelled folder")
+    segmentation.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: report/<set name>)"
+    )
+    segmentation.add_argument(
+        "--independent", action="store_true",
+        help="gngdt learns every frame from scratch (the default when no mode is given)",
+    )
+    segmentation.add_argument(
+        "--online", action="store_true",
+        help="gngdt carries one network from frame to frame (both flags: both, side by side)",
+    )
+    segmentation.add_argument(
+        "--params", type=Path, metavar="FILE.toml", help="sensor profile (as gngdt segment)"
+    )
+    segmentation.add_argument("--no-peer", action="store_true", help="do not run the peer")
+    segmentation.add_argument(
+        "--figures", type=int, default=4,
+        help="frames drawn side by side, spread over the set (default: %(default)s)",
+    )
+    segmentation.add_argument(
+        "--max-frames", type=_positive_int, default=None, help="only the first N frames"
+    )
+    segmentation.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    segmentation.add_argument("--no-progress", action="store_true",
+                              help="no progress bar on stderr")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -186,7 +333,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"gngdt eval needs {' and '.join(missing)}: pip install 'gngdt[eval]'",
               file=sys.stderr)
         return 2
-    handlers = {"paper": _main_paper, "recording": _main_recording, "rrd": _main_rrd}
+    handlers = {"paper": _main_paper, "recording": _main_recording, "rrd": _main_rrd,
+                "segmentation": _main_segmentation}
     try:
         return handlers[args.eval_command](args)
     except (ValueError, OSError, RecordingError) as error:
@@ -200,8 +348,13 @@ def _main_paper(args: argparse.Namespace) -> int:
     options = {"workers": args.workers} if args.workers else {}
     settings = PaperSettings(
         trials=args.trials,
+        stop=args.stop,
         steps=args.steps,
         max_nodes=args.max_nodes,
+        color_noise=tuple(args.color_noise),
+        frames=tuple(str(folder) for folder in args.frames),
+        all_frames=args.all_frames,
+        frame_trials=args.frame_trials,
         data1_points=args.data1_points,
         data2_points=args.data2_points,
         scales=tuple(args.scales),
@@ -213,9 +366,11 @@ def _main_paper(args: argparse.Namespace) -> int:
     data = run_paper(settings, args.out, progress=not args.no_progress)
     print(f"report: {args.out / 'paper.md'} ({data['wall_seconds']:.1f} s)")
     for claim, check in data["findings"].items():
-        if check["holds"] != check.get("paper", True):
-            verdict = "holds here, not in the paper" if check["holds"] else "does not hold here"
-            print(f"  {verdict}: {claim}")
+        if not check["holds"]:
+            print(f"  not reproduced: {claim}")
+    if data["real_frames"]:
+        for claim, check in data["real_frames"]["findings"].items():
+            print(f"  {'reproduced' if check['holds'] else 'not reproduced'}: {claim}")
     return 0
 
 
@@ -241,10 +396,22 @@ def _main_recording(args: argparse.Namespace) -> int:
         )
         if getattr(args, name) is not None
     }
+    from services.evaluation.dynamics import DynamicsSettings
+
+    if args.utility_k is not None:
+        if args.utility_k < 0:
+            raise ValueError(f"--utility-k must be >= 0, got {args.utility_k}")
+        overrides["utility_k"] = args.utility_k or None
+    if args.reference_every < 0:
+        raise ValueError(f"--reference-every must be >= 0, got {args.reference_every}")
     settings = RecordingSettings(
         methods=_in_paper_order(args.methods),
         trials=args.trials,
         reference_points=args.reference_points,
+        world_frame=not args.camera_frame,
+        dynamics=DynamicsSettings(ghost_distance_m=args.ghost_distance,
+                                  reference_every=args.reference_every,
+                                  world_sample=args.world_sample),
         **overrides,
     )
     out = args.out or Path("report") / args.path.stem
@@ -265,4 +432,29 @@ def _main_rrd(args: argparse.Namespace) -> int:
     out = args.out or Path("report") / args.path.stem
     data = evaluate_rrd(args.path, out)
     print(f"report: {out / 'rrd.md'} ({len(data['metrics'])} metrics over {data['frames']} frames)")
+    return 0
+
+
+def _main_segmentation(args: argparse.Namespace) -> int:
+    from services.evaluation.segmentation import (
+        SegmentationEvalSettings,
+        evaluate_segmentation,
+    )
+
+    modes = tuple(mode for mode in ("independent", "online") if getattr(args, mode))
+    settings = SegmentationEvalSettings(
+        modes=modes or ("independent",), params=args.params, peer=not args.no_peer,
+        figures=args.figures, max_frames=args.max_frames, seed=args.seed,
+    )
+    out = args.out or Path("report") / args.set_dir.resolve().name
+    data = evaluate_segmentation(args.set_dir, settings, out, progress=not args.no_progress)
+    print(f"report: {out / 'segmentation.md'} ({data['wall_seconds']:.1f} s)")
+    for method, entry in data["methods"].items():
+        summary, total = entry["summary"], entry["milliseconds"]["total"]
+        print(f"  {method}: mean best IoU {summary['mean_best_iou']:.3f}, "
+              f"R@0.5 {summary['recall_50']:.3f}, R@0.75 {summary['recall_75']:.3f}, "
+              f"{summary['segments_per_frame']:.1f} segments/frame, "
+              f"{total['p50']:.0f} ms/frame p50")
+    if not data["peer"]["run"]:
+        print(f"  peer not run: {data['peer']['status']}")
     return 0

@@ -218,3 +218,41 @@ def plot_method_curves(
         figure.suptitle(title, fontsize=10)
     figure.tight_layout()
     return _save(figure, path)
+
+
+def label_image_colours(labels: np.ndarray) -> np.ndarray:
+    """(H, W, 3) uint8 picture of (H, W) int labels: 0 black, 1 grey (no segment /
+    background), each k >= 2 a distinct, stable colour (golden-ratio hues)."""
+    from matplotlib.colors import hsv_to_rgb
+
+    labels = np.asarray(labels, dtype=np.int64)
+    ids = np.arange(int(labels.max(initial=0)) + 1)
+    hues = (ids * 0.618033988749895) % 1.0
+    saturation = np.where(ids % 2 == 0, 0.85, 0.6)
+    palette = (hsv_to_rgb(np.column_stack([hues, saturation, np.full(ids.size, 0.95)]))
+               * 255).astype(np.uint8)
+    palette[0] = 0
+    if palette.shape[0] > 1:
+        palette[1] = 150
+    return palette[labels]
+
+
+def plot_image_rows(
+    rows: Sequence[Sequence[tuple[str, np.ndarray]]], path: Path, title: str = ""
+) -> Path:
+    """A grid of pictures, one row per entry: each (title, (H, W, 3) uint8 RGB image)."""
+    plt = _pyplot()
+    n_rows = len(rows)
+    n_cols = max(len(row) for row in rows)
+    figure, axes = plt.subplots(n_rows, n_cols, figsize=(3.4 * n_cols, 2.8 * n_rows),
+                                squeeze=False)
+    for axis_row, row in zip(axes, rows, strict=True):
+        for axis, (panel_title, image) in zip(axis_row, row, strict=False):
+            axis.imshow(image, interpolation="nearest")
+            axis.set_title(panel_title, fontsize=8)
+        for axis in axis_row:
+            axis.axis("off")
+    if title:
+        figure.suptitle(title, fontsize=10)
+    figure.tight_layout()
+    return _save(figure, path)

@@ -2,12 +2,16 @@
 
 No zenoh: frames are read from the MCAP file, deprojected with the capture service's
 ``Deprojector`` (same valid-pixel rule), and each frame's points are learned with
-``partial_fit(points, colors, n_steps=samples_per_frame)``, exactly the learner's per-frame call.
-After every frame we measure the quantization errors on that frame's points, the node count, the
-clusters per topology and, where the recording has ground-truth labels, the adjusted Rand index of
-each clustering (each point takes its winner node's cluster). On the last frame the references are
-computed on the same points: k-means with as many centres as nodes, a voxel grid downsampled to as
-many points, and DBSCAN of the raw points.
+``partial_fit(points, colors, n_steps=samples_per_frame, camera_pose=pose)``, exactly the
+learner's per-frame call: with the recording's camera poses the network is learned in the fixed
+frame (``world_frame``), without them in the camera frame. After every frame we measure the
+quantization errors on that frame's points, the node count, the clusters per topology and, where
+the recording has ground-truth labels, the adjusted Rand index of each clustering (each point
+takes its winner node's cluster), plus the metrics over time of :mod:`services.evaluation.dynamics`
+(ghost share, old-place nodes of changed objects, and with poses the error against k-means on
+the world seen so far). On the last frame the references are computed on the same points: k-means
+with as many centres as nodes, a voxel grid downsampled to as many points, and DBSCAN of the raw
+points.
 """
 
 from __future__ import annotations
@@ -21,6 +25,12 @@ from typing import Any
 
 import numpy as np
 
+from services.evaluation.dynamics import (
+    CameraView,
+    DynamicsSettings,
+    DynamicsTracker,
+    scene_changes,
+)
 from services.evaluation.paper import (
     METHOD_NAMES,
     PAPER_PARAMETERS,
@@ -61,6 +71,12 @@ class RecordingSettings:
     dbscan_min_samples: int = 10
     #: None = 1.5 x the median distance to the min_samples-th neighbour
     dbscan_eps: float | None = None
+    #: GNG-DT's forgetting (None: off, as the paper); default: the learner's profile
+    utility_k: float | None = field(default_factory=lambda: _learner_model_default("utility_k"))
+    #: learn in the recording's fixed frame when it has camera poses (False: camera frame)
+    world_frame: bool = True
+    #: the metrics over time (ghost distance, world sample, k-means every N frames)
+    dynamics: DynamicsSettings = field(default_factory=DynamicsSettings)
 
     def __post_init__(self) -> None:
         for name in (
@@ -78,6 +94,12 @@ class RecordingSettings:
         for method in self.methods:
             if method not in METHOD_NAMES.values():
                 raise ValueError(f"methods: unknown {method!r}")
+
+
+def _learner_model_default(name: str) -> Any:
+    from services.learner import LEARNER_MODEL_DEFAULTS
+
+    return LEARNER_MODEL_DEFAULTS.get(name)
 
 
 def _learner_default(name: str) -> Any:
@@ -98,14 +120,20 @@ def _gngdt_default(name: str) -> Any:
 class FramePoints:
     """One frame as the learner sees it.
 
-    positions: (N, 3) float32 metres (camera frame); colors: (N, 3) uint8;
-    labels: (N,) int64 ground-truth segment ids (0 = none) or None for real recordings.
+    camera_positions: (N, 3) float32 metres, camera frame (what the learner receives);
+    positions: (N, 3) the same points in the model's frame (the fixed frame with a pose, else
+    the camera frame); colors: (N, 3) uint8; labels: (N,) int64 ground-truth segment ids (0 =
+    none) or None for real recordings; pose: (4, 4) camera-to-world or None; view: the frame's
+    depth image and pose, for the metrics over time (None without a pose).
     """
 
     index: int
     positions: np.ndarray
     colors: np.ndarray
     labels: np.ndarray | None
+    camera_positions: np.ndarray | None = None
+    pose: np.ndarray | None = None
+    view: CameraView | None = None
 
 
 def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
@@ -116,7 +144,8 @@ def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoint
 
     deproject = Deprojector(settings.min_depth_m, settings.max_depth_m)
     # colour and depth paired as capture pairs them, so a ROS 2 bag replays here as it does live
-    frames = read_frames(path, max_skew_ns=round(DEFAULT_MAX_SKEW_MS * 1e6))
+    frames = read_frames(path, max_skew_ns=round(DEFAULT_MAX_SKEW_MS * 1e6),
+                         fixed_frame="auto" if settings.world_frame else None)
     for count, frame in enumerate(frames):
         if settings.max_frames is not None and count >= settings.max_frames:
             return
@@ -124,7 +153,14 @@ def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoint
         labels = None
         if frame.labels is not None:
             labels = deproject_labels(deproject, frame.depth, frame.labels, frame.intrinsics)
-        yield FramePoints(frame.index, positions, colors, labels)
+        if frame.pose is None:
+            yield FramePoints(frame.index, positions, colors, labels, positions)
+            continue
+        pose = frame.pose.matrix
+        k = frame.intrinsics
+        view = CameraView(frame.depth / 1000.0, k.fx, k.fy, k.cx, k.cy, pose)
+        world = positions.astype(np.float64) @ pose[:3, :3].T + pose[:3, 3]
+        yield FramePoints(frame.index, world, colors, labels, positions, pose, view)
 
 
 def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intrinsics: Any):
@@ -145,17 +181,25 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
     """One method, one seed, every frame: per-frame metrics and the final model's topology."""
     from gngdt_core import adjusted_rand_index, cluster_count
     from services.evaluation.identity import IdentityScore
+    from services.recording.reader import recording_metadata
 
-    model = make_model(method, settings.max_nodes, random_state=trial)
+    forgetting = {"utility_k": settings.utility_k} if method == "GNG-DT" else {}
+    model = make_model(method, settings.max_nodes, random_state=trial, **forgetting)
     identity = IdentityScore()
     frames: list[dict[str, Any]] = []
     last: FramePoints | None = None
+    tracker: DynamicsTracker | None = None
     for points in frame_points(path, settings):
         if len(points.positions) == 0:
             log.warning("%s: frame %d has no valid depth; skipped", path, points.index)
             continue
+        if tracker is None:
+            changes = scene_changes(recording_metadata(path))
+            tracker = DynamicsTracker(settings.dynamics, changes, posed=points.pose is not None)
+        tracker.before_learning(points.index, points.positions, points.labels)
         started = time.perf_counter()
-        model.partial_fit(points.positions, points.colors, n_steps=settings.samples_per_frame)
+        model.partial_fit(points.camera_positions, points.colors,
+                          n_steps=settings.samples_per_frame, camera_pose=points.pose)
         learn_seconds = time.perf_counter() - started
         error = model.quantization_error(points.positions, points.colors)
         record: dict[str, Any] = {
@@ -184,11 +228,25 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
                 record["ari"][name] = float(
                     adjusted_rand_index(points.labels[labelled], node_labels[winners])
                 )
+        if method == "GNG-DT":  # the objects the learner publishes: its segments, tracked
+            has_truth = labelled is not None and labelled.any()
+            identity.update("segments", model.node_ids_, np.asarray(model.segment()),
+                            winners if has_truth else None,
+                            points.labels[labelled] if has_truth else None)
+        record["dynamics"] = tracker.after_learning(
+            model, points.index, points.camera_positions, points.positions, points.pose,
+            points.view)
+        every = settings.dynamics.reference_every
+        if every > 0 and len(frames) % every == every - 1:
+            record["dynamics"].update(tracker.world_reference(model))
         frames.append(record)
         last = points
-    if last is None:
+    if last is None or tracker is None:
         raise ValueError(f"{path}: no frame with valid depth to learn from")
+    if "world_qe_pos" not in frames[-1]["dynamics"]:  # the last frame is always a reference
+        frames[-1]["dynamics"].update(tracker.world_reference(model))
     return {"method": method, "trial": trial, "frames": frames, "model": model, "last": last,
+            "changes": tracker.summary(), "posed": last.pose is not None,
             "identity": identity.summary()}
 
 
@@ -272,13 +330,15 @@ def evaluate_recording(
     node_counts = {int(r["model"].n_nodes_) for r in runs if r["trial"] == 0}
     refs = references(runs[0]["last"], first_gngdt and first_gngdt["model"], node_counts, settings)
     summary = summarise_runs(runs, refs)
-    plots = _write_plots(runs, refs, summary, path, out_dir, settings.min_cluster_size)
+    plots = _write_plots(runs, refs, summary, path, out_dir, settings.min_cluster_size,
+                         settings.dynamics.ghost_distance_m)
     data = {
         "recording": str(path),
         "settings": asdict(settings),
         "parameters": PAPER_PARAMETERS,
         "wall_seconds": time.perf_counter() - started,
         "labelled": runs[0]["last"].labels is not None,
+        "posed": runs[0]["posed"],
         "summary": summary,
         "references": refs,
         "runs": [{"method": r["method"], "trial": r["trial"], "frames": r["frames"],
@@ -319,6 +379,7 @@ def summarise_runs(runs: list[dict[str, Any]], refs: dict[str, Any]) -> dict[str
             entry["ratio_to_voxel_grid_pos"] = (
                 entry["qe_pos"]["mean"] / reference["voxel_grid"]["qe"]["pos"]
             )
+        entry["over_time"] = summarise_over_time([r for r in runs if r["method"] == method])
         summary[method] = entry
     return summary
 
@@ -338,13 +399,91 @@ def _identity_summary(per_trial: list[dict[str, dict[str, Any]]]) -> dict[str, d
     return result
 
 
-def _mean_curve(runs: list[dict[str, Any]], method: str, key: str) -> tuple[np.ndarray, np.ndarray]:
-    """(frames (T,), mean over trials (T,)) of a per-frame figure."""
+def summarise_over_time(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    """The metrics over time of one method's trials: steady state (the second half of the
+    frames) of the ghost and stale shares, the largest node count, the last world reference, and
+    frames until each changed object's old-place nodes were gone (mean ± std over trials)."""
+    def dynamics(run: dict[str, Any]) -> list[dict[str, Any]]:
+        return [frame["dynamics"] for frame in run["frames"]]
+
+    def steady(run: dict[str, Any]) -> list[dict[str, Any]]:
+        records = dynamics(run)
+        return records[len(records) // 2 :]
+
+    result: dict[str, Any] = {
+        "ghost_share_steady": mean_std(np.mean([d["ghost_share"] for d in steady(r)])
+                                       for r in runs),
+        "ghost_share_steady_max": mean_std(max(d["ghost_share"] for d in steady(r))
+                                           for r in runs),
+        "stale_share_steady": mean_std(np.mean([d["stale_share"] for d in steady(r)])
+                                       for r in runs),
+        "nodes_max": mean_std(max(f["nodes"] for f in r["frames"]) for r in runs),
+        "forgotten": mean_std(dynamics(r)[-1]["forgotten"] for r in runs),
+    }
+    last = dynamics(runs[0])[-1]
+    for key in ("world_qe_pos", "world_kmeans_qe_pos", "world_ratio_to_kmeans",
+                "out_of_view_qe_pos", "in_view_qe_pos", "out_of_view_nodes"):
+        if key in last:
+            result[key] = mean_std(dynamics(r)[-1][key] for r in runs)
+    changes: dict[str, Any] = {}
+    for name, change in runs[0]["changes"].items():
+        gone = [r["changes"][name]["frames_until_gone"] for r in runs]
+        changes[name] = {
+            "kind": change["kind"],
+            "start_frame": change["start_frame"],
+            "settled_frame": change["settled_frame"],
+            "old_place_nodes_at_change": change["old_place_nodes_at_change"],
+            "frames_until_gone": (mean_std(gone) if all(g is not None for g in gone) else None),
+            "gone_in_trials": sum(g is not None for g in gone),
+        }
+    result["changes"] = changes
+    return result
+
+
+def _mean_curve(runs: list[dict[str, Any]], method: str, key: str,
+                group: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(frames (T,), mean over trials (T,)) of a per-frame figure (``frame[group][key]`` with
+    a group; NaN where a frame lacks it)."""
     chosen = [r["frames"] for r in runs if r["method"] == method]
     frames = np.array([f["frame"] for f in chosen[0]])
     length = min(len(c) for c in chosen)
-    values = np.array([[f[key] for f in c[:length]] for c in chosen], dtype=np.float64)
+
+    def value(frame: dict[str, Any]) -> float:
+        holder = frame if group is None else frame[group]
+        return float(holder.get(key, np.nan))
+
+    values = np.array([[value(f) for f in c[:length]] for c in chosen], dtype=np.float64)
     return frames[:length], values.mean(axis=0)
+
+
+def _plot_over_time(runs: list[dict[str, Any]], methods: list[str], path: Path,
+                    out_dir: Path, ghost_distance_m: float) -> Path:
+    """Ghost share, nodes, world error / k-means and old-place nodes per frame, per method."""
+    from services.evaluation.plots import plot_method_curves
+
+    def curves(key: str, group: str | None = "dynamics") -> dict[str, Any]:
+        result = {m: _mean_curve(runs, m, key, group) for m in methods}
+        return {m: (x, y) for m, (x, y) in result.items() if np.isfinite(y).any()}
+
+    quantities = {
+        f"ghost share (> {ghost_distance_m * 100:g} cm from the frame)": curves("ghost_share"),
+        "nodes": curves("nodes", None),
+    }
+    lines: dict[str, dict[str, float]] = {next(iter(quantities)): {"target 2 %": 0.02}}
+    ratio = curves("world_ratio_to_kmeans")
+    if ratio:
+        quantities["position error / k-means, world sample"] = {
+            m: (x[np.isfinite(y)], y[np.isfinite(y)]) for m, (x, y) in ratio.items()}
+        lines["position error / k-means, world sample"] = {"target 1.2": 1.2}
+    kept = curves("out_of_view_nodes")
+    if kept:
+        quantities["out-of-view nodes on the world seen"] = kept
+    gngdt = [r for r in runs if r["method"] == "GNG-DT"]
+    for name in gngdt[0]["changes"] if gngdt else ():
+        quantities[f"old-place nodes of {name} (GNG-DT)"] = {
+            "GNG-DT": _mean_curve(runs, "GNG-DT", f"old_place_nodes/{name}", "dynamics")}
+    return plot_method_curves(quantities, out_dir / "recording_over_time.png",
+                              title=f"{path.name}: over time", references=lines)
 
 
 def _write_plots(
@@ -354,6 +493,7 @@ def _write_plots(
     path: Path,
     out_dir: Path,
     min_cluster_size: int,
+    ghost_distance_m: float,
 ) -> list[Path]:
     from services.evaluation.plots import TopologyPanel, plot_method_curves, plot_topology_grid
 
@@ -381,7 +521,8 @@ def _write_plots(
             out_dir / "recording_curves.png",
             title=f"{path.name}: per-frame errors and nodes",
             references=lines,
-        )
+        ),
+        _plot_over_time(runs, methods, path, out_dir, ghost_distance_m),
     ]
     gngdt_runs = [r for r in runs if r["method"] == "GNG-DT"]
     if gngdt_runs and "ari" in gngdt_runs[0]["frames"][0]:
@@ -426,6 +567,75 @@ def _write_plots(
             )
         )
     return plots
+
+
+def _over_time_markdown(data: dict[str, Any], settings: RecordingSettings) -> list[str]:
+    """The "Over time" section: definitions, then one row per method."""
+    dyn = settings.dynamics
+    frame = ("in the recording's fixed frame (camera poses)" if data["posed"]
+             else "in the camera frame (the recording has no poses)")
+    forgetting = (f"GNG-DT forgets with utility_k = {settings.utility_k:g}"
+                  if settings.utility_k is not None else "GNG-DT does not forget")
+    text = (
+        f"Learned {frame}; {forgetting}. A node is *seen* when the frame's sensor could have seen "
+        "it (in view, not behind the measured surface by more than "
+        f"{dyn.view_depth_margin:.0%} of the depth) and a *ghost* when seen and farther than "
+        f"{dyn.ghost_distance_m * 100:g} cm from every point of the frame; the ghost share is "
+        "ghosts / seen nodes. The stale share is the share of all nodes farther than that from "
+        "the frame's points. Steady state: the second half of the frames."
+    )
+    if data["posed"]:
+        text += (
+            f" The world sample keeps {dyn.world_sample:,} points of every frame so far, in the "
+            "fixed frame, minus those a later frame saw through; k-means with as many centres as "
+            "nodes is fitted on half of it and both errors (eq. 17) are measured on the other "
+            f"half, every {dyn.reference_every} frames and on the last. Out of view: its points "
+            "off the image or occluded, and the nodes the frame could not see that lie within "
+            "the ghost distance of it (the map kept where the camera does not look)."
+        )
+    headers = ["method", "ghost share, steady (mean / max)", "stale share, steady",
+               "nodes (max)", "forgotten"]
+    if data["posed"]:
+        headers += ["world error ÷ k-means (last)", "error out of view / in view (last, m)",
+                    "out-of-view nodes (last)"]
+    rows = []
+    for method, entry in data["summary"].items():
+        over = entry["over_time"]
+        row = [
+            method,
+            f"{over['ghost_share_steady']['mean']:.2%} / "
+            f"{over['ghost_share_steady_max']['mean']:.2%}",
+            f"{over['stale_share_steady']['mean']:.1%}",
+            format_mean_std(over["nodes_max"], 0),
+            format_mean_std(over["forgotten"], 0),
+        ]
+        if data["posed"]:
+            ratio = over.get("world_ratio_to_kmeans")
+            outside, inside = over.get("out_of_view_qe_pos"), over.get("in_view_qe_pos")
+            kept = over.get("out_of_view_nodes")
+            row += [format_mean_std(ratio, 3) if ratio else "—",
+                    f"{outside['mean']:.4f} / {inside['mean']:.4f}" if outside and inside
+                    else "—",
+                    format_mean_std(kept, 0) if kept else "—"]
+        rows.append(row)
+    parts = ["## Over time", text, markdown_table(headers, rows)]
+    change_rows = [
+        [method, name, change["kind"], change["settled_frame"], change["old_place_nodes_at_change"],
+         format_mean_std(change["frames_until_gone"], 1) if change["frames_until_gone"]
+         else f"not within the run ({change['gone_in_trials']}/{settings.trials} trials)"]
+        for method, entry in data["summary"].items()
+        for name, change in entry["over_time"]["changes"].items()
+    ]
+    if change_rows:
+        parts.append(
+            "Objects that changed (from the recording's scene description): once an object has "
+            "vanished or finished moving, the nodes within the ghost distance of its place in "
+            "the frame before its change, and farther than that from the current frame, are its "
+            "old-place nodes.")
+        parts.append(markdown_table(
+            ["method", "object", "change", "gone / moved by frame", "old-place nodes then",
+             "frames until none"], change_rows))
+    return parts
 
 
 def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: list[Path]) -> str:
@@ -518,6 +728,7 @@ def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: li
                     f"C^{n} {v:.3f}" for n, v in dbscan["gngdt_ari_same_points"].items()
                 )
         parts.append(text + ".")
+    parts.extend(_over_time_markdown(data, settings))
     parts.append("## Per frame (trial 0)")
     for run in data["runs"]:
         if run["trial"] != 0:
@@ -530,6 +741,9 @@ def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: li
             "pos err (m)",
             "col err",
             *(f"clusters C^{n}" for n in names),
+            "seen nodes",
+            "ghost share",
+            "forgotten",
         ]
         if data["labelled"]:
             headers += [f"ARI C^{n}" for n in names]
@@ -542,6 +756,9 @@ def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: li
                 format_number(f["qe_pos"], 4),
                 format_number(f["qe_col"], 2),
                 *(f["clusters"][n] for n in names),
+                f["dynamics"]["seen_nodes"],
+                f"{f['dynamics']['ghost_share']:.1%}",
+                f["dynamics"]["forgotten"],
             ]
             if data["labelled"]:
                 row += [format_number(f["ari"].get(n)) for n in names]

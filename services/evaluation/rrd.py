@@ -101,6 +101,11 @@ def read_metrics(path: str | Path) -> dict[str, MetricSeries]:
             np.concatenate([p[1] for p in parts]) if all(p[1] is not None for p in parts) else None
         )
         order = np.argsort(frames, kind="stable")
+        # one value per frame, the last logged: at the end of a stream the learner publishes
+        # its settled network again for the last frame
+        last_of_frame = np.append(frames[order][1:] != frames[order][:-1], True)
+        last_of_frame |= frames[order] < 0  # no frame timeline: keep every value
+        order = order[last_of_frame]
         series[name] = MetricSeries(
             name=name,
             frames=frames[order],

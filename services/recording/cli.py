@@ -17,71 +17,105 @@ EXAMPLES = """examples:
   gngdt record synth --scene tabletop --frames 30 --out recordings/tabletop.mcap
   gngdt record synth --scene tabletop_vanish --frames 90 --out vanish.mcap   # a changing scene
   gngdt record images --format redwood ../shared/data/rgbd/rtabmap_rgbd_test --out lab.mcap
-  gngdt record images --format tum rgbd_dataset_freiburg1_xyz --out fr1_xyz.mcap
+  gngdt record images --format tum rgbd_dataset_freiburg1_xyz --out fr1_xyz.mcap \\
+      --poses rgbd_dataset_freiburg1_xyz/groundtruth.txt
+  gngdt record images --format redwood ../shared/data/rgbd/tum_fr1_xyz_dvo_examples \\
+      --poses ../shared/data/rgbd/tum_fr1_xyz_dvo_examples/poses --out tum3.mcap
   gngdt record images --format pcl-tiff frames/ --out grabber.mcap --fx 525 --fy 525
+  gngdt record synth --help                     # scenes and every option
 """
 
 #: Log a progress line every this many frames.
 PROGRESS_EVERY = 10
 
 
-class _DefaultsAndRawEpilog(
-    argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter
-):
-    """Show defaults, and the epilog's lines as they are."""
+SYNTH_EXAMPLES = """examples:
+  gngdt record synth --scene tabletop --frames 30 --out recordings/tabletop.mcap
+  gngdt record synth --scene data2 --frames 10 --width 320 --height 240 --out small.mcap
+  gngdt record synth --scene tabletop --frames 90 --fps 15 --color-format jpeg --out jpeg.mcap
+"""
+
+IMAGES_EXAMPLES = """examples:
+  gngdt record images --format redwood ../shared/data/rgbd/rtabmap_rgbd_test --out lab.mcap
+  gngdt record images --format tum rgbd_dataset_freiburg1_xyz --out fr1_xyz.mcap
+  gngdt record images --format pcl-tiff frames/ --out grabber.mcap --fx 525 --fy 525
+  gngdt record images --format tum my_frames/ --camera-json my_camera.json --out mine.mcap
+"""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``synth`` and ``images`` sub-subcommands."""
     from services.recording.images import FORMATS
+    from services.recording.synth import SCENES
     from services.recording.writer import COLOR_FORMATS, COMPRESSIONS
 
     kinds = parser.add_subparsers(dest="record_kind", required=True, metavar="KIND")
 
     def add_output_options(sub: argparse.ArgumentParser) -> None:
-        sub.add_argument("--out", type=Path, required=True, help="MCAP file to write")
-        sub.add_argument("--fps", type=float, default=30.0, help="frame rate (default: 30)")
-        sub.add_argument("--compression", choices=COMPRESSIONS, default="zstd")
+        sub.add_argument("--out", type=Path, required=True, metavar="PATH.mcap",
+                         help="MCAP file to write (replaced if it exists)")
+        sub.add_argument("--fps", type=float, default=30.0,
+                         help="frame rate of the recording's stamps (default: %(default)g)")
+        sub.add_argument("--compression", choices=COMPRESSIONS, default="zstd",
+                         help="MCAP chunk compression (default: %(default)s)")
         sub.add_argument(
             "--color-format",
             choices=COLOR_FORMATS,
             default="raw",
-            help="colour as RawImage rgb8 (raw, default) or CompressedImage jpeg/png",
+            help="colour as a RawImage rgb8 (raw) or a CompressedImage jpeg/png "
+            "(default: %(default)s)",
         )
 
-    from services.recording.synth import SCENES
-
-    scene_list = "\n".join(f"  {name:16s}{text}" for name, text in SCENES.items())
+    scene_lines = "\n".join(f"  {name:<16} {text}" for name, text in sorted(SCENES.items()))
     synth = kinds.add_parser(
         "synth",
         help="render a synthetic scene with ground-truth labels and camera poses",
         description="Render a synthetic scene with the virtual Kinect: colour, depth, "
-        "ground-truth labels and the camera's pose (/tf) per frame.",
-        epilog=f"scenes:\n{scene_list}",
-        formatter_class=_DefaultsAndRawEpilog,
+        "ground-truth labels and the camera's pose (/tf) per frame.\n\nscenes:\n" + scene_lines,
+        epilog=SYNTH_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    synth.add_argument("--scene", required=True, metavar="NAME",
-                       help=f"scene: {', '.join(SCENES)} (described below)")
-    synth.add_argument("--frames", type=int, required=True, help="number of frames")
-    synth.add_argument("--width", type=int, default=640)
-    synth.add_argument("--height", type=int, default=480)
-    synth.add_argument("--seed", type=int, default=0)
+    synth.add_argument("--scene", required=True, choices=sorted(SCENES), metavar="NAME",
+                       help=f"scene to render: {', '.join(sorted(SCENES))} (described above)")
+    synth.add_argument("--frames", type=int, required=True, help="number of frames to render")
+    synth.add_argument("--width", type=int, default=640,
+                       help="image width in pixels (default: %(default)s)")
+    synth.add_argument("--height", type=int, default=480,
+                       help="image height in pixels (default: %(default)s)")
+    synth.add_argument("--seed", type=int, default=0,
+                       help="seed of the sensor noise (default: %(default)s)")
     add_output_options(synth)
 
     images = kinds.add_parser(
         "images",
         help="import real RGB-D frames (TUM, PCL ImageGrabber TIFFs, Redwood)",
-        description="Import an RGB-D image folder. Camera parameters: --camera-json, else "
-        "DIR/camera.json, else the format's defaults (TUM fr1: 517.3/516.5/318.6/255.3, depth "
-        "5000/m; pcl-tiff: 525/525/320/240, 1000/m; redwood: 525/525/319.5/239.5, 1000/m); the "
+        description="Import a folder of RGB-D images (colour registered to depth) into an "
+        "MCAP recording. Camera parameters: --camera-json, else DIR/camera.json, else the "
+        "format's defaults (TUM fr1: 517.3/516.5/318.6/255.3, depth 5000/m; pcl-tiff: "
+        "525/525/320/240, 1000/m; redwood: 525/525/319.5/239.5, 1000/m); the "
         "--fx/--fy/--cx/--cy/--depth-scale options override single values.",
+        epilog=IMAGES_EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     images.add_argument("directory", type=Path, metavar="DIR", help="folder with the images")
-    images.add_argument("--format", dest="image_format", choices=FORMATS, required=True)
-    images.add_argument("--camera-json", type=Path, help="camera parameters JSON file")
+    images.add_argument("--format", dest="image_format", choices=FORMATS, required=True,
+                        help="folder layout: tum (rgb/, depth/ and their .txt lists), pcl-tiff "
+                        "(PCL ImageGrabber frame_*_rgb.tiff/_depth.tiff), redwood (rgb/, depth/ "
+                        "PNGs)")
+    images.add_argument("--camera-json", type=Path, metavar="FILE.json",
+                        help="camera parameters: fx, fy, cx, cy, depth_scale (and width, height)")
     for name in ("fx", "fy", "cx", "cy"):
         images.add_argument(f"--{name}", type=float, help=f"intrinsic {name} in pixels")
     images.add_argument("--depth-scale", type=float, help="depth units per metre (1000 = mm)")
+    images.add_argument(
+        "--poses",
+        type=Path,
+        metavar="FILE",
+        help="camera-to-world poses, written as /tf from 'world': a TUM trajectory (timestamp "
+        "tx ty tz qx qy qz qw per line, interpolated at each frame's time), one 'tx ty tz qx "
+        "qy qz qw' line per frame, or a folder with one file per frame (a 4x4 matrix or such a "
+        "line, e.g. pose/NNNNNN.txt)",
+    )
     add_output_options(images)
 
 
@@ -143,9 +177,17 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     for name, value in overrides.items():
         if name != "cx" and name != "cy" and value <= 0:
             raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value}")
-    return iter_image_frames(
+    frames = iter_image_frames(
         args.directory, args.image_format, fps=args.fps, camera=replace(camera, **overrides)
     )
+    if args.poses is None:
+        return frames
+    from services.recording.images import count_image_frames
+    from services.recording.poses import attach_poses, load_poses
+
+    poses = load_poses(args.poses)  # every pose error before the first frame is written
+    count = count_image_frames(args.directory, args.image_format, fps=args.fps)
+    return attach_poses(frames, poses, count)
 
 
 def _synth_metadata(args: argparse.Namespace) -> dict[str, dict[str, str]]:

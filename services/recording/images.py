@@ -32,7 +32,7 @@ import numpy as np
 from services.recording.errors import RecordingError
 from services.recording.frame import CameraIntrinsics, Frame
 
-__all__ = ["FORMATS", "CameraParameters", "iter_image_frames", "load_camera"]
+__all__ = ["FORMATS", "CameraParameters", "count_image_frames", "iter_image_frames", "load_camera"]
 
 logger = logging.getLogger(__name__)
 
@@ -81,6 +81,23 @@ DEFAULT_CAMERAS: dict[str, CameraParameters] = {
     "pcl-tiff": CameraParameters(fx=525.0, fy=525.0, cx=320.0, cy=240.0, depth_scale=1000.0),
     "redwood": CameraParameters(fx=525.0, fy=525.0, cx=319.5, cy=239.5, depth_scale=1000.0),
 }
+
+
+def detect_format(directory: str | Path) -> str:
+    """The layout of an image folder: ``tum`` (rgb.txt), ``pcl-tiff`` (``frame_*_rgb.tiff``) or
+    ``redwood`` (color/ and depth/). RecordingError when it is none of them."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise RecordingError(directory, None, "not a directory")
+    if (directory / "rgb.txt").is_file():
+        return "tum"
+    if any(_PCL_NAME.match(path.name) for path in directory.iterdir()):
+        return "pcl-tiff"
+    if (directory / "color").is_dir() and (directory / "depth").is_dir():
+        return "redwood"
+    raise RecordingError(
+        directory, None, "no RGB-D layout found (rgb.txt, frame_*_rgb.tiff, or color/ + depth/)"
+    )
 
 
 def _check_format(fmt: str) -> None:
@@ -248,6 +265,27 @@ def _load_depth_mm(path: Path, index: int, depth_scale: float) -> np.ndarray:
     return np.clip(np.rint(millimetres), 0, np.iinfo(np.uint16).max).astype(np.uint16)
 
 
+def _image_pairs(directory: Path, fmt: str, fps: float) -> list[_ImagePair]:
+    if fmt == "tum":
+        pairs = _pairs_tum(directory)
+    elif fmt == "pcl-tiff":
+        pairs = _pairs_pcl_tiff(directory)
+    else:
+        pairs = _pairs_redwood(directory, fps)
+    if not pairs:
+        raise RecordingError(directory, None, f"no {fmt} colour/depth image pairs found")
+    return pairs
+
+
+def count_image_frames(directory: str | Path, fmt: str, fps: float = 30.0) -> int:
+    """How many frames :func:`iter_image_frames` will yield (pairs the images, reads none)."""
+    _check_format(fmt)
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise RecordingError(directory, None, "not a directory")
+    return len(_image_pairs(directory, fmt, fps))
+
+
 def iter_image_frames(
     directory: str | Path,
     fmt: str,
@@ -275,14 +313,7 @@ def iter_image_frames(
         if depth_scale <= 0:
             raise ValueError(f"depth_scale must be positive, got {depth_scale}")
         camera = replace(camera, depth_scale=float(depth_scale))
-    if fmt == "tum":
-        pairs = _pairs_tum(directory)
-    elif fmt == "pcl-tiff":
-        pairs = _pairs_pcl_tiff(directory)
-    else:
-        pairs = _pairs_redwood(directory, fps)
-    if not pairs:
-        raise RecordingError(directory, None, f"no {fmt} colour/depth image pairs found")
+    pairs = _image_pairs(directory, fmt, fps)
     for index, pair in enumerate(pairs):
         color = _load_color(pair.color, index)
         depth = _load_depth_mm(pair.depth, index, camera.depth_scale)

@@ -19,7 +19,8 @@ through any chain of frames, interpolated (:mod:`services.recording.transforms`)
 is ``fixed_frame``, or with ``"auto"`` the first of ``world``, ``map``, ``odom`` connected to the
 camera, else the root of the camera's tree. A recording whose transforms never connect the
 fixed frame and the camera gives frames without a pose, with one warning naming the frames; a
-frame whose time the transforms do not cover has no pose either (warned).
+frame whose time the transforms do not cover has no pose either (warned), and says why in
+``frame.extras["pose_error"]``: the recording has poses, only not for that frame.
 
 Frames: a colour image and a depth image are paired when their stamps (the message's own
 timestamp/header stamp, else the MCAP ``log_time``) differ by at most ``max_skew_ns`` (default
@@ -40,7 +41,7 @@ import logging
 import os
 from collections import deque
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import IO, Any
 
@@ -50,13 +51,34 @@ from services.recording.errors import RecordingError
 from services.recording.frame import CameraIntrinsics, CameraPose, Frame
 from services.recording.transforms import TransformError, TransformTree
 
-__all__ = ["RecordingError", "read_frames", "recording_info", "recording_metadata"]
+__all__ = ["RecordingError", "check_recording", "read_frames", "recording_info",
+           "recording_metadata"]
 
 logger = logging.getLogger(__name__)
 
 #: Unpaired colour or depth images kept while waiting for their partner.
 MAX_PENDING_IMAGES = 32
 MAX_FRAMES_WITHOUT_CALIBRATION = 64
+
+
+@dataclass(frozen=True)
+class ReadLimits:
+    """What reading a recording may cost, however the file is made: a few kilobytes must not
+    cost gigabytes or minutes. Each is checked before the memory is spent.
+
+    max_frame_pixels: largest image (width x height); default 4096 x 2160.
+    max_chunk_bytes: largest MCAP chunk once decompressed (and largest record).
+    max_held_bytes: images held while they wait for their partner or for a calibration.
+    """
+
+    max_frame_pixels: int = 4096 * 2160
+    max_chunk_bytes: int = 64 * 1024 * 1024
+    max_held_bytes: int = 256 * 1024 * 1024
+
+    def __post_init__(self) -> None:
+        for item in fields(self):
+            if getattr(self, item.name) <= 0:
+                raise ValueError(f"{item.name} must be positive, got {getattr(self, item.name)}")
 
 _COLOR_ENCODINGS = frozenset({"rgb8", "bgr8", "8UC3", "rgba8", "bgra8", "mono8", "8UC1"})
 _DEPTH_ENCODINGS = frozenset({"16UC1", "mono16", "32FC1"})
@@ -113,16 +135,25 @@ def normalize_color(color: np.ndarray) -> np.ndarray:
     return color
 
 
-def decode_compressed(data: bytes, image_format: str) -> np.ndarray:
-    """(H, W, 3) uint8 RGB of a jpeg/png image."""
+def decode_compressed(data: bytes, image_format: str,
+                      max_pixels: int = ReadLimits.max_frame_pixels) -> np.ndarray:
+    """(H, W, 3) uint8 RGB of a jpeg/png image of at most ``max_pixels`` (OpenCV's own ceiling,
+    ``OPENCV_IO_MAX_IMAGE_PIXELS``, which `gngdt` sets, bounds what decoding allocates)."""
     import cv2
 
     if "depth" in image_format.lower():
         raise _DecodeFailure(f"compressed depth ({image_format!r}) is not supported")
     buffer = np.frombuffer(data, dtype=np.uint8)
-    image = cv2.imdecode(buffer, cv2.IMREAD_COLOR) if buffer.size else None
+    try:
+        image = cv2.imdecode(buffer, cv2.IMREAD_COLOR) if buffer.size else None
+    except cv2.error as error:  # e.g. larger than OpenCV's ceiling
+        raise _DecodeFailure(f"OpenCV cannot decode the {image_format or 'compressed'} image: "
+                             f"{str(error).strip().splitlines()[-1]}") from error
     if image is None:
         raise _DecodeFailure(f"OpenCV cannot decode the {image_format or 'compressed'} image")
+    if image.shape[0] * image.shape[1] > max_pixels:
+        raise _DecodeFailure(f"image {image.shape[1]}x{image.shape[0]} exceeds the limit of "
+                             f"{max_pixels} pixels (--max-frame-pixels)")
     return image[..., ::-1].copy()
 
 
@@ -196,12 +227,17 @@ class _MessageDecoder:
         return stamp if stamp else log_time_ns
 
     @staticmethod
-    def pixels(schema_name: str, payload: Any) -> np.ndarray:
-        """Pixels of an image message (see ``schemas.packing.decode_pixels`` for shapes)."""
+    def pixels(schema_name: str, payload: Any,
+               max_pixels: int = ReadLimits.max_frame_pixels) -> np.ndarray:
+        """Pixels of an image message (see ``schemas.packing.decode_pixels`` for shapes), of at
+        most ``max_pixels``, checked before decoding."""
         from schemas.packing import MessageError, decode_pixels
 
         if schema_name.endswith("CompressedImage"):
-            return decode_compressed(bytes(payload.data), payload.format)
+            return decode_compressed(bytes(payload.data), payload.format, max_pixels)
+        if payload.width * payload.height > max_pixels:
+            raise _DecodeFailure(f"image {payload.width}x{payload.height} exceeds the limit of "
+                                 f"{max_pixels} pixels (--max-frame-pixels)")
         try:
             return decode_pixels(
                 bytes(payload.data),
@@ -232,23 +268,72 @@ class _MessageDecoder:
             raise _DecodeFailure(str(error)) from error
 
 
-def _open_messages(stream: IO[bytes]) -> Iterator[tuple[Any, Any, Any]]:
+def _open_messages(
+    stream: IO[bytes], max_record_bytes: int = ReadLimits.max_chunk_bytes
+) -> Iterator[tuple[Any, Any, Any]]:
     """(schema, channel, message) in log-time order when the file has an index, else file order.
 
     An intact file is read through its chunk index; a file without a readable summary (e.g.
     truncated by a crash) is streamed record by record so that everything before the damage is
-    still delivered.
+    still delivered. Records larger than ``max_record_bytes`` are refused (mcap raises).
     """
     from mcap.reader import NonSeekingReader, SeekingReader
 
     try:
-        summary = SeekingReader(stream).get_summary()
+        summary = SeekingReader(stream, record_size_limit=max_record_bytes).get_summary()
     except Exception:  # missing or damaged footer/summary: fall back to streaming
         summary = None
     stream.seek(0)
     if summary is not None and summary.chunk_indexes:
-        return SeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=True)
-    return NonSeekingReader(stream, validate_crcs=True).iter_messages(log_time_order=False)
+        return SeekingReader(stream, validate_crcs=True, record_size_limit=max_record_bytes
+                             ).iter_messages(log_time_order=True)
+    return NonSeekingReader(stream, validate_crcs=True, record_size_limit=max_record_bytes
+                            ).iter_messages(log_time_order=False)
+
+
+def check_chunks(stream: IO[bytes], path: Path, max_chunk_bytes: int) -> None:
+    """Refuse (``RecordingError``) a file holding a chunk that would inflate beyond
+    ``max_chunk_bytes``, by the sizes its record and its compressed frame declare, before any
+    chunk is decompressed (an 8 kB chunk of zeros can declare 256 MB). Reads the file once;
+    damage is left for the reading itself to report, after the frames before it."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    offset = 0
+    try:
+        reader = StreamReader(stream, emit_chunks=True, record_size_limit=max_chunk_bytes)
+        for record in reader.records:
+            if isinstance(record, Chunk):
+                declared = max(record.uncompressed_size, _frame_content_size(record))
+                if declared > max_chunk_bytes:
+                    raise RecordingError(
+                        path, None, f"a {record.compression or 'raw'} chunk of "
+                        f"{len(record.data)} bytes (at log time {record.message_start_time}) "
+                        f"inflates to {declared} bytes, more than the limit of "
+                        f"{max_chunk_bytes} (--max-chunk-mb)")
+            offset += 1
+    except RecordingError:
+        raise
+    except Exception as error:  # damage: the reading itself reports it, with its place
+        logger.debug("%s: chunk check stopped at record %d: %s", path, offset, error)
+    finally:
+        stream.seek(0)
+
+
+def _frame_content_size(chunk: Any) -> int:
+    """What the chunk's compressed frame says it inflates to (0 when it does not say)."""
+    try:
+        if chunk.compression == "zstd":
+            import zstandard
+
+            return max(int(zstandard.frame_content_size(chunk.data)), 0)
+        if chunk.compression == "lz4":
+            import lz4.frame
+
+            return int(lz4.frame.get_frame_info(chunk.data).get("content_size") or 0)
+    except Exception:  # an unreadable frame header fails decompression later
+        return 0
+    return 0
 
 
 #: receives each bad frame's error when the caller chose to skip bad frames
@@ -265,9 +350,11 @@ class _FrameAssembler:
         max_skew_ns: int,
         on_bad_frame: BadFrameHandler | None = None,
         poses: PoseLookup | None = None,
+        max_held_bytes: int = ReadLimits.max_held_bytes,
     ) -> None:
         self.path = path
         self.poses = poses
+        self.max_held_bytes = max_held_bytes
         self.on_bad_frame = on_bad_frame
         self.calibration = intrinsics
         self.max_skew_ns = max_skew_ns
@@ -295,12 +382,34 @@ class _FrameAssembler:
             yield from self._checked_frame(color, depth, labels)
 
     def add_labels(self, image: _Image) -> None:
+        self._make_room(image.pixels.nbytes)
         self.labels.append(image)
+
+    def held_bytes(self) -> int:
+        """Bytes of the images held: unpaired, and frames waiting for a calibration."""
+        waiting = [image for queue in (*self.pending.values(), self.labels) for image in queue]
+        held = sum(image.pixels.nbytes for image in waiting)
+        for color, depth, labels in self.awaiting_calibration:
+            held += color.pixels.nbytes + depth.pixels.nbytes
+            held += 0 if labels is None else labels.nbytes
+        return held
+
+    def _make_room(self, nbytes: int) -> None:
+        """Drop the oldest unpaired images until ``nbytes`` more fit in ``max_held_bytes``."""
+        held = self.held_bytes()
+        queues = [*self.pending.values(), self.labels]
+        while held + nbytes > self.max_held_bytes and any(queues):
+            oldest = min((queue for queue in queues if queue), key=lambda q: q[0].stamp_ns)
+            dropped = oldest.popleft()
+            held -= dropped.pixels.nbytes
+            logger.debug("%s: dropping unpaired image at %d ns (--max-pending-mb)", self.path,
+                         dropped.stamp_ns)
 
     def add_image(self, role: str, image: _Image) -> Iterator[Frame]:
         other = self.pending["depth" if role == "color" else "color"]
         partner = min(other, key=lambda item: abs(item.stamp_ns - image.stamp_ns), default=None)
         if partner is None or abs(partner.stamp_ns - image.stamp_ns) > self.max_skew_ns:
+            self._make_room(image.pixels.nbytes)
             self.pending[role].append(image)
             return
         while other[0] is not partner:  # older unpaired images can no longer pair: drop them
@@ -313,10 +422,15 @@ class _FrameAssembler:
             (item.pixels for item in self.labels if item.stamp_ns == color.stamp_ns), None
         )
         if self.calibration is None:
-            if len(self.awaiting_calibration) >= MAX_FRAMES_WITHOUT_CALIBRATION:
+            frame_bytes = color.pixels.nbytes + depth.pixels.nbytes
+            frame_bytes += 0 if labels is None else labels.nbytes
+            if (len(self.awaiting_calibration) >= MAX_FRAMES_WITHOUT_CALIBRATION
+                    or self.held_bytes() + frame_bytes > self.max_held_bytes):
                 raise self.error(
                     f"no calibration channel (CameraCalibration/CameraInfo) in the first "
-                    f"{MAX_FRAMES_WITHOUT_CALIBRATION} frames"
+                    f"{len(self.awaiting_calibration) + 1} frames (at most "
+                    f"{MAX_FRAMES_WITHOUT_CALIBRATION} frames or {self.max_held_bytes >> 20} "
+                    "MB are held waiting for one, --max-pending-mb)"
                 )
             self.awaiting_calibration.append((color, depth, labels))
             return
@@ -356,6 +470,11 @@ class _FrameAssembler:
                 f"calibration is for {self.calibration.width}x{self.calibration.height}, "
                 f"colour is {width}x{height}"
             )
+        pose, pose_error = None, None
+        if self.poses is not None:
+            pose, pose_error = self.poses(
+                color.frame_id or depth.frame_id, color.stamp_ns, self.next_index
+            )
         frame = Frame(
             index=self.next_index,
             timestamp_ns=color.stamp_ns,
@@ -363,12 +482,36 @@ class _FrameAssembler:
             depth=normalize_depth(depth.pixels),
             intrinsics=self.calibration,
             labels=None if labels is None else labels.astype(np.uint16, copy=False),
-            pose=None if self.poses is None else self.poses(
-                color.frame_id or depth.frame_id, color.stamp_ns, self.next_index
-            ),
+            pose=pose,
+            extras={} if pose_error is None else {"pose_error": pose_error},
         )
         self.next_index += 1
         return frame
+
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+def check_recording(path: str | Path) -> None:
+    """Raise :class:`RecordingError` saying why ``path`` cannot be an MCAP recording (missing,
+    a folder, empty, another kind of file); cheap: reads 8 bytes."""
+    path = Path(path)
+    if path.is_dir():
+        inside = sorted(item.name for item in path.glob("*.mcap"))[:5]
+        hint = f"; inside: {', '.join(inside)}" if inside else "; it holds no .mcap file"
+        raise RecordingError(path, None, f"is a folder, not an MCAP file{hint}")
+    try:
+        with open(path, "rb") as stream:
+            start = stream.read(len(MCAP_MAGIC))
+    except FileNotFoundError:
+        raise RecordingError(path, None, "no such file") from None
+    except OSError as error:
+        raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
+    if not start:
+        raise RecordingError(path, None, "is empty (0 bytes)")
+    if start != MCAP_MAGIC:
+        raise RecordingError(path, None, f"is not an MCAP file (it starts with {start!r}, an "
+                             f"MCAP file with {MCAP_MAGIC!r})")
 
 
 def _transform_samples(
@@ -419,7 +562,8 @@ def _may_have_transforms(stream: IO[bytes]) -> bool:
     )
 
 
-def read_transforms(stream: IO[bytes], path: Path) -> TransformTree:
+def read_transforms(stream: IO[bytes], path: Path,
+                    max_record_bytes: int = ReadLimits.max_chunk_bytes) -> TransformTree:
     """Every transform of the recording (first pass). A bad transform message is warned about
     (naming its frames) and skipped; damage to the file ends the pass, the main pass reports it."""
     tree = TransformTree()
@@ -428,7 +572,7 @@ def read_transforms(stream: IO[bytes], path: Path) -> TransformTree:
     decoder = _MessageDecoder()
     bad = 0
     try:
-        for schema, channel, message in _open_messages(stream):
+        for schema, channel, message in _open_messages(stream, max_record_bytes):
             if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
                 continue
             try:
@@ -485,26 +629,28 @@ class PoseLookup:
         self.fixed_frames[camera_frame] = fixed
         return fixed
 
-    def __call__(self, camera_frame: str, stamp_ns: int, index: int) -> CameraPose | None:
-        """The camera's pose at ``stamp_ns``, or None (warned) when there is none."""
+    def __call__(self, camera_frame: str, stamp_ns: int, index: int
+                 ) -> tuple[CameraPose | None, str | None]:
+        """The camera's pose at ``stamp_ns``; or None and, when the recording has poses for
+        this camera but not at this time, why (warned)."""
         if not camera_frame:
             if "" not in self.fixed_frames:
                 self.fixed_frames[""] = None
                 logger.warning("%s: the images carry no frame_id, so no pose can be attached",
                                self.path)
-            return None
+            return None, None
         fixed = self.fixed_frame_for(camera_frame)
         if fixed is None:
-            return None
+            return None, None
         try:
-            return CameraPose(self.transforms.lookup(fixed, camera_frame, stamp_ns), fixed)
+            return CameraPose(self.transforms.lookup(fixed, camera_frame, stamp_ns), fixed), None
         except TransformError as error:
             self.missing += 1
             if self.missing <= MAX_POSE_WARNINGS:
                 logger.warning("%s: frame %d has no pose: %s", self.path, index, error)
             elif self.missing == MAX_POSE_WARNINGS + 1:
                 logger.warning("%s: more frames without a pose; not warned one by one", self.path)
-            return None
+            return None, str(error)
 
 
 def _topic_matches(topic: str, camera_prefix: str | None) -> bool:
@@ -522,6 +668,7 @@ def read_frames(
     max_skew_ns: int = 0,
     on_bad_frame: BadFrameHandler | None = None,
     fixed_frame: str | None = "auto",
+    limits: ReadLimits | None = None,
 ) -> Iterator[Frame]:
     """Yield the frames of an MCAP recording in log-time order (see the module docstring).
 
@@ -530,33 +677,39 @@ def read_frames(
     difference between a paired colour and depth image. on_bad_frame: called with the
     RecordingError of each bad frame, which is then skipped (default: raise it). fixed_frame:
     the frame poses are given in (``"auto"``: see the module docstring; None: no poses).
+    limits: what reading may cost (:class:`ReadLimits`; an image over the pixel limit is a bad
+    frame, a chunk over the chunk limit refuses the file before anything is decompressed).
     Raises RecordingError naming the file and frame for missing calibration, mismatched sizes,
     undecodable messages and truncated or corrupt files -- after yielding the frames before.
     """
+    limits = limits or ReadLimits()
     path = Path(path)
     try:
         stream = open(path, "rb")
     except OSError as error:
         raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
     with stream:
+        check_chunks(stream, path, limits.max_chunk_bytes)
         poses = None
         if fixed_frame is not None:
-            transforms = read_transforms(stream, path)
+            transforms = read_transforms(stream, path, limits.max_chunk_bytes)
             if len(transforms):
                 poses = PoseLookup(path, transforms, fixed_frame)
             stream.seek(0)
-        assembler = _FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame, poses)
-        yield from _read_stream(path, stream, camera_prefix, assembler)
+        assembler = _FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame, poses,
+                                    limits.max_held_bytes)
+        yield from _read_stream(path, stream, camera_prefix, assembler, limits)
 
 
 def _read_stream(
-    path: Path, stream: IO[bytes], camera_prefix: str | None, assembler: _FrameAssembler
+    path: Path, stream: IO[bytes], camera_prefix: str | None, assembler: _FrameAssembler,
+    limits: ReadLimits,
 ) -> Iterator[Frame]:
     max_skew_ns = assembler.max_skew_ns
     decoder = _MessageDecoder()
     chosen: dict[str, str] = {}  # role -> topic
     try:
-        messages = _open_messages(stream)
+        messages = _open_messages(stream, limits.max_chunk_bytes)
         for schema, channel, message in messages:
             if schema is None or schema.name not in _FOXGLOVE_SCHEMAS | _ROS_SCHEMAS:
                 continue
@@ -572,7 +725,7 @@ def _read_stream(
                     continue
                 image = _Image(
                     decoder.stamp_ns(schema.name, payload, message.log_time),
-                    decoder.pixels(schema.name, payload),
+                    decoder.pixels(schema.name, payload, limits.max_frame_pixels),
                     decoder.frame_id(schema.name, payload),
                 )
             except _DecodeFailure as failure:

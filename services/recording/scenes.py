@@ -673,15 +673,16 @@ def tabletop_scene() -> Scene:
 
 
 #: when the tabletop's objects change in the moving scenes, seconds after the first frame
-CHANGE_AT_S = 1.0
+CHANGE_AT_S = 2.0
 
 
 def tabletop_vanish_scene() -> Scene:
-    """The tabletop, camera orbiting as in ``tabletop``; the red box vanishes 1 s in (frame 30
-    at 30 fps), leaving the table top under it to be seen."""
+    """The tabletop, camera orbiting as in ``tabletop``; the red box vanishes 2 s in (frame 60
+    at 30 fps, when a learner at 10,000 steps a frame has just reached 1,000 nodes), leaving the
+    table top under it to be seen."""
     return Scene(
         name="tabletop_vanish",
-        description="tabletop with the camera orbiting; the red box vanishes 1 s in",
+        description="tabletop with the camera orbiting; the red box vanishes 2 s in",
         primitives=_tabletop_primitives(),
         orbit=TABLETOP_ORBIT,
         background=(0, 0, 0),
@@ -691,12 +692,12 @@ def tabletop_vanish_scene() -> Scene:
 
 
 def tabletop_move_scene() -> Scene:
-    """The tabletop, camera orbiting as in ``tabletop``; from 1 s to 2.5 s in the blue sphere
+    """The tabletop, camera orbiting as in ``tabletop``; from 2 s to 3.5 s in the blue sphere
     slides 0.3 m away from the camera (+y, 0.2 m/s) across the table, then rests."""
     return Scene(
         name="tabletop_move",
         description="tabletop with the camera orbiting; the blue sphere slides 0.3 m across "
-        "the table from 1 s to 2.5 s",
+        "the table from 2 s to 3.5 s",
         primitives=_tabletop_primitives(),
         orbit=TABLETOP_ORBIT,
         background=(0, 0, 0),

@@ -55,25 +55,67 @@ def unit_quaternion(quaternion: object, what: str) -> np.ndarray:
     return q / np.sqrt(norm2)
 
 
+# Quaternion arithmetic is written out here rather than taken from scipy.spatial.transform:
+# importing scipy.spatial costs ~1 s, which capture and logger would pay at start-up only to
+# turn a few quaternions into matrices (tests check these against scipy).
+def _rotation_matrix(q: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation of a unit quaternion (x, y, z, w)."""
+    x, y, z, w = q
+    return np.array([
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+    ])
+
+
+def _quaternion(r: np.ndarray) -> np.ndarray:
+    """Unit quaternion (x, y, z, w), w >= 0, of a (3, 3) rotation (Shepperd's method: the
+    largest of the four candidates' divisors keeps it exact near every rotation)."""
+    trace = r[0, 0] + r[1, 1] + r[2, 2]
+    if trace > 0.0:
+        s = 2.0 * np.sqrt(trace + 1.0)
+        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, s / 4]
+    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
+        q = [s / 4, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
+    elif r[1, 1] > r[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
+        q = [(r[0, 1] + r[1, 0]) / s, s / 4, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
+        q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, s / 4, (r[1, 0] - r[0, 1]) / s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0 else q
+
+
+def _slerp(q0: np.ndarray, q1: np.ndarray, fraction: float) -> np.ndarray:
+    """Spherical-linear interpolation between unit quaternions, along the shorter arc."""
+    dot = float(q0 @ q1)
+    if dot < 0.0:
+        q1, dot = -q1, -dot
+    if dot > 0.9995:  # nearly equal: linear, renormalised (the arc formula loses precision)
+        q = q0 + fraction * (q1 - q0)
+        return q / np.linalg.norm(q)
+    angle = np.arccos(dot)
+    return (np.sin((1.0 - fraction) * angle) * q0 + np.sin(fraction * angle) * q1) / np.sin(angle)
+
+
 def pose_to_matrix(translation: object, quaternion: object, what: str = "pose") -> np.ndarray:
     """(4, 4) float64 rigid transform from a translation (3,) and a quaternion (x, y, z, w)."""
-    from scipy.spatial.transform import Rotation
-
     t = np.asarray(translation, dtype=np.float64).reshape(-1)
     if t.shape != (3,) or not np.isfinite(t).all():
         raise TransformError(f"{what}: translation must be 3 finite numbers, got {t}")
     matrix = np.eye(4)
-    matrix[:3, :3] = Rotation.from_quat(unit_quaternion(quaternion, what)).as_matrix()
+    matrix[:3, :3] = _rotation_matrix(unit_quaternion(quaternion, what))
     matrix[:3, 3] = t
     return matrix
 
 
 def matrix_to_pose(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Translation (3,) and unit quaternion (x, y, z, w) of a (4, 4) rigid transform."""
-    from scipy.spatial.transform import Rotation
-
+    """Translation (3,) and unit quaternion (x, y, z, w), w >= 0, of a (4, 4) rigid transform."""
     matrix = np.asarray(matrix, dtype=np.float64)
-    return matrix[:3, 3].copy(), Rotation.from_matrix(matrix[:3, :3]).as_quat()
+    return matrix[:3, 3].copy(), _quaternion(matrix[:3, :3])
 
 
 def _inverse(matrix: np.ndarray) -> np.ndarray:
@@ -109,8 +151,6 @@ class _Link:
 
     def at(self, stamp_ns: int, max_extrapolation_ns: int, child: str) -> np.ndarray:
         """(4, 4) parent_from_child at ``stamp_ns``."""
-        from scipy.spatial.transform import Rotation, Slerp
-
         if self.static:
             _, translation, quaternion = self.samples[0]
             return pose_to_matrix(translation, quaternion)
@@ -128,9 +168,8 @@ class _Link:
         after = int(np.searchsorted(self._stamps, stamp_ns))
         (t0, p0, q0), (t1, p1, q1) = self.samples[after - 1], self.samples[after]
         fraction = (stamp_ns - t0) / (t1 - t0) if t1 > t0 else 1.0
-        rotation = Slerp([0.0, 1.0], Rotation.from_quat([q0, q1]))(fraction)
         matrix = np.eye(4)
-        matrix[:3, :3] = rotation.as_matrix()
+        matrix[:3, :3] = _rotation_matrix(_slerp(np.asarray(q0), np.asarray(q1), fraction))
         matrix[:3, 3] = np.asarray(p0) + fraction * (np.asarray(p1) - np.asarray(p0))
         return matrix
 

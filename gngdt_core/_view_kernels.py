@@ -1,0 +1,119 @@
+"""Numba kernels of the sensor's view: which nodes the sensor could have seen in one batch.
+
+A batch of points in the camera frame (x right, y down, z forward) is binned on the image plane
+by normalised coordinates ``u = x / z``, ``v = y / z`` into square cells ``cell`` wide; a cell
+keeps the farthest depth ``z`` measured in it (0: nothing measured). A node is *seen* when, put
+in the camera frame, the cells around it out to ``reach`` (the node's share of the surface: the
+running node spacing, in the model's units, seen at the node's depth) are all measured and
+inside the grid, and it is not behind the farthest depth of its own cell by more than ``margin``
+times that depth: in free space in front of what the sensor measured, or on it. Nodes behind the
+measured surface (occluded), outside the view, at its edge or next to holes (where only part of
+what they stand for is in view, so they win fewer samples) are not seen. Pure functions over
+arrays.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+#: points nearer than this (in the camera's z, input units) are not binned
+MIN_DEPTH = 1e-6
+#: the neighbourhood a node needs measured is at most this many cells out from its own
+MAX_REACH_CELLS = 8
+
+
+@njit(cache=True)
+def view_bounds(points):
+    """(u_min, u_max, v_min, v_max, count) of the points in front of the camera.
+
+    points: (M, 3) any float, camera frame."""
+    u_min = np.inf
+    u_max = -np.inf
+    v_min = np.inf
+    v_max = -np.inf
+    count = 0
+    for i in range(points.shape[0]):
+        z = float(points[i, 2])
+        if not z > MIN_DEPTH:  # also skips NaN
+            continue
+        u = points[i, 0] / z
+        v = points[i, 1] / z
+        if not (math.isfinite(u) and math.isfinite(v)):
+            continue
+        u_min = min(u_min, u)
+        u_max = max(u_max, u)
+        v_min = min(v_min, v)
+        v_max = max(v_max, v)
+        count += 1
+    return u_min, u_max, v_min, v_max, count
+
+
+@njit(cache=True)
+def fill_depth_grid(points, u_min, v_min, inv_cell, zmax):
+    """Farthest depth per cell into ``zmax`` (rows: v, columns: u; zeros beforehand)."""
+    rows, columns = zmax.shape
+    for i in range(points.shape[0]):
+        z = float(points[i, 2])
+        if not z > MIN_DEPTH:
+            continue
+        u = points[i, 0] / z
+        v = points[i, 1] / z
+        if not (math.isfinite(u) and math.isfinite(v)):
+            continue
+        column = min(int((u - u_min) * inv_cell), columns - 1)
+        row = min(int((v - v_min) * inv_cell), rows - 1)
+        if z > zmax[row, column]:
+            zmax[row, column] = z
+
+
+@njit(cache=True)
+def measured_counts(zmax):
+    """(rows + 1, columns + 1) int64 summed-area table of the measured cells (zmax > 0)."""
+    rows, columns = zmax.shape
+    table = np.zeros((rows + 1, columns + 1), dtype=np.int64)
+    for row in range(rows):
+        running = 0
+        for column in range(columns):
+            if zmax[row, column] > 0.0:
+                running += 1
+            table[row + 1, column + 1] = table[row, column + 1] + running
+    return table
+
+
+@njit(cache=True)
+def judge_nodes(pos, n, camera_from_model, zmax, measured, u_min, v_min, inv_cell, margin, reach,
+                seen):
+    """``seen[i]`` = 1 for each node ``i < n`` the sensor could have seen, else 0.
+
+    pos: (cap, 3) float64 node positions in the model's frame; camera_from_model: (4, 4);
+    measured: `measured_counts` of ``zmax``; reach: a node's radius, model units.
+    """
+    rows, columns = zmax.shape
+    r = camera_from_model
+    for i in range(n):
+        x = r[0, 0] * pos[i, 0] + r[0, 1] * pos[i, 1] + r[0, 2] * pos[i, 2] + r[0, 3]
+        y = r[1, 0] * pos[i, 0] + r[1, 1] * pos[i, 1] + r[1, 2] * pos[i, 2] + r[1, 3]
+        z = r[2, 0] * pos[i, 0] + r[2, 1] * pos[i, 1] + r[2, 2] * pos[i, 2] + r[2, 3]
+        seen[i] = 0
+        if not z > MIN_DEPTH:
+            continue
+        fu = (x / z - u_min) * inv_cell
+        fv = (y / z - v_min) * inv_cell
+        if not (0.0 <= fu < columns and 0.0 <= fv < rows):
+            continue
+        column = int(fu)
+        row = int(fv)
+        ring = max(1, min(MAX_REACH_CELLS, math.ceil(reach / z * inv_cell)))
+        low_row, high_row = row - ring, row + ring + 1
+        low_column, high_column = column - ring, column + ring + 1
+        if low_row < 0 or low_column < 0 or high_row > rows or high_column > columns:
+            continue
+        count = (measured[high_row, high_column] - measured[low_row, high_column]
+                 - measured[high_row, low_column] + measured[low_row, low_column])
+        if count < (2 * ring + 1) * (2 * ring + 1):
+            continue
+        if z <= zmax[row, column] * (1.0 + margin):
+            seen[i] = 1

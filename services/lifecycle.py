@@ -1,0 +1,110 @@
+"""How every gngdt process starts and stops: the first SIGINT, SIGTERM or SIGHUP stops it, and a
+process started by `gngdt run` (or by a service, like the logger's rerun server) dies with its
+parent, so that no signal and no crash ever leaves an orphan behind.
+
+Until a service enters :func:`graceful` (its main loop, which polls :data:`STOP`), a signal
+interrupts start-up where it stands (``KeyboardInterrupt``, exit 130); inside, it only sets
+:data:`STOP` and the loop winds down cleanly. A SIGHUP that ``nohup`` asked to ignore stays
+ignored. Loops must wait with a timeout: a signal that one of zenoh's threads received runs its
+Python handler only once the main thread wakes up.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+
+#: set by the first stop signal; every service loop polls it
+STOP = threading.Event()
+#: names the parent a child of `gngdt run` must not outlive (its pid)
+PARENT_ENV = "GNGDT_PARENT_PID"
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+_PR_SET_PDEATHSIG = 1
+
+_graceful = False
+_signals_received: list[int] = []
+_wake_write = -1
+
+
+def _on_signal(signum: int, _frame: object) -> None:
+    _signals_received.append(signum)
+    # STOP is set by the relay thread: Event.set() here could take the lock of an Event.wait()
+    # the main thread is inside of, and deadlock
+    os.write(_wake_write, b"\0")
+    if not _graceful:
+        raise KeyboardInterrupt
+
+
+def _relay_stop(wake_read: int) -> None:
+    os.read(wake_read, 1)
+    STOP.set()
+
+
+def install() -> None:
+    """Install the stop handlers and honour :data:`PARENT_ENV`; the CLI calls this first."""
+    global _wake_write
+    if _wake_write < 0:
+        wake_read, _wake_write = os.pipe()
+        threading.Thread(target=_relay_stop, args=(wake_read,), name="stop-signal",
+                         daemon=True).start()
+    for signum in STOP_SIGNALS:
+        if signum == signal.SIGHUP and signal.getsignal(signum) == signal.SIG_IGN:
+            continue  # started under nohup: the user asked to survive the terminal
+        signal.signal(signum, _on_signal)
+    parent = os.environ.pop(PARENT_ENV, None)
+    if parent is not None:
+        die_with_parent(int(parent))
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Get SIGTERM when ``parent_pid`` (our parent) exits; exit now if it already has."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    if os.getppid() != parent_pid:  # the parent died before the prctl took effect
+        raise SystemExit(1)
+
+
+def child_environment() -> dict[str, str]:
+    """The environment of a gngdt child of this process (it will die with us)."""
+    return {**os.environ, PARENT_ENV: str(os.getpid())}
+
+
+#: runs a non-Python command so that it dies with the process that started it (self-contained:
+#: imports nothing from the current folder)
+_TRAMPOLINE = """
+import ctypes, os, signal, sys
+if sys.platform.startswith("linux"):
+    ctypes.CDLL(None).prctl(1, signal.SIGTERM, 0, 0, 0)
+if os.getppid() != int(sys.argv[1]):
+    sys.exit(1)
+os.execvp(sys.argv[2], sys.argv[2:])
+"""
+
+
+def orphan_proof(command: list[str]) -> list[str]:
+    """``command`` wrapped so that it gets SIGTERM when this process exits, however it exits
+    (the death signal survives ``exec``)."""
+    return [sys.executable, "-P", "-c", _TRAMPOLINE, str(os.getpid()), *command]
+
+
+@contextlib.contextmanager
+def graceful() -> Iterator[threading.Event]:
+    """Inside, a stop signal only sets :data:`STOP` (yielded) for the service loop to see."""
+    global _graceful
+    _graceful = True
+    try:
+        yield STOP
+    finally:
+        _graceful = False
+
+
+def stop_reason() -> str:
+    """The first stop signal's name, or ``""`` if none came."""
+    return signal.Signals(_signals_received[0]).name if _signals_received else ""

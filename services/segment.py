@@ -1,0 +1,206 @@
+"""Segment RGB-D frames into objects: a uint16 label image per frame and a JSON summary.
+
+SOURCE is an MCAP recording (gngdt's layout or a ROS 2 bag) or a folder of frames in a layout
+``gngdt record images`` reads (redwood, tum, pcl-tiff; detected, or ``--format``). Each frame is
+deprojected to an organized point array and segmented by GNG-DT
+(`gngdt_core.frame_segmenter.FrameSegmenter`): by default online, one network carried from frame
+to frame; with ``--independent`` every frame is learned from scratch (unrelated snapshots).
+
+Outputs in ``--out DIR``: ``<name>.png`` per frame, a uint16 label image of the frame's size
+(0 = no segment: no depth there; k >= 1 = segment k, by decreasing size), ``<name>`` being the
+colour image's file stem for a folder and the 0-based frame index as 6 digits for a recording;
+and ``summary.json`` (per frame: nodes, segments, steps, milliseconds per phase; the mode, the
+parameters and the intrinsics used). Every frame is read once before any learning, so bad input
+fails fast with the file named; outputs are written into a hidden folder beside DIR that becomes
+DIR only when every frame is done. On failure DIR is left as it was (absent, or untouched) and
+the exit code is 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from gngdt_core.frame_segmenter import FrameResult, FrameSegmenter
+    from services.recording.frame import Frame
+    from services.recording.sources import FrameSource
+    from services.segment_profile import SegmenterProfile
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt segment recordings/tabletop.mcap --out seg/tabletop        # online: one network
+  gngdt segment ../shared/data/labelled/mosd_learn --out seg/mosd --independent
+  gngdt segment fr1_desk/ --format tum --out seg/desk --params my_profile.toml
+  gngdt segment scans/ --out seg/scans --camera-json kinect.json --overwrite
+
+--params FILE.toml: tables [gngdt] (GNGDT arguments, e.g. max_nodes, lambda), [segmentation]
+(SegmentationParams) and [frames] (FrameSchedule: steps per frame, depth range, ...); keys left
+out take the classes' defaults; [learner] is ignored. Without it: the default sensor profile.
+"""
+
+SUMMARY_NAME = "summary.json"
+LABEL_DESCRIPTION = "uint16 PNG per frame, same size as its colour/depth image; 0 = no segment, " \
+                    "k >= 1 = segment k (1 = largest)"
+
+
+@dataclass
+class SegmentedFrame:
+    """One frame, its organized points and what the segmenter made of it."""
+
+    name: str
+    frame: Frame
+    #: (H, W, 3) float32 metres, NaN where there is no depth
+    points: np.ndarray
+    result: FrameResult
+    #: milliseconds per phase: deproject + the segmenter's phases, and their ``total``
+    milliseconds: dict[str, float]
+
+
+def organized_frames(source: FrameSource) -> Iterator[tuple[str, Frame, np.ndarray, float]]:
+    """(name, frame, points, milliseconds) of every frame of ``source``: points (H, W, 3)
+    float32 metres in the camera frame, NaN where the depth is 0; milliseconds of deprojection.
+    Raises RecordingError naming the file for a frame that cannot be read."""
+    from services.pointcloud import Deprojector
+
+    deproject = Deprojector(min_depth_m=0.0, max_depth_m=math.inf)  # only "no depth" is dropped
+    for name, frame in source.frames():
+        started = time.perf_counter()
+        points = deproject.organized(frame.depth, frame.intrinsics)
+        yield name, frame, points, (time.perf_counter() - started) * 1000.0
+
+
+def segment_frames(source: FrameSource, segmenter: FrameSegmenter, independent: bool
+                   ) -> Iterator[SegmentedFrame]:
+    """Deproject and segment every frame of ``source`` in order (online unless
+    ``independent``). Raises RecordingError naming the file for a frame that cannot be read."""
+    for name, frame, points, deproject_ms in organized_frames(source):
+        result = segmenter.segment_frame(points, frame.color, independent=independent)
+        milliseconds = {"deproject": deproject_ms, **result.milliseconds}
+        milliseconds["total"] = sum(milliseconds.values())
+        yield SegmentedFrame(name, frame, points, result, milliseconds)
+
+
+def timing_summary(per_frame: list[dict[str, float]]) -> dict[str, dict[str, float]]:
+    """Per phase: mean, p50, p90 and max of the frames' milliseconds (phases in first-seen
+    order; a frame without a phase counts as 0 ms for it)."""
+    phases = list(dict.fromkeys(name for frame in per_frame for name in frame))
+    summary = {}
+    for phase in phases:
+        values = np.array([frame.get(phase, 0.0) for frame in per_frame], dtype=np.float64)
+        summary[phase] = {"mean": float(values.mean()), "p50": float(np.percentile(values, 50)),
+                          "p90": float(np.percentile(values, 90)), "max": float(values.max())}
+    return summary
+
+
+def write_label_image(path: Path, labels: np.ndarray) -> None:
+    """Write (H, W) int labels >= 0 as a uint16 PNG; ValueError when they do not fit."""
+    import cv2
+
+    if labels.size and (labels.min() < 0 or labels.max() > np.iinfo(np.uint16).max):
+        raise ValueError(f"{path}: labels {labels.min()}..{labels.max()} do not fit uint16")
+    if not cv2.imwrite(str(path), labels.astype(np.uint16)):
+        raise OSError(f"{path}: cannot write the label image")
+
+
+def segment_source(source: FrameSource, profile: SegmenterProfile, out: Path, *,
+                   independent: bool = False, seed: int = 0, overwrite: bool = False
+                   ) -> dict[str, Any]:
+    """Segment every frame of ``source`` into ``out`` (label PNGs + summary.json, written as a
+    whole or not at all); returns the summary."""
+    from services.evaluation.report import to_jsonable
+    from services.recording.errors import RecordingError
+    from services.staged_output import StagedDirectory
+
+    staged = StagedDirectory(out, overwrite=overwrite)  # refuses a non-empty DIR before work
+    log.info("checking %s (%s) ...", source.path, source.format)
+    total = source.check()
+    mode = "independent" if independent else "online"
+    log.info("%d frames; segmenting %s with %s", total, mode, profile.source)
+    segmenter = profile.segmenter(random_state=seed)
+    frames: list[dict[str, Any]] = []
+    first: Frame | None = None
+    started = time.perf_counter()
+    with staged as staging:
+        for item in segment_frames(source, segmenter, independent):
+            first = first or item.frame
+            write_label_image(staging / f"{item.name}.png", item.result.labels)
+            height, width = item.result.labels.shape
+            frames.append({"name": item.name, "index": item.frame.index, "width": width,
+                           "height": height, "nodes": item.result.n_nodes,
+                           "segments": item.result.n_segments, "steps": item.result.steps,
+                           "milliseconds": item.milliseconds})
+            log.info("frame %d/%d %s: %d nodes, %d segments, %.0f ms", len(frames), total,
+                     item.name, item.result.n_nodes, item.result.n_segments,
+                     item.milliseconds["total"])
+        if first is None:
+            raise RecordingError(source.path, None, "no frames")
+        intrinsics = first.intrinsics  # of the first frame (a recording may change them)
+        summary = {
+            "source": str(source.path), "format": source.format, "mode": mode,
+            "frames": len(frames), "labels": LABEL_DESCRIPTION,
+            "intrinsics": {"fx": intrinsics.fx, "fy": intrinsics.fy, "cx": intrinsics.cx,
+                           "cy": intrinsics.cy, "from": source.camera_note},
+            "parameters": {**profile.as_dict(), "random_state": seed},
+            "milliseconds": timing_summary([frame["milliseconds"] for frame in frames]),
+            "wall_seconds": time.perf_counter() - started,
+            "per_frame": frames,
+        }
+        (staging / SUMMARY_NAME).write_text(
+            json.dumps(to_jsonable(summary), indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    return summary
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from services.recording.sources import SOURCE_FORMATS
+
+    parser.add_argument("source", type=Path, metavar="SOURCE",
+                        help="MCAP recording, or a folder of colour/depth frames")
+    parser.add_argument("--out", type=Path, required=True, metavar="DIR",
+                        help="output folder (must be absent or empty unless --overwrite)")
+    parser.add_argument("--independent", action="store_true",
+                        help="learn every frame from scratch (default: online, one network "
+                             "carried from frame to frame)")
+    parser.add_argument("--params", type=Path, metavar="FILE.toml",
+                        help="sensor profile (default: DEFAULT_PROFILE of "
+                             "services/segment_profile.py)")
+    parser.add_argument("--format", dest="source_format", choices=SOURCE_FORMATS,
+                        help="source layout (default: detected; needed when it is ambiguous)")
+    parser.add_argument("--camera-json", type=Path, metavar="FILE",
+                        help="camera parameters of a folder (default: DIR/camera.json)")
+    parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace a non-empty --out folder once the new one is complete")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``gngdt segment``; bad input: one error line naming the file, exit code 2."""
+    from services.recording.errors import RecordingError
+    from services.recording.sources import open_source
+    from services.segment_profile import load_profile
+
+    try:
+        profile = load_profile(args.params)
+        source = open_source(args.source, args.source_format, args.camera_json)
+        summary = segment_source(source, profile, args.out, independent=args.independent,
+                                 seed=args.seed, overwrite=args.overwrite)
+    except (RecordingError, ValueError, OSError) as error:
+        log.error("gngdt segment: %s", error)
+        log.error("gngdt segment: nothing written to %s", args.out)
+        return 2
+    total = summary["milliseconds"]["total"]
+    print(f"wrote {summary['frames']} label images and {SUMMARY_NAME} to {args.out} "
+          f"({summary['mode']}, {total['p50']:.0f} ms/frame p50, {total['p90']:.0f} p90)")
+    if source.intrinsics_assumed:
+        print(f"WARNING: intrinsics {source.camera_note}")
+    return 0

@@ -1,0 +1,165 @@
+"""Recordings that cost time or memory out of proportion: a jump in the stamps, oversized frames
+and chunks, frames that never get a calibration. The capture bounds each and says so."""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+
+def _log(process) -> str:
+    return Path(process.log_path).read_text(errors="replace")
+
+
+def _frames(count: int, width: int = 64, height: int = 48):
+    from services.recording.synth import render_scene
+
+    return list(render_scene("data2", count, width=width, height=height))
+
+
+@pytest.mark.timeout(90)
+def test_a_jump_in_the_stamps_is_shortened_and_said(
+    router_endpoint: str, spawn: Callable, tmp_path: Path
+) -> None:
+    from services.recording.writer import RecordingWriter
+
+    path = tmp_path / "jump.mcap"
+    first, second = _frames(2)
+    second = dataclasses.replace(second, timestamp_ns=first.timestamp_ns + 10**6 * 10**9)
+    with RecordingWriter(path) as writer:
+        writer.write_frame(first)
+        writer.write_frame(second)  # stamped 11.6 days later
+    started = time.monotonic()
+    capture = spawn("capture", str(path), "--rate", "1", "--max-gap", "0.5",
+                    "--wait-subscribers", "0", "--zenoh-connect", router_endpoint)
+    assert capture.wait(60) == 0, _log(capture)
+    assert time.monotonic() - started < 50
+    assert "is stamped 1e+06 s after the previous one; waiting 0.5 s instead" in _log(capture)
+    assert "sent 2 frames" in _log(capture)
+
+
+def test_the_replay_clock_keeps_the_recorded_spacing_below_the_cap() -> None:
+    import threading
+
+    from services.capture import ReplayClock
+
+    clock = ReplayClock(rate=2.0, max_gap_s=0.3)
+    stop = threading.Event()
+    started = time.monotonic()
+    for stamp_s in (0.0, 0.2, 0.4, 100.0, 100.2):  # 0.1 s apart at 2x, one gap of 49.8 s
+        clock.wait_for(round(stamp_s * 1e9), stop)
+    elapsed = time.monotonic() - started
+    assert 0.55 <= elapsed < 5.0  # 0.1 + 0.1 + 0.3 (capped) + 0.1
+
+
+def _capture(router_endpoint: str, path: Path, *options: str) -> tuple[int, str, float]:
+    """Run `gngdt capture PATH --fast`: exit status, output, peak RSS in MB."""
+    import subprocess
+    import sys
+
+    from processes import peak_rss_mb, with_peak_rss
+
+    completed = subprocess.run(
+        with_peak_rss([sys.executable, "-m", "services.cli", "capture", str(path), "--fast",
+                       "--wait-subscribers", "0", "--zenoh-connect", router_endpoint, *options]),
+        cwd=Path(__file__).resolve().parents[1], capture_output=True, text=True, timeout=120)
+    output = completed.stdout + completed.stderr
+    return completed.returncode, output, peak_rss_mb(output)
+
+
+def _write_images(path: Path, images: list[tuple[str, object]], calibrated: bool) -> None:
+    """An MCAP of raw images (role, array), stamped 33 ms apart, with or without calibration."""
+    from mcap_protobuf.writer import Writer
+
+    from schemas.packing import image_to_raw, intrinsics_to_calibration
+    from services.recording.frame import CameraIntrinsics
+
+    with open(path, "wb") as file, Writer(file) as writer:
+        for index, (role, image) in enumerate(images):
+            stamp = 1_000_000_000 + index // 2 * 33_000_000
+            if calibrated and role == "color":
+                height, width = image.shape[:2]
+                intrinsics = CameraIntrinsics(width, height, 500.0, 500.0, width / 2, height / 2)
+                writer.write_message("/camera/calibration", intrinsics_to_calibration(
+                    intrinsics, timestamp_ns=stamp), log_time=stamp, publish_time=stamp)
+            writer.write_message(f"/camera/{role}", image_to_raw(image, timestamp_ns=stamp),
+                                 log_time=stamp, publish_time=stamp)
+
+
+@pytest.mark.timeout(120)
+def test_one_huge_frame_is_refused_before_it_costs_a_gigabyte(
+    router_endpoint: str, tmp_path: Path
+) -> None:
+    import numpy as np
+
+    path = tmp_path / "huge.mcap"
+    _write_images(path, [("color", np.zeros((4000, 4000, 3), np.uint8)),
+                         ("depth", np.zeros((4000, 4000), np.uint16))], calibrated=True)
+    assert path.stat().st_size < 200_000  # zeros: a few kilobytes for 80 MB of pixels
+    code, output, peak_mb = _capture(router_endpoint, path)
+    assert code == 2, output
+    assert "huge.mcap: frame 0: /camera/color: image 4000x4000 exceeds the limit" in output
+    assert "--max-frame-pixels" in output and "Traceback" not in output
+    assert peak_mb < 400, f"{peak_mb:.0f} MB"  # was 1,383 MB
+
+
+@pytest.mark.timeout(120)
+def test_frames_that_never_get_a_calibration_are_held_within_a_budget(
+    router_endpoint: str, tmp_path: Path
+) -> None:
+    import numpy as np
+
+    path = tmp_path / "uncalibrated.mcap"
+    color, depth = np.zeros((2000, 2000, 3), np.uint8), np.zeros((2000, 2000), np.uint16)
+    _write_images(path, [(role, image) for _ in range(64)
+                         for role, image in (("color", color), ("depth", depth))],
+                  calibrated=False)
+    code, output, peak_mb = _capture(router_endpoint, path, "--max-pending-mb", "64")
+    assert code == 2, output
+    assert "uncalibrated.mcap: frame 0: no calibration channel" in output
+    assert "--max-pending-mb" in output
+    assert peak_mb < 400, f"{peak_mb:.0f} MB"  # was 1,332 MB
+
+
+@pytest.mark.timeout(120)
+def test_a_chunk_that_inflates_beyond_the_limit_is_refused_before_decompression(
+    router_endpoint: str, tmp_path: Path
+) -> None:
+    from mcap.writer import CompressionType, Writer
+
+    path = tmp_path / "bomb.mcap"
+    with open(path, "wb") as file:
+        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=200 * 1024 * 1024)
+        writer.start()
+        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
+        channel = writer.register_channel("/camera/color", "protobuf", schema)
+        writer.add_message(channel, log_time=1, data=bytes(96 * 1024 * 1024), publish_time=1)
+        writer.finish()
+    assert path.stat().st_size < 100_000
+    started = time.monotonic()
+    code, output, peak_mb = _capture(router_endpoint, path, "--max-chunk-mb", "64")
+    assert code == 2, output
+    assert "bomb.mcap: a zstd chunk of" in output and "--max-chunk-mb" in output
+    assert time.monotonic() - started < 60
+    assert peak_mb < 300, f"{peak_mb:.0f} MB"
+
+
+def test_a_cloud_never_exceeds_what_a_learner_accepts_and_a_message_holds() -> None:
+    import numpy as np
+
+    from schemas.packing import CLOUD_POINT_STRIDE, MAX_CLOUD_POINTS
+    from services.capture import CloudOptions, FrameToCloud
+    from services.recording.frame import CameraIntrinsics, Frame
+    from services.zenoh_session import MAX_MESSAGE_BYTES
+
+    assert MAX_CLOUD_POINTS * CLOUD_POINT_STRIDE < MAX_MESSAGE_BYTES
+    height, width = 1500, 2000  # 3 million valid pixels
+    frame = Frame(0, 1, np.zeros((height, width, 3), np.uint8),
+                  np.full((height, width), 1000, np.uint16),
+                  CameraIntrinsics(width, height, 1000.0, 1000.0, width / 2, height / 2))
+    positions, colors = FrameToCloud(CloudOptions())(frame)
+    assert len(positions) == len(colors) == MAX_CLOUD_POINTS

@@ -1,0 +1,254 @@
+"""The logger under odd or hostile input: cameras it must wait for, cameras it must not grow
+for, queues bounded in bytes, topologies bounded by what a learner can send, a bounded .rrd."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from processes import wait_for
+
+from schemas.packing import encode_stream_end
+from schemas.wire import FrameStamp
+
+
+@pytest.fixture
+def dispatcher():
+    """The logger's real per-sample path into an in-memory recording."""
+    import rerun as rr
+
+    from services.logger import Dispatcher, DisplayRates, RerunLog
+
+    recording = rr.RecordingStream("gngdt-test")
+    recording.memory_recording()
+    yield Dispatcher(RerunLog(recording, DisplayRates(max_cloud_points=100)))
+    recording.disconnect()
+
+
+def _eos(dispatcher, camera: str, last_sequence: int = 0) -> None:
+    message = encode_stream_end(timestamp_ns=time.time_ns(), frames_sent=last_sequence + 1,
+                                last_frame_sequence=last_sequence)
+    dispatcher.handle(f"gngdt/{camera}/eos", message.SerializeToString(),
+                      FrameStamp(last_sequence, time.time_ns()).to_attachment())
+
+
+def test_a_camera_whose_capture_started_is_waited_for_before_its_first_message(
+    dispatcher,
+) -> None:
+    dispatcher.capture_seen("right", alive=True)  # its capture is up, nothing sent yet
+    _eos(dispatcher, "left")
+    assert not dispatcher.all_finished(drain_seconds=0.0)
+    _eos(dispatcher, "right")
+    assert dispatcher.all_finished(drain_seconds=0.0)
+
+
+def test_a_capture_that_leaves_without_an_end_of_stream_ends_its_camera(dispatcher) -> None:
+    dispatcher.capture_seen("lost", alive=True)
+    assert not dispatcher.all_finished(drain_seconds=0.0)
+    dispatcher.capture_seen("lost", alive=False)
+    time.sleep(0.01)
+    assert dispatcher.all_finished(drain_seconds=0.0)
+    assert not dispatcher.all_finished(drain_seconds=60.0)  # after the drain, not at once
+
+
+# ------------------------------------------------------------------------- cameras
+def test_garbage_on_new_camera_names_makes_no_camera_and_cameras_are_bounded() -> None:
+    import rerun as rr
+
+    from schemas.packing import encode_status
+    from services.logger import Dispatcher, RerunLog
+
+    recording = rr.RecordingStream("gngdt-test")
+    recording.memory_recording()
+    blueprints: list[list[str]] = []
+    dispatcher = Dispatcher(RerunLog(recording), on_new_camera=blueprints.append,
+                            max_cameras=3)
+    stamp = FrameStamp(1, time.time_ns()).to_attachment()
+    for index in range(50):  # a valid attachment, a payload no decoder accepts
+        dispatcher.handle(f"gngdt/fake{index}/calibration", b"\x0a\xff\xff\x03", stamp)
+    assert dispatcher.cameras == {} and blueprints == [] and dispatcher.malformed == 50
+    status = encode_status(frame_sequence=1).SerializeToString()
+    for index in range(5):
+        dispatcher.handle(f"gngdt/cam{index}/learner/status", status, stamp)
+    assert sorted(dispatcher.cameras) == ["cam0", "cam1", "cam2"]
+    assert dispatcher.refused == 2
+    assert len(blueprints) == 3  # one blueprint per real camera, not one per message
+    recording.disconnect()
+
+
+# ------------------------------------------------------------------------- topologies
+def _topology(nodes: int, edges_per_node: int = 2, clusterings: int = 2, name: str = "pos"):
+    import numpy as np
+
+    from schemas.packing import encode_topology
+
+    rng = np.random.default_rng(0)
+    pairs = rng.integers(0, nodes, (nodes * edges_per_node, 2))
+    return encode_topology(
+        positions=rng.random((nodes, 3)), colors=None, normals=None, errors=None,
+        edges={name: pairs}, clusterings={f"c{i}": np.zeros(nodes, np.int32)
+                                          for i in range(clusterings)},
+        steps=1, frame_sequence=1, timestamp_ns=1, frame_id="camera").SerializeToString()
+
+
+@pytest.mark.parametrize(("payload", "match"), [
+    (_topology(100, edges_per_node=9), "exceed the limit of 1600"),
+    (_topology(10, clusterings=20_000), "20000 clusterings"),
+    (_topology(10, name="x" * 65), "longer than 64"),
+])
+def test_topologies_beyond_what_a_learner_sends_are_refused(payload: bytes, match: str) -> None:
+    from schemas.packing import MessageError, decode_topology
+
+    with pytest.raises(MessageError, match=match):
+        decode_topology(payload)
+
+
+def test_the_edge_limit_is_what_the_kernel_can_hold() -> None:
+    from gngdt_core import _kernels
+    from schemas.packing import MAX_EDGES_PER_NODE, decode_topology
+
+    assert MAX_EDGES_PER_NODE == _kernels.MAX_DEGREE // 2
+    assert decode_topology(_topology(100, edges_per_node=8)).node_count == 100
+
+
+# ---------------------------------------------------------------------------- the inbox
+@pytest.mark.timeout(60)
+def test_the_inbox_of_a_busy_logger_is_bounded_in_bytes(router_endpoint: str) -> None:
+    import zenoh
+
+    from services.logger import Inbox
+    from services.zenoh_session import client_config, open_config
+
+    inbox = Inbox(max_bytes=5_000_000)  # nothing takes from it: a logger busy elsewhere
+    session = open_config(client_config([router_endpoint]))
+    session.declare_subscriber("gngdt/**", inbox.put)
+    block = zenoh.CongestionControl.BLOCK
+    stamp = FrameStamp(1, time.time_ns()).to_attachment()
+    try:
+        for _ in range(40):  # 1 MB topologies: within their stream's limit, 8x the budget
+            session.put("gngdt/camera/topology", b"\x00" * 1_000_000, attachment=stamp,
+                        congestion_control=block)
+        for _ in range(20):  # 2 MB calibrations: no calibration is this large
+            session.put("gngdt/camera/calibration", b"\x00" * 2_000_000, attachment=stamp,
+                        congestion_control=block)
+        session.put("gngdt/camera/eos", b"end", attachment=stamp, congestion_control=block)
+        wait_for(lambda: inbox.oversized == 20 and inbox.dropped >= 35 and inbox.arrived.is_set()
+                 and inbox.dropped + 5 >= 40, 30, "every sample to reach the inbox")
+    finally:
+        session.close()
+    taken = inbox.take()
+    assert [key for key, _, _ in taken][-1] == "gngdt/camera/eos"  # never evicted
+    assert sum(len(payload) for _, payload, _ in taken[:-1]) <= 5_000_000
+    assert inbox.dropped + len(taken) - 1 == 40
+
+
+# ---------------------------------------------------------------------------- the .rrd
+class ImageFlood:
+    """A camera publishing 320x240 colour images at ~20 Hz, then an end of stream."""
+
+    def __init__(self, endpoint: str) -> None:
+        from services.zenoh_session import client_config, open_config
+
+        self.session = open_config(client_config([endpoint]))
+        self.sent = 0
+
+    def run(self, seconds: float) -> None:
+        import numpy as np
+        import zenoh
+
+        from schemas.packing import image_to_raw
+
+        rng = np.random.default_rng(0)
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            image = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)  # incompressible
+            now = time.time_ns()
+            self.session.put("gngdt/camera/color", image_to_raw(image, timestamp_ns=now)
+                             .SerializeToString(), attachment=FrameStamp(self.sent, now)
+                             .to_attachment(), congestion_control=zenoh.CongestionControl.BLOCK)
+            self.sent += 1
+            time.sleep(0.05)
+
+    def end(self) -> None:
+        import zenoh
+
+        _eos_put(self.session, self.sent)
+        self.session.close()
+        del zenoh
+
+
+def _eos_put(session, frames: int) -> None:
+    import zenoh
+
+    message = encode_stream_end(timestamp_ns=time.time_ns(), frames_sent=frames,
+                                last_frame_sequence=max(frames - 1, 0))
+    session.put("gngdt/camera/eos", message.SerializeToString(),
+                attachment=FrameStamp(max(frames - 1, 0), time.time_ns()).to_attachment(),
+                congestion_control=zenoh.CongestionControl.BLOCK)
+
+
+@pytest.mark.timeout(120)
+def test_the_rrd_stops_at_its_cap_complete_and_the_logger_goes_on(
+    router_endpoint: str, spawn, tmp_path
+) -> None:
+    from processes import log_text
+    from rerun.chunk import RrdReader
+
+    rrd_path = tmp_path / "capped.rrd"
+    # --keep-everything: every image raw, so that the flood's volume reaches the file
+    logger = spawn("log", "--save", str(rrd_path), "--max-rrd-mb", "1", "--eos-drain", "1",
+                   "--keep-everything", "--zenoh-connect", router_endpoint)
+    wait_for(lambda: "logging to" in log_text(logger), 60, "the logger")
+    flood = ImageFlood(router_endpoint)
+    flood.run(seconds=1.0)
+    wait_for(lambda: "stopped writing" in log_text(logger), 30, "the cap")
+    flood.run(seconds=3.0)  # still served after the cap: received, not written
+    flood.end()
+    assert logger.wait(30) == 0, log_text(logger)
+    assert "it reached" in log_text(logger) and "--max-rrd-mb 1" in log_text(logger)
+    # the size is checked at each flush (every second): ~1 s of this flood (4.6 MB) past the
+    # cap at most, of the ~18 MB sent
+    assert rrd_path.stat().st_size < 1_000_000 + 7_000_000
+    chunks = list(RrdReader(rrd_path).stream().collect().stream())  # complete, with a footer
+    assert any(chunk.entity_path == "/world/camera/image/rgb" for chunk in chunks)
+
+
+#: runs gngdt with writes limited to a few megabytes a file, as a full disk would stop them
+FILE_SIZE_LIMITED = (
+    "import os, resource, signal, sys\n"
+    "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG instead of a kill\n"
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (3_000_000, 3_000_000))\n"
+    "os.execv(sys.executable, [sys.executable, '-m', 'services.cli', *sys.argv[1:]])\n"
+)
+
+
+@pytest.mark.timeout(120)
+def test_a_logger_whose_disk_fills_up_says_so_and_keeps_serving(
+    router_endpoint: str, tmp_path
+) -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    rrd_path = tmp_path / "full.rrd"
+    log_path = tmp_path / "logger.log"
+    with open(log_path, "wb") as output:
+        logger = subprocess.Popen(
+            [sys.executable, "-c", FILE_SIZE_LIMITED, "log", "--save", str(rrd_path),
+             "--eos-drain", "1", "--keep-everything", "--zenoh-connect", router_endpoint],
+            cwd=Path(__file__).resolve().parents[1], stdout=output, stderr=output,
+            start_new_session=True)
+    try:
+        wait_for(lambda: "logging to" in log_path.read_text(), 60, "the logger")
+        flood = ImageFlood(router_endpoint)
+        flood.run(seconds=2.0)  # ~10 MB for a file that cannot pass 3 MB
+        wait_for(lambda: "stopped writing" in log_path.read_text(), 60, "the failed write")
+        flood.run(seconds=0.5)
+        flood.end()  # it still hears the end of stream, and stops by itself
+        assert logger.wait(60) == 0, log_path.read_text()
+    finally:
+        if logger.poll() is None:
+            logger.kill()
+    text = log_path.read_text()
+    assert "writing it failed" in text and "is the disk full?" in text
+    assert "Traceback" not in text

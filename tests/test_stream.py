@@ -1,0 +1,127 @@
+"""Learning a stream of frames (gngdt_core.stream), the sensor profile, veil points."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from gngdt_core.frame_segmenter import FrameSegmenter, veil_pixels
+from gngdt_core.stream import FrameSchedule, StreamLearner
+from services.capture import CloudOptions, FrameToCloud
+from services.learner import Learner, load_params
+from services.pointcloud import Deprojector
+from services.recording.reader import read_frames
+
+ROOT = Path(__file__).resolve().parents[1]
+PROFILE = ROOT / "config" / "kinect.toml"
+#: a small network and few steps: what the schedule decides, not how well it learns
+QUICK = {"max_nodes": 300, "lambda_": 50}
+QUICK_SCHEDULE = FrameSchedule(steps_first_frame=15_000, steps_per_frame=3_000)
+
+
+def frame_clouds(name: str, count: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    deproject = Deprojector()
+    clouds = []
+    for frame in read_frames(ROOT / "recordings" / name):
+        clouds.append(deproject(frame.depth, frame.color, frame.intrinsics))
+        if len(clouds) == count:
+            break
+    return clouds
+
+
+def test_a_stream_carries_its_network_and_starts_over_on_a_new_scene() -> None:
+    tabletop = frame_clouds("tabletop_small.mcap", 3)
+    data2 = frame_clouds("data2.mcap", 1)
+    stream = StreamLearner(QUICK, schedule=QUICK_SCHEDULE, random_state=0)
+    learned = [stream.learn_frame(*cloud) for cloud in [*tabletop, *data2]]
+    assert [frame.from_scratch for frame in learned] == [True, False, False, True]
+    assert [frame.steps for frame in learned] == [15_000, 3_000, 3_000, 15_000]
+    assert learned[-1].segmentation.labels.size == stream.model_.n_nodes_
+
+
+def test_attention_moves_nodes_from_the_large_surfaces_to_the_objects() -> None:
+    frame = next(iter(read_frames(ROOT / "recordings" / "tabletop.mcap")))
+    points = Deprojector().organized(frame.depth, frame.intrinsics).reshape(-1, 3)
+    valid = np.isfinite(points[:, 2])
+    positions, colors = points[valid], frame.color.reshape(-1, 3)[valid]
+    truth = frame.labels.reshape(-1)[valid]
+    # the floor, the wall and the table top each cover > 5 % of the image; the rest is objects
+    on_object = (np.bincount(truth) < 0.05 * truth.size)[truth]
+
+    def node_share_on_objects(share: float) -> float:
+        schedule = FrameSchedule(steps_first_frame=60_000, flat_surface_share=share)
+        stream = StreamLearner({"max_nodes": 600, "lambda_": 50}, schedule=schedule,
+                               random_state=1)
+        stream.learn_frame(positions, colors)
+        nearest_point = cKDTree(positions).query(stream.model_.positions_)[1]
+        return float(np.mean(on_object[nearest_point]))
+
+    assert node_share_on_objects(0.05) > 1.3 * node_share_on_objects(1.0)
+
+
+def test_frame_segmenter_labels_every_valid_pixel_of_an_organized_frame() -> None:
+    frame = next(iter(read_frames(ROOT / "recordings" / "tabletop_small.mcap")))
+    points = Deprojector().organized(frame.depth, frame.intrinsics)
+    segmenter = FrameSegmenter(QUICK, schedule=QUICK_SCHEDULE, random_state=0)
+    result = segmenter.segment_frame(points, frame.color)
+    valid = np.isfinite(points[..., 2])
+    assert result.labels.shape == frame.depth.shape
+    assert (result.labels[valid] >= 1).all() and (result.labels[~valid] == 0).all()
+    assert result.labels.max() == result.n_segments
+    assert result.from_scratch and result.steps == 15_000
+
+
+def test_veil_pixels_are_the_two_sides_of_a_depth_jump() -> None:
+    depth = np.full((6, 8), 1000, dtype=np.uint16)
+    depth[:, 4:] = 1500  # a 50 cm jump between columns 3 and 4
+    depth[0, 0] = 0      # no measurement: never a veil point
+    depth[5, 1] = 1010   # 1 %: noise, not a jump
+    veil = veil_pixels(depth, 0.03)
+    expected = np.zeros_like(veil)
+    expected[:, 3:5] = True
+    assert np.array_equal(veil, expected)
+
+
+def test_capture_drops_veil_points_when_asked() -> None:
+    frame = next(iter(read_frames(ROOT / "recordings" / "tabletop_small.mcap")))
+    every = FrameToCloud(CloudOptions())(frame)[0]
+    without_veil = FrameToCloud(CloudOptions(veil_ratio=0.03))(frame)[0]
+    veil = veil_pixels(frame.depth, 0.03) & (frame.depth > 0)
+    assert 0 < len(every) - len(without_veil) == np.count_nonzero(veil)
+
+
+def test_the_learner_learns_and_segments_through_the_sensor_profile() -> None:
+    config = load_params(PROFILE)
+    assert config.frames is not None and config.model["max_nodes"] == 4000
+    config.model.update(QUICK)
+    config.frames.update(steps_first_frame=15_000)
+    config.options.samples_per_frame = 3_000
+    learner = Learner("camera", config)
+    for positions, colors in frame_clouds("tabletop_small.mcap", 2):
+        learner.learn(positions, colors)
+    assert learner.counters.learning_steps == 18_000
+    assert learner.model is learner.stream.model_
+    segments = learner.last_segmentation.labels
+    assert segments.size == learner.model.n_nodes_ and segments.max() >= 1
+
+
+def test_a_profile_with_a_wrong_frames_key_names_it(tmp_path: Path) -> None:
+    path = tmp_path / "profile.toml"
+    path.write_text("[frames]\nsteps_per_franme = 10\n")
+    with pytest.raises(ValueError, match="steps_per_franme"):
+        load_params(path)
+
+
+def test_settling_stops_at_its_step_limit_and_says_so() -> None:
+    config = load_params(None)
+    config.model.update(max_nodes=5000)  # a budget it cannot reach in the steps allowed
+    config.options.settle_max_steps = 30_000
+    learner = Learner("camera", config)
+    positions, colors = frame_clouds("tabletop_small.mcap", 1)[0]
+    learner.learn(positions, colors)
+    reason = learner.settle(positions, colors)
+    assert reason.startswith("stopped after 30,000 more steps"), reason
+    assert learner.model.n_steps_ == config.options.samples_per_frame + 30_000

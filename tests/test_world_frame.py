@@ -1,0 +1,152 @@
+"""Poses through the pipeline: capture publishes each cloud with its pose, the learner learns in
+the fixed frame, says so, and skips (counts, names) clouds in another frame or with a bad pose."""
+
+from __future__ import annotations
+
+import signal
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_pipeline import Watcher, log_text, wait_exit
+
+from schemas.packing import MessageError, cloud_to_msg, decode_topology
+from schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
+from services.learner import Learner, LearnerConfig, OtherFrameError, decode_points
+from services.recording.synth import render_scene
+from services.recording.writer import RecordingWriter
+from services.zenoh_session import client_config, open_config
+
+FRAMES = 4
+
+
+@pytest.fixture(scope="module")
+def walk_recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list]:
+    """Four 160x120 frames of the walking camera, with poses; and the rendered frames."""
+    path = tmp_path_factory.mktemp("walk") / "walk.mcap"
+    frames = list(render_scene("tabletop_walk", FRAMES, width=160, height=120, fps=2.0))
+    with RecordingWriter(path) as writer:
+        for frame in frames:
+            writer.write_frame(frame)
+    return path, frames
+
+
+def posed_cloud(pose: np.ndarray | None, frame_id: str, seed: int = 0) -> bytes:
+    """A 2,000-point coloured cloud 1.5-2.5 m in front of the camera."""
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform([-0.5, -0.4, 1.5], [0.5, 0.4, 2.5], (2000, 3)).astype(np.float32)
+    colors = rng.integers(0, 256, (2000, 3), dtype=np.uint8)
+    return cloud_to_msg(positions, colors, timestamp_ns=1, frame_id=frame_id,
+                        pose=pose).SerializeToString()
+
+
+def pose_at(x: float) -> np.ndarray:
+    pose = np.eye(4)
+    pose[:3, 3] = [x, 0.0, 1.0]
+    return pose
+
+
+def attachment(sequence: int) -> bytes:
+    return FrameStamp(sequence, time.time_ns()).to_attachment()
+
+
+@pytest.mark.timeout(120)
+def test_capture_publishes_each_cloud_with_its_pose(run_capture: Callable, walk_recording):
+    path, frames = walk_recording
+    output = run_capture(path)
+    assert len(output.clouds) == FRAMES
+    for (frame_id, pose), frame in zip(output.poses, frames, strict=True):
+        assert frame_id == "world"
+        np.testing.assert_allclose(pose, frame.pose.matrix, atol=1e-9)
+    ignored = run_capture(path, "--fixed-frame", "none")
+    assert [frame_id for frame_id, _ in ignored.poses] == ["camera"] * FRAMES
+    assert all(np.array_equal(pose, np.eye(4)) for _, pose in ignored.poses)
+
+
+def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path: Path):
+    learner = Learner("camera", LearnerConfig(model={"max_nodes": 50, "lambda_": 100}))
+    for sequence, x in enumerate((0.0, 0.5, 1.0)):
+        message = decode_points(posed_cloud(pose_at(x), "world", sequence), attachment(sequence))
+        learner.learn(message.positions, message.colors, message.frame_id, message.pose)
+    assert learner.frame_id == "world"
+    # the map spans the three camera positions: x from -0.5 to 1.5 in the world
+    assert learner.model.positions_[:, 0].min() < -0.3 < 1.3 < learner.model.positions_[:, 0].max()
+    # the frame's error is measured where the map is: the cloud placed by its pose
+    last = message.positions, message.colors
+    assert learner.quantization_error(*last)["pos"] < 0.2
+    # settling on the last frame learns it where it was, in the world
+    learner.options.settle_max_steps = 2_000
+    learner.settle(*last)
+    assert learner.model.positions_[:, 0].max() > 1.3
+    assert learner.quantization_error(*last)["pos"] < 0.2
+    unposed = decode_points(posed_cloud(None, "camera"), attachment(3))
+    assert unposed.pose is None and unposed.frame_id == "camera"
+    with pytest.raises(OtherFrameError, match=r"frame 'camera'.*learned in 'world'"):
+        learner.learn(unposed.positions, unposed.colors, unposed.frame_id, unposed.pose)
+    assert learner.counters.frames_other_frame == 1 and learner.counters.frames_used == 3
+    stamp = FrameStamp(3, 1)
+    topology = learner.topology(stamp, {})
+    assert topology.frame_id == "world"
+    status = learner.status(stamp, 1.0, topology)
+    assert status.frames_other_frame == 1 and status.ghost_distance_m == 0.05
+    assert 0 < status.seen_nodes <= status.nodes and 0.0 <= status.ghost_share <= 1.0
+    # a checkpoint remembers the frame
+    learner.save(tmp_path / "learner.npz")
+    resumed = Learner.resume(tmp_path / "learner.npz", "camera", LearnerConfig())
+    assert resumed.frame_id == "world"
+
+
+def test_a_cloud_with_a_bad_pose_is_a_message_error_naming_the_frame():
+    payload = posed_cloud(pose_at(0.0), "map")
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+    message = PointCloud.FromString(payload)
+    message.pose.orientation.w = 2.5  # not a rotation
+    with pytest.raises(MessageError, match=r"'map'.*norm 2\.5"):
+        decode_points(message.SerializeToString(), attachment(0))
+    message.pose.position.x = float("nan")
+    message.pose.orientation.w = 1.0
+    with pytest.raises(MessageError, match="translation"):
+        decode_points(message.SerializeToString(), attachment(0))
+
+
+@pytest.mark.timeout(120)
+def test_a_running_learner_skips_bad_poses_and_other_frames(
+    router_endpoint: str, spawn: Callable
+) -> None:
+    import zenoh
+
+    learner = spawn("learn", "--samples-per-frame", "2000", "--zenoh-connect", router_endpoint)
+    watcher = Watcher(router_endpoint)
+    session = open_config(client_config([router_endpoint]))
+    try:
+        publisher = session.declare_publisher(
+            "gngdt/camera/points", encoding=ENCODING_POINT_CLOUD,
+            congestion_control=zenoh.CongestionControl.BLOCK)
+        deadline = time.monotonic() + 60
+        while not publisher.matching_status.matching and time.monotonic() < deadline:
+            time.sleep(0.05)
+        from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+        bad = PointCloud.FromString(posed_cloud(pose_at(0.0), "world"))
+        bad.pose.orientation.x = 3.0
+        sends = [posed_cloud(pose_at(0.0), "world"), bad.SerializeToString(),
+                 posed_cloud(None, "camera"), posed_cloud(pose_at(0.4), "world", 1)]
+        for sequence, payload in enumerate(sends):
+            publisher.put(payload, attachment=attachment(sequence))
+            time.sleep(0.3)
+        statuses = watcher.wait_for(lambda s: bool(s) and s[-1].frame_sequence == 3, 60)
+        last = statuses[-1]
+        assert (last.frames_used, last.malformed_messages, last.frames_other_frame) == (2, 1, 1)
+        replies = list(session.get("gngdt/camera/topology", timeout=10))
+        assert decode_topology(replies[0].ok.payload.to_bytes()).frame_id == "world"
+        assert learner.poll() is None, log_text(learner)
+    finally:
+        watcher.close()
+        session.close()
+    learner.send_signal(signal.SIGTERM)
+    assert wait_exit(learner, 30) == 0
+    log = log_text(learner)
+    assert "learned in 'world'" in log and "'camera'" in log
