@@ -53,16 +53,16 @@ class FrameSchedule:
     min_depth_m: float = 0.0
     max_depth_m: float = 10.0
     #: share of the points on large flat surfaces (tables, floors) that are learned (1.0: all)
-    flat_surface_share: float = 0.2
+    flat_surface_share: float = 0.05
     #: a smooth patch is a large flat surface when it holds at least this share of the nodes
     flat_surface_min_nodes: float = 0.1
     #: a frame learned from scratch learns this share of its steps from every point first, to
     #: find the large flat surfaces
-    warm_up_share: float = 1 / 3
+    warm_up_share: float = 0.5
     #: a frame is a new scene when more than ``scene_change_share`` of its points lie farther
     #: than ``scene_change_distance_m`` from every node; 1.0 never cuts
     scene_change_distance_m: float = 0.02
-    scene_change_share: float = 0.03
+    scene_change_share: float = 0.015
 
     def __post_init__(self) -> None:
         check_integer("steps_first_frame", self.steps_first_frame, 1)

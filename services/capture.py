@@ -41,6 +41,7 @@ from services.recording.reader import ReadLimits
 from services.zenoh_session import (
     ZenohSetupError,
     add_zenoh_arguments,
+    declare_publisher,
     open_session,
     wait_for_subscribers,
 )
@@ -204,23 +205,15 @@ class CapturePublisher:
     """The capture's publishers, declared once; every put carries the frame's attachment."""
 
     def __init__(self, session: zenoh.Session, camera: str) -> None:
-        import zenoh
-
-        block = zenoh.CongestionControl.BLOCK
-
-        def declare(name: str, encoding: str) -> zenoh.Publisher:
-            # BLOCK everywhere: consumers never block in their callbacks (latest-wins slots),
-            # so this only waits for the network, and nothing is silently lost on loopback.
-            return session.declare_publisher(
-                topic(camera, name), encoding=encoding, congestion_control=block
-            )
+        def declare(name: str, encoding: str, latest_wins: bool) -> zenoh.Publisher:
+            return declare_publisher(session, topic(camera, name), encoding, latest_wins)
 
         self.camera = camera
-        self.color = declare("color", ENCODING_RAW_IMAGE)
-        self.depth = declare("depth", ENCODING_RAW_IMAGE)
-        self.calibration = declare("calibration", ENCODING_CALIBRATION)
-        self.points = declare("points", ENCODING_POINT_CLOUD)
-        self.eos = declare("eos", ENCODING_STREAM_END)
+        self.color = declare("color", ENCODING_RAW_IMAGE, latest_wins=True)
+        self.depth = declare("depth", ENCODING_RAW_IMAGE, latest_wins=True)
+        self.calibration = declare("calibration", ENCODING_CALIBRATION, latest_wins=False)
+        self.points = declare("points", ENCODING_POINT_CLOUD, latest_wins=True)
+        self.eos = declare("eos", ENCODING_STREAM_END, latest_wins=False)
         self._last_intrinsics: CameraIntrinsics | None = None
 
     def publish_frame(

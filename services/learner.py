@@ -47,7 +47,12 @@ from schemas.wire import (
     topic,
 )
 from services import lifecycle
-from services.zenoh_session import ZenohSetupError, add_zenoh_arguments, open_session
+from services.zenoh_session import (
+    ZenohSetupError,
+    add_zenoh_arguments,
+    declare_publisher,
+    open_session,
+)
 
 if TYPE_CHECKING:
     import zenoh
@@ -948,19 +953,17 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
     except DuplicateLearnerError:
         session.close()
         raise
-    block = zenoh.CongestionControl.BLOCK
     points = session.declare_subscriber(topic(args.cam, "points"), zenoh.handlers.RingChannel(1))
     eos_subscriber = session.declare_subscriber(topic(args.cam, "eos"), on_eos)
-    topology_publisher = session.declare_publisher(
-        topic(args.cam, "topology"), encoding=ENCODING_TOPOLOGY, congestion_control=block)
-    status_publisher = session.declare_publisher(
-        topic(args.cam, "learner/status"), encoding=ENCODING_STATUS, congestion_control=block)
+    topology_publisher = declare_publisher(session, topic(args.cam, "topology"),
+                                           ENCODING_TOPOLOGY, latest_wins=True)
+    status_publisher = declare_publisher(session, topic(args.cam, "learner/status"),
+                                         ENCODING_STATUS, latest_wins=False)
     # latest-wins views: a consumer that never reads must not hold the learner back
-    drop = zenoh.CongestionControl.DROP
-    objects_publisher = session.declare_publisher(
-        topic(args.cam, "objects"), encoding=ENCODING_SCENE_UPDATE, congestion_control=drop)
-    scene_publisher = session.declare_publisher(
-        topic(args.cam, "scene"), encoding=ENCODING_SCENE_UPDATE, congestion_control=drop)
+    objects_publisher = declare_publisher(session, topic(args.cam, "objects"),
+                                          ENCODING_SCENE_UPDATE, latest_wins=True)
+    scene_publisher = declare_publisher(session, topic(args.cam, "scene"),
+                                        ENCODING_SCENE_UPDATE, latest_wins=True)
     queryable = session.declare_queryable(topic(args.cam, "topology"), latest.reply)
     token = session.liveliness().declare_token(f"gngdt/{args.cam}/learner/alive")
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),

@@ -79,8 +79,9 @@ LIVELINESS_KEY = "gngdt/logger/alive"
 #: how often the .rrd is flushed to disk: what a killed logger can lose at most
 FLUSH_EVERY_SECONDS = 1.0
 DEFAULT_MAX_CAMERAS = 16
-#: 100 times the learner's default node budget
-DEFAULT_MAX_TOPOLOGY_NODES = 100_000
+#: 25 times the learner's default node budget: a topology of 25,000 nodes (~8 MB on the wire)
+#: costs the .rrd ~20 MB; a learner with a larger --max-nodes needs a larger logger limit
+DEFAULT_MAX_TOPOLOGY_NODES = 25_000
 
 
 def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
@@ -949,6 +950,8 @@ def main(args: argparse.Namespace) -> int:
                 inbox.arrived.wait(0.05)
                 for key, payload, attachment in inbox.take():
                     dispatcher.handle(key, payload, attachment)
+                    if output is not None:
+                        output.tick()
                 for camera, alive in captures.take():
                     dispatcher.capture_seen(camera, alive)
                 if output is not None:

@@ -43,8 +43,9 @@ class NullRecording:
 
 class RrdFile:
     """The ``.rrd`` a logger writes: flushed every ``flush_every_s``; writing stops, said once,
-    when the file reaches ``max_bytes`` (0: no cap), when fewer than ``min_free_bytes`` are free
-    on its file system, or when a write fails (a full disk); the logger keeps running.
+    when the file reaches ``max_bytes`` (0: no cap; it may pass it by what was logged but not
+    yet written), when fewer than ``min_free_bytes`` are free on its file system, or when a write
+    fails (a full disk); the logger keeps running.
 
     ``owner.rec`` is the recording stream its logging goes through; it is swapped for a
     :class:`NullRecording` when writing stops.
@@ -63,8 +64,15 @@ class RrdFile:
         self._last_flush = time.monotonic()
 
     def tick(self) -> None:
-        """Flush when due, then check size, free space and the write itself."""
-        if self.stopped or time.monotonic() - self._last_flush < self.flush_every_s:
+        """Check the size (cheap: call it after every message); every ``flush_every_s``, flush
+        and check the free space and the write itself."""
+        if self.stopped:
+            return
+        size = self.path.stat().st_size if self.path.exists() else 0
+        if self.max_bytes and size >= self.max_bytes:
+            self._stop(f"it reached {size / 1e6:.0f} MB (--max-rrd-mb {self.max_bytes // 10**6})")
+            return
+        if time.monotonic() - self._last_flush < self.flush_every_s:
             return
         self._last_flush = time.monotonic()
         try:
@@ -73,11 +81,8 @@ class RrdFile:
             self.failed = True
             self._stop(f"writing it failed ({error}; is the disk full?)")
             return
-        size = self.path.stat().st_size if self.path.exists() else 0
         free = shutil.disk_usage(self.path.parent).free
-        if self.max_bytes and size >= self.max_bytes:
-            self._stop(f"it reached {size / 1e6:.0f} MB (--max-rrd-mb {self.max_bytes // 10**6})")
-        elif free < self.min_free_bytes:
+        if free < self.min_free_bytes:
             self._stop(f"only {free / 1e6:.0f} MB are free on its disk "
                        f"(--min-free-mb {self.min_free_bytes // 10**6})")
 

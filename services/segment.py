@@ -172,8 +172,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="learn every frame from scratch (default: online, one network "
                              "carried from frame to frame)")
     parser.add_argument("--params", type=Path, metavar="FILE.toml",
-                        help="sensor profile (default: DEFAULT_PROFILE of "
-                             "services/segment_profile.py)")
+                        help="sensor profile (default: config/kinect.toml, installed with gngdt "
+                             "as gngdt_config; `python -m gngdt_config` prints where)")
     parser.add_argument("--format", dest="source_format", choices=SOURCE_FORMATS,
                         help="source layout (default: detected; needed when it is ambiguous)")
     parser.add_argument("--camera-json", type=Path, metavar="FILE",

@@ -18,12 +18,24 @@ from typing import Any
 from gngdt_core.frame_segmenter import FrameSchedule, FrameSegmenter
 from gngdt_core.segmentation import SegmentationParams
 
-#: the profile used without ``--params``; None: the built-in defaults below. (The sensor
-#: profile config/kinect.toml replaces this when it lands.)
-DEFAULT_PROFILE: Path | None = None
-#: model parameters of the built-in default (the rest: GNGDT's, SegmentationParams' and
-#: FrameSchedule's own defaults)
-BUILTIN_MODEL: dict[str, Any] = {"max_nodes": 4000, "lambda_": 50}
+#: the sensor profile used without ``--params``, a file of the installed ``gngdt_config``
+#: package (the repository's config/)
+DEFAULT_PROFILE_NAME = "kinect.toml"
+
+
+def default_profile() -> Path:
+    """Where the default sensor profile is installed (config/kinect.toml in a checkout)."""
+    import gngdt_config
+
+    # a namespace package in an editable install: its folders, not a __file__
+    for folder in gngdt_config.__path__:
+        candidate = Path(folder) / DEFAULT_PROFILE_NAME
+        if candidate.is_file():
+            return candidate
+    raise ValueError(f"the default sensor profile {DEFAULT_PROFILE_NAME} is not installed "
+                     f"with gngdt_config ({list(gngdt_config.__path__)}); give --params")
+
+
 #: tables of a profile that belong to other commands
 IGNORED_TABLES = ("learner",)
 
@@ -35,7 +47,7 @@ class SegmenterProfile:
     model: dict[str, Any]
     segmentation: SegmentationParams
     schedule: FrameSchedule
-    #: the TOML file read, or "built-in defaults"
+    #: the TOML file read
     source: str
 
     def segmenter(self, random_state: int | None = 0) -> FrameSegmenter:
@@ -48,14 +60,11 @@ class SegmenterProfile:
 
 
 def load_profile(path: str | Path | None = None) -> SegmenterProfile:
-    """The profile in ``path``, else `DEFAULT_PROFILE`, else the built-in defaults. ValueError
+    """The profile in ``path``, else the default sensor profile (`default_profile`). ValueError
     naming the file and key for unknown tables or keys and invalid values."""
     from services.learner import LearnerOptions, model_parameter_names
 
-    path = Path(path) if path is not None else DEFAULT_PROFILE
-    if path is None:
-        return SegmenterProfile(dict(BUILTIN_MODEL), SegmentationParams(), FrameSchedule(),
-                                "built-in defaults")
+    path = Path(path) if path is not None else default_profile()
     try:
         with open(path, "rb") as file:
             document = tomllib.load(file)

@@ -38,6 +38,8 @@ DEFAULT_ROUTER_WAIT_S = 30.0
 MAX_MESSAGE_BYTES = 32 * 1024 * 1024
 #: the longest pause between two attempts to reach a lost router
 RECONNECT_PERIOD_MS = 1000
+#: how long a router waits on a client that reads nothing before cutting it off, microseconds
+BLOCKED_CLIENT_CUTOFF_US = 1_000_000
 
 
 class ZenohSetupError(RuntimeError):
@@ -75,6 +77,16 @@ _SECURE_DEFAULTS: dict[str, Any] = {
     "scouting/multicast/enabled": False,
     "scouting/gossip/enabled": False,
     "transport/link/rx/max_message_size": MAX_MESSAGE_BYTES,
+    # 16 batches (1 MB) of data in flight per link instead of 2: a reader that is only late (a
+    # loaded machine) loses no image or cloud; one that never reads is cut off or dropped
+    "transport/link/tx/queue/size/data": 16,
+}
+#: a publisher waits this long for room in its own queue (toward the router) before it drops a
+#: latest-wins sample, microseconds (zenoh: 1 ms, and 50 ms for a fragmented message): the
+#: router, not a consumer, is on the other end, so waiting only absorbs scheduling delays
+_PUBLISHER_DROP_WAITS: dict[str, Any] = {
+    "transport/link/tx/queue/congestion_control/drop/wait_before_drop": 100_000,
+    "transport/link/tx/queue/congestion_control/drop/max_wait_before_drop_fragments": 1_000_000,
 }
 
 
@@ -97,6 +109,7 @@ def client_settings(connect: list[str] | None = None) -> dict[str, Any]:
                           "period_increase_factor": 2},
         "listen/endpoints": [],
         **_SECURE_DEFAULTS,
+        **_PUBLISHER_DROP_WAITS,
     }
 
 
@@ -130,6 +143,10 @@ def router_config(listen: list[str], config_file: Path | None = None) -> zenoh.C
     if config_file is None:
         config.insert_json5("connect/endpoints", "[]")
         _secure_defaults(config)
+        # a client that stops reading is cut off after this long instead of zenoh's 5 s, during
+        # which every message that must arrive (status, end of stream) would wait for it
+        config.insert_json5("transport/link/tx/queue/congestion_control/block/wait_before_close",
+                            str(BLOCKED_CLIENT_CUTOFF_US))
     return config
 
 
@@ -224,6 +241,20 @@ def open_session(args: argparse.Namespace) -> zenoh.Session:
     if wait_s < 0:
         raise ZenohSetupError(f"--router-wait must be >= 0, got {wait_s}")
     return open_config(config, wait_s=wait_s)
+
+
+def declare_publisher(session: zenoh.Session, key: str, encoding: str,
+                      latest_wins: bool) -> zenoh.Publisher:
+    """The one place congestion is decided. ``latest_wins`` (images, clouds, topologies: a
+    newer one supersedes it): ``DROP``, so that a consumer that does not keep up loses stale
+    samples instead of stalling the publisher and everyone else. Otherwise (calibration, status,
+    end of stream: what must arrive): ``BLOCK``, a consumer that stops reading altogether then
+    being cut off by zenoh after ``transport/link/tx/queue/congestion_control/block/
+    wait_before_close``."""
+    import zenoh
+
+    control = zenoh.CongestionControl.DROP if latest_wins else zenoh.CongestionControl.BLOCK
+    return session.declare_publisher(key, encoding=encoding, congestion_control=control)
 
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:

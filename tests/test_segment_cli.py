@@ -137,7 +137,7 @@ def test_segment_real_labelled_frames(tmp_path: Path) -> None:
         assert summary["format"] == "redwood"
         assert summary["intrinsics"]["fx"] == camera["fx"]
         assert summary["intrinsics"]["from"].endswith("camera.json")
-        assert summary["parameters"]["profile"] == "built-in defaults"
+        assert summary["parameters"]["profile"].endswith("kinect.toml")  # the default profile
 
 
 def test_a_folder_without_camera_json_warns_which_intrinsics_are_assumed(

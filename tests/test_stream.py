@@ -52,7 +52,9 @@ def test_attention_moves_nodes_from_the_large_surfaces_to_the_objects() -> None:
     on_object = (np.bincount(truth) < 0.05 * truth.size)[truth]
 
     def node_share_on_objects(share: float) -> float:
-        schedule = FrameSchedule(steps_first_frame=60_000, flat_surface_share=share)
+        # attention acts on the nodes still to grow: most of the budget is left after warm-up
+        schedule = FrameSchedule(steps_first_frame=60_000, flat_surface_share=share,
+                                 warm_up_share=0.15)
         stream = StreamLearner({"max_nodes": 600, "lambda_": 50}, schedule=schedule,
                                random_state=1)
         stream.learn_frame(positions, colors)

@@ -105,3 +105,20 @@ def test_gngdt_router_process_serves_clients(free_port: int) -> None:
         if process.poll() is None:
             process.kill()
             process.wait()
+
+
+@pytest.mark.parametrize("path", sorted((REPO_ROOT / "config").rglob("*.json5")),
+                         ids=lambda path: str(path.relative_to(REPO_ROOT / "config")))
+def test_every_shipped_config_keeps_gngdt_bounds(path: Path) -> None:
+    import json
+
+    import zenoh
+
+    from services.zenoh_session import BLOCKED_CLIENT_CUTOFF_US, MAX_MESSAGE_BYTES
+
+    config = zenoh.Config.from_file(str(path))
+    rx = json.loads(config.get_json("transport/link/rx"))
+    assert rx["max_message_size"] == MAX_MESSAGE_BYTES
+    if json.loads(config.get_json("mode")) == "router" or "router" in path.name:
+        block = json.loads(config.get_json("transport/link/tx/queue/congestion_control/block"))
+        assert block["wait_before_close"] == BLOCKED_CLIENT_CUTOFF_US

@@ -1,0 +1,291 @@
+"""Hostile and odd inputs, replayed against running services: peak RSS per process, exit codes,
+and whether every refusal was counted (issue 15's inputs, each small on the wire).
+
+    python benchmarks/bench_hostile.py
+
+Services: ``gngdt router``, ``learn`` and ``log`` (a .rrd capped at 200 MB) on loopback, fed by
+this script's own zenoh client:
+  - 2 MB samples on ``gngdt/<cam>/calibration`` (300 of them: 600 MB);
+  - topologies at the logger's node limit (25,000 nodes, 8 edges a node in 4 edge sets, 5
+    clusterings: what a learner with --max-nodes 25000 sends), 10 of them, one of 100,000 nodes
+    (over the limit) and one of 20,000 clusterings;
+  - a 200 MB sample on ``gngdt/camera/points``, and on a topic nobody reads;
+  - garbage on 1,000 made-up camera names (valid attachments);
+  - clouds stamped with sequence 2**64-1 and capture time INT64_MIN;
+  - 3 s of 640x480 colour images at 30 Hz into the capped .rrd.
+Then ``gngdt capture`` replays three small hostile recordings (one 4000x4000 frame in 8 kB, 64
+uncalibrated 2000x2000 frames, a zstd chunk inflating to 256 MB): capture refuses each (exit 2,
+naming file and frame: issue 15.11) within its limits. Target: no process above 1 GB, no service
+exits non-zero, every refusal counted in the learner's status or the logger's log.
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import struct
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))
+
+from procstat import status_mb  # noqa: E402  (benchmarks/, beside this script)
+
+from schemas.packing import (  # noqa: E402
+    cloud_to_msg,
+    decode_status,
+    encode_topology,
+    image_to_raw,
+)
+from schemas.wire import FrameStamp  # noqa: E402
+from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
+
+MB = 1024 * 1024
+
+
+class Peaks:
+    """Polls VmHWM of the given processes (a peak resident set is kept by the kernel: polling
+    only has to see the process alive)."""
+
+    def __init__(self) -> None:
+        self.peaks: dict[str, float] = {}
+        self.watched: dict[str, int] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def watch(self, name: str, pid: int) -> None:
+        self.watched[name] = pid
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.05):
+            for name, pid in list(self.watched.items()):
+                self.peaks[name] = max(self.peaks.get(name, 0.0), status_mb(pid, "VmHWM"))
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+
+def gngdt(*arguments: str, log: Path) -> subprocess.Popen:
+    with open(log, "wb") as output:
+        return subprocess.Popen([sys.executable, "-m", "services.cli", *arguments],
+                                cwd=REPO_ROOT, stdout=output, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+
+
+def wait_until(condition, timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.05)
+    raise SystemExit(f"timed out waiting for {what}")
+
+
+def stamp(sequence: int = 1) -> bytes:
+    return FrameStamp(sequence, time.time_ns()).to_attachment()
+
+
+def big_topology(nodes: int, rng: np.random.Generator) -> bytes:
+    pairs = {prop: rng.integers(0, nodes, (8 * nodes, 2)) for prop in ("pos", "col", "nor", "cvx")}
+    labels = {name: rng.integers(-1, 50, nodes).astype(np.int32)
+              for name in ("pos", "col", "nor", "col+nor", "segments")}
+    return encode_topology(
+        positions=rng.random((nodes, 3), dtype=np.float32),
+        colors=rng.integers(0, 256, (nodes, 3)), normals=rng.random((nodes, 3)),
+        errors=rng.random(nodes), edges=pairs, clusterings=labels, steps=1, frame_sequence=1,
+        timestamp_ns=time.time_ns(), frame_id="camera").SerializeToString()
+
+
+def feed(session, rng: np.random.Generator) -> dict[str, int]:
+    """Every hostile input through ``session``; what each service should have refused."""
+    import zenoh
+
+    block = zenoh.CongestionControl.BLOCK
+    expected = {"logger oversized": 0, "logger malformed": 0, "learner malformed": 0}
+
+    def put(key: str, payload: bytes, attachment: bytes | None = None) -> None:
+        session.put(key, payload, attachment=attachment or stamp(), congestion_control=block)
+
+    for _ in range(300):  # 15.1: 2 MB calibrations
+        put("gngdt/camera/calibration", b"\x00" * (2 * MB))
+    expected["logger oversized"] += 300
+    print("  sent 300 calibrations of 2 MB", flush=True)
+    topology = big_topology(25_000, rng)
+    for sequence in range(10):  # 15.2: at the node limit
+        put("gngdt/camera/topology", topology, stamp(sequence))
+    print(f"  sent 10 topologies of 25,000 nodes ({len(topology) / 1e6:.0f} MB each)", flush=True)
+    put("gngdt/camera/topology", big_topology(100_000, rng))
+    expected["logger malformed"] += 1
+    print("  sent a topology of 100,000 nodes", flush=True)
+    many = encode_topology(
+        positions=np.zeros((10, 3)), colors=None, normals=None, errors=None, edges={},
+        clusterings={f"c{i}": np.zeros(10, np.int32) for i in range(20_000)}, steps=1,
+        frame_sequence=1, timestamp_ns=1, frame_id="camera").SerializeToString()
+    put("gngdt/camera/topology", many)
+    expected["logger malformed"] += 1
+    print(f"  sent a topology of 20,000 clusterings ({len(many) / 1e3:.0f} kB)", flush=True)
+    for key in ("gngdt/camera/points", "gngdt/nobody/reads"):  # 15.4
+        put(key, b"\x00" * (200 * MB))
+    print("  sent two samples of 200 MB", flush=True)
+    for index in range(1000):  # 13.8
+        put(f"gngdt/made-up-{index}/calibration", b"\x0a\xff\xff\x03")
+    expected["logger malformed"] += 1000
+    print("  sent garbage on 1,000 camera names", flush=True)
+    cloud = cloud_to_msg(rng.random((5000, 3), dtype=np.float32),
+                         rng.integers(0, 256, (5000, 3), dtype=np.uint8),
+                         timestamp_ns=time.time_ns()).SerializeToString()
+    for attachment in (struct.pack("<Qq", 2**64 - 1, time.time_ns()),
+                       struct.pack("<Qq", 1, -(2**63))):  # 13.1, 15.10
+        put("gngdt/camera/points", cloud, attachment)
+        time.sleep(1.0)  # the learner keeps only the latest cloud: one at a time
+        expected["learner malformed"] += 1
+    put("gngdt/camera/points", cloud, stamp(2))  # a good frame: the status that counts
+    print("  sent clouds stamped 2**64-1 and INT64_MIN, then a good one", flush=True)
+    image = rng.integers(0, 256, (480, 640, 3), dtype=np.uint8)
+    for sequence in range(90):  # 15.5: into the capped .rrd
+        put("gngdt/camera/color", image_to_raw(image, timestamp_ns=time.time_ns())
+            .SerializeToString(), stamp(sequence))
+        time.sleep(1 / 30)
+    print("  sent 3 s of 640x480 images", flush=True)
+    return expected
+
+
+def hostile_recordings(folder: Path) -> dict[str, Path]:
+    from mcap.writer import CompressionType, Writer
+    from mcap_protobuf.writer import Writer as ProtobufWriter
+
+    from schemas.packing import intrinsics_to_calibration
+    from services.recording.frame import CameraIntrinsics
+
+    def images(path: Path, shape: tuple[int, int], frames: int, calibrated: bool) -> Path:
+        with open(path, "wb") as file, ProtobufWriter(file) as writer:
+            color = image_to_raw(np.zeros((*shape, 3), np.uint8), timestamp_ns=1)
+            depth = image_to_raw(np.zeros(shape, np.uint16), timestamp_ns=1)
+            for index in range(frames):
+                ns = 1_000_000_000 + index * 33_000_000
+                color.timestamp.nanos = depth.timestamp.nanos = ns % 10**9
+                if calibrated:
+                    intrinsics = CameraIntrinsics(shape[1], shape[0], 500.0, 500.0, 1.0, 1.0)
+                    writer.write_message("/camera/calibration", intrinsics_to_calibration(
+                        intrinsics, timestamp_ns=ns), log_time=ns, publish_time=ns)
+                writer.write_message("/camera/color", color, log_time=ns, publish_time=ns)
+                writer.write_message("/camera/depth", depth, log_time=ns, publish_time=ns)
+        return path
+
+    bomb = folder / "zstd-bomb.mcap"
+    with open(bomb, "wb") as file:
+        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=512 * MB)
+        writer.start()
+        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
+        channel = writer.register_channel("/camera/color", "protobuf", schema)
+        writer.add_message(channel, log_time=1, data=bytes(256 * MB), publish_time=1)
+        writer.finish()
+    return {
+        "one 4000x4000 frame": images(folder / "huge-frame.mcap", (4000, 4000), 1, True),
+        "64 uncalibrated 2000x2000": images(folder / "uncalibrated.mcap", (2000, 2000), 64,
+                                            False),
+        "zstd chunk of 256 MB": bomb,
+    }
+
+
+def main() -> None:
+    folder = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    connect = ("--zenoh-connect", endpoint)
+    peaks = Peaks()
+    processes = {
+        "router": gngdt("router", "--listen", endpoint, log=folder / "router.log"),
+        "learner": gngdt("learn", "--samples-per-frame", "2000", *connect,
+                         log=folder / "learner.log"),
+        "logger": gngdt("log", "--save", str(folder / "hostile.rrd"), "--keep-running",
+                        "--max-rrd-mb", "200", *connect, log=folder / "logger.log"),
+    }
+    for name, process in processes.items():
+        peaks.watch(name, process.pid)
+    session = open_config(client_config([endpoint]), wait_s=30)
+    statuses: list = []
+    session.declare_subscriber("gngdt/camera/learner/status",
+                               lambda sample: statuses.append(decode_status(
+                                   sample.payload.to_bytes())))
+    wait_until(lambda: "learning from" in (folder / "learner.log").read_text()
+               and "logging to" in (folder / "logger.log").read_text(), 120, "the services")
+    print("feeding the services:", flush=True)
+    started = time.monotonic()
+    expected = feed(session, np.random.default_rng(0))
+    wait_until(lambda: any(status.frame_sequence == 2 for status in statuses), 60,
+               "the good frame's status")
+    time.sleep(2.0)  # the logger drains its inbox
+    fed_s = time.monotonic() - started
+    alive = {name: process.poll() is None for name, process in processes.items()}
+    session.close()
+    for process in processes.values():
+        process.send_signal(signal.SIGINT)
+    codes = {name: process.wait(60) for name, process in processes.items()}
+
+    print("\ncapture replaying hostile recordings:", flush=True)
+    capture_rows = []
+    for label, path in hostile_recordings(folder).items():
+        log = folder / f"capture-{path.stem}.log"
+        router = gngdt("router", "--listen", endpoint, log=folder / "router-capture.log")
+        wait_until(lambda: "listening on" in (folder / "router-capture.log").read_text(), 30,
+                   "a router")
+        began = time.monotonic()
+        capture = gngdt("capture", str(path), "--fast", "--wait-subscribers", "0", *connect,
+                        log=log)
+        peaks.watch(f"capture: {label}", capture.pid)
+        code = capture.wait(300)
+        seconds = time.monotonic() - began
+        router.send_signal(signal.SIGINT)
+        router.wait(30)
+        reason = next((line.split("ERROR services.capture: ", 1)[1] for line in
+                       log.read_text().splitlines() if "ERROR services.capture: " in line), "")
+        capture_rows.append((label, path.stat().st_size, code, seconds, reason))
+    time.sleep(0.2)
+    peaks.stop()
+
+    status = next(s for s in statuses if s.frame_sequence == 2)
+    logged = (folder / "logger.log").read_text()
+    done = re.search(r"logger done: (\d+) malformed, (\d+) dropped, (\d+) oversized, (\d+) refused",
+                     logged)
+    malformed, dropped, oversized, refused = (int(value) for value in done.groups())
+    print(f"\nservices, fed for {fed_s:.1f} s (shared 2-core machine):")
+    print(f"{'process':<34}{'peak RSS':>10}  alive after  exit")
+    for name in processes:
+        print(f"{name:<34}{peaks.peaks.get(name, 0):>7.0f} MB  {alive[name]!s:>11}  "
+              f"{codes[name]:>4}")
+    print(f"\n{'capture of a hostile recording':<34}{'size':>9}{'peak RSS':>11}  exit  "
+          "seconds  reason")
+    for label, size, code, seconds, reason in capture_rows:
+        print(f"{label:<34}{size / 1e3:>6.0f} kB{peaks.peaks.get('capture: ' + label, 0):>8.0f} MB"
+              f"  {code:>4}  {seconds:>7.1f}  {reason[:110]}")
+    rrd_mb = (folder / "hostile.rrd").stat().st_size / 1e6
+    print("\nrefusals counted:")
+    print(f"  learner status: {status.malformed_messages} malformed "
+          f"(expected >= {expected['learner malformed']})")
+    print(f"  logger log: {oversized} oversized (expected >= {expected['logger oversized']}), "
+          f"{malformed} malformed (expected >= {expected['logger malformed']}), {dropped} "
+          f"dropped, {refused} cameras refused")
+    print(f"  .rrd: {rrd_mb:.0f} MB (capped at 200 MB)"
+          + ("; the logger said it stopped writing" if "stopped writing" in logged else ""))
+    worst = max(peaks.peaks.values())
+    counted = (status.malformed_messages >= expected["learner malformed"]
+               and oversized >= expected["logger oversized"]
+               and malformed >= expected["logger malformed"])
+    print(f"\ntarget: peak RSS <= 1024 MB: {worst:.0f} MB "
+          f"({'met' if worst <= 1024 else 'MISSED'}); services exit 0: "
+          f"{'met' if not any(codes.values()) else 'MISSED'}; refusals counted: "
+          f"{'met' if counted else 'MISSED'}")
+    print(f"logs: {folder}")
+
+
+if __name__ == "__main__":
+    main()
