@@ -96,6 +96,19 @@ def rrd_entities_and_scalars(path: Path) -> tuple[set[str], dict[str, list[tuple
     return entities, scalars
 
 
+def points_publisher(session, camera: str = "camera"):
+    """A BLOCK publisher on the camera's points, once a subscriber (the learner) matches it."""
+    import zenoh
+
+    publisher = session.declare_publisher(
+        f"gngdt/{camera}/points", encoding=ENCODING_POINT_CLOUD,
+        congestion_control=zenoh.CongestionControl.BLOCK)
+    deadline = time.monotonic() + 60
+    while not publisher.matching_status.matching and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return publisher
+
+
 def log_text(process: subprocess.Popen) -> str:
     return Path(process.log_path).read_text(errors="replace")
 
@@ -221,18 +234,12 @@ def test_killed_learner_resumes_from_its_checkpoint(
 def test_learner_counts_and_skips_malformed_messages(
     router_endpoint: str, spawn: Callable
 ) -> None:
-    import zenoh
 
     learner = spawn("learn", "--samples-per-frame", "500", "--zenoh-connect", router_endpoint)
     watcher = Watcher(router_endpoint)
     session = open_config(client_config([router_endpoint]))
     try:
-        publisher = session.declare_publisher(
-            "gngdt/camera/points", encoding=ENCODING_POINT_CLOUD,
-            congestion_control=zenoh.CongestionControl.BLOCK)
-        deadline = time.monotonic() + 60
-        while not publisher.matching_status.matching and time.monotonic() < deadline:
-            time.sleep(0.05)
+        publisher = points_publisher(session)
         rng = np.random.default_rng(0)
         cloud = cloud_to_msg(rng.random((2000, 3), dtype=np.float32),
                              rng.integers(0, 256, (2000, 3), dtype=np.uint8), timestamp_ns=1)

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_pipeline import Watcher, log_text, wait_exit
+from test_pipeline import Watcher, log_text, points_publisher, wait_exit
 
 from schemas.packing import MessageError, cloud_to_msg, decode_topology
-from schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
+from schemas.wire import FrameStamp
 from services.learner import Learner, LearnerConfig, OtherFrameError, decode_points
 from services.recording.synth import render_scene
 from services.recording.writer import RecordingWriter
@@ -116,18 +116,11 @@ def test_a_cloud_with_a_bad_pose_is_a_message_error_naming_the_frame():
 def test_a_running_learner_skips_bad_poses_and_other_frames(
     router_endpoint: str, spawn: Callable
 ) -> None:
-    import zenoh
-
     learner = spawn("learn", "--samples-per-frame", "2000", "--zenoh-connect", router_endpoint)
     watcher = Watcher(router_endpoint)
     session = open_config(client_config([router_endpoint]))
     try:
-        publisher = session.declare_publisher(
-            "gngdt/camera/points", encoding=ENCODING_POINT_CLOUD,
-            congestion_control=zenoh.CongestionControl.BLOCK)
-        deadline = time.monotonic() + 60
-        while not publisher.matching_status.matching and time.monotonic() < deadline:
-            time.sleep(0.05)
+        publisher = points_publisher(session)
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
         bad = PointCloud.FromString(posed_cloud(pose_at(0.0), "world"))
@@ -150,3 +143,34 @@ def test_a_running_learner_skips_bad_poses_and_other_frames(
     assert wait_exit(learner, 30) == 0
     log = log_text(learner)
     assert "learned in 'world'" in log and "'camera'" in log
+
+
+def test_the_logger_puts_a_posed_cloud_and_the_camera_in_the_world(tmp_path: Path):
+    import rerun as rr
+    from rerun.chunk import RrdReader
+
+    from services.logger import EntityPaths, RerunLog
+
+    path = tmp_path / "posed.rrd"
+    recording = rr.RecordingStream("gngdt-test")
+    recording.set_sinks(rr.FileSink(str(path)))
+    rerun_log = RerunLog(recording)
+    rerun_log.set_time(FrameStamp(0, time.time_ns()))
+    pose = rotation_about_z(np.pi / 2)
+    pose[:3, 3] = [1.0, 2.0, 3.0]
+    points = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 2.0]], dtype=np.float32)
+    rerun_log.points(EntityPaths("camera"), points, np.zeros((2, 3), np.uint8), pose)
+    recording.flush()
+    recording.disconnect()
+    logged = {chunk.entity_path: chunk.to_record_batch()
+              for chunk in RrdReader(path).stream().collect().stream()}
+    positions = np.array(logged["/world/points"].column("Points3D:positions").to_pylist()[0])
+    np.testing.assert_allclose(positions, [[1.0, 3.0, 3.0], [1.0, 2.0, 5.0]], atol=1e-6)
+    translation = logged["/world/camera"].column("Transform3D:translation").to_pylist()[0]
+    np.testing.assert_allclose(np.ravel(translation), [1.0, 2.0, 3.0])
+
+
+def rotation_about_z(angle: float) -> np.ndarray:
+    pose = np.eye(4)
+    pose[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    return pose
