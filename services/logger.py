@@ -496,13 +496,14 @@ class RerunLog:
                pose: np.ndarray | None = None) -> None:
         """The cloud at ``world/points``, at most ``max_cloud_points``; with a ``pose``
         (camera-to-world, the cloud was taken by a moving camera) the points are put in the
-        world."""
+        world and the camera follows the pose (`camera_pose`)."""
         import rerun as rr
 
         cap = self.rates.max_cloud_points or len(positions)
         stride = max(1, -(-len(positions) // cap))
         shown = positions[::stride]
         if pose is not None:
+            self.camera_pose(paths, pose)
             shown = shown @ pose[:3, :3].T.astype(np.float32) + pose[:3, 3].astype(np.float32)
         self.rec.log(paths.points, rr.Points3D(
             shown, colors=None if colors is None else colors[::stride],
@@ -809,12 +810,12 @@ class Dispatcher:
         message = packing.parse_message(PointCloud, payload)
         pose = packing.cloud_pose(message)
         moving = not np.array_equal(pose, np.eye(4))
-        if moving:  # the camera's pose: every frame, whether its cloud is logged or not
-            rerun_log.camera_pose(paths, pose)
         if rerun_log.due(paths, "points", stamp.sequence, rerun_log.rates.cloud_every):
             # views: the logger decimates, so only the logged points are copied
             positions, colors = packing.msg_to_cloud(message, copy=False)
             rerun_log.points(paths, positions, colors, pose if moving else None)
+        elif moving:  # the camera's pose: every frame, whether its cloud is logged or not
+            rerun_log.camera_pose(paths, pose)
 
     def capture_seen(self, camera: str, alive: bool) -> None:
         """A capture of ``camera`` started (``alive``) or left."""
