@@ -13,9 +13,11 @@ this script's own zenoh client:
   - garbage on 1,000 made-up camera names (valid attachments);
   - clouds stamped with sequence 2**64-1 and capture time INT64_MIN;
   - 3 s of 640x480 colour images at 30 Hz into the capped .rrd.
-Then ``gngdt capture`` replays three small hostile recordings (one 4000x4000 frame in 8 kB, 64
-uncalibrated 2000x2000 frames, a zstd chunk inflating to 256 MB): capture refuses each (exit 2,
-naming file and frame: issue 15.11) within its limits. Target: no process above 1 GB, no service
+Then ``gngdt capture`` replays small hostile recordings (one 4000x4000 frame in 8 kB, 64
+uncalibrated 2000x2000 frames, a zstd chunk inflating to 256 MB, an lz4 chunk hiding its 256 MB,
+16 chunks of 40 MB overlapping in time, 1.5 million transforms): capture refuses each of the
+first five (exit 2, naming file and frame: issue 15.11) and reads the first million transforms
+of the last (exit 0, warned), within its limits. Target: no process above 1 GB, no service
 exits non-zero, every refusal counted in the learner's status or the logger's log.
 """
 
@@ -194,7 +196,94 @@ def hostile_recordings(folder: Path) -> dict[str, Path]:
         "64 uncalibrated 2000x2000": images(folder / "uncalibrated.mcap", (2000, 2000), 64,
                                             False),
         "zstd chunk of 256 MB": bomb,
+        "lz4 chunk hiding 256 MB": lz4_chunk_hiding_its_size(folder / "lz4-bomb.mcap"),
+        "16 chunks overlapping in time": overlapping_chunks(folder / "overlap.mcap"),
+        f"{TRANSFORM_FLOOD:,} transforms": transform_flood(folder / "tf-flood.mcap"),
     }
+
+
+#: transform samples in the flooded recording (capture reads 1,000,000 by default)
+TRANSFORM_FLOOD = 1_500_000
+
+
+def lz4_chunk_hiding_its_size(path: Path) -> Path:
+    """One lz4 chunk of 256 MB of zeros (1.1 MB) whose frame states no size and whose record
+    claims 100 bytes: mcap inflates an lz4 frame whole."""
+    import lz4.frame
+    from mcap.writer import CompressionType, Writer
+
+    real_compress = lz4.frame.compress
+    lz4.frame.compress = lambda data, **_: real_compress(data, store_size=False)
+    try:
+        with open(path, "wb") as file:
+            writer = Writer(file, compression=CompressionType.LZ4, chunk_size=512 * MB)
+            writer.start()
+            schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
+            channel = writer.register_channel("/camera/color", "protobuf", schema)
+            writer.add_message(channel, log_time=1, data=bytes(256 * MB), publish_time=1)
+            writer.finish()
+    finally:
+        lz4.frame.compress = real_compress
+    stated = struct.pack("<Q", 256 * MB + 125)  # the chunk record's uncompressed_size
+    path.write_bytes(path.read_bytes().replace(stated, struct.pack("<Q", 100), 1))
+    return path
+
+
+def overlapping_chunks(path: Path) -> Path:
+    """16 zstd chunks of 40 MB that each start early and end late: a merge by log time holds
+    them all inflated."""
+    from mcap.writer import CompressionType, Writer
+
+    with open(path, "wb") as file:
+        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=40 * MB)
+        writer.start()
+        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
+        channel = writer.register_channel("/camera/color", "protobuf", schema)
+        for index in range(16):
+            writer.add_message(channel, log_time=index + 1, data=b"", publish_time=1)
+            writer.add_message(channel, log_time=10**12, data=bytes(40 * MB), publish_time=1)
+        writer.finish()
+    return path
+
+
+def transform_flood(path: Path) -> Path:
+    """One good 64x48 frame, then TRANSFORM_FLOOD identical /tf samples (they compress to
+    little)."""
+    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+    from mcap.writer import CompressionType, IndexType, Writer
+
+    from schemas.packing import intrinsics_to_calibration
+    from services.recording.frame import CameraIntrinsics
+
+    ns = 1_000_000_000
+    transform = FrameTransform(parent_frame_id="world", child_frame_id="camera")
+    transform.timestamp.seconds, transform.rotation.w = 1, 1.0
+    messages = {
+        "/camera/calibration": ("foxglove.CameraCalibration", intrinsics_to_calibration(
+            CameraIntrinsics(64, 48, 50.0, 50.0, 32.0, 24.0), timestamp_ns=ns)),
+        "/camera/color": ("foxglove.RawImage", image_to_raw(
+            np.zeros((48, 64, 3), np.uint8), timestamp_ns=ns, frame_id="camera")),
+        "/camera/depth": ("foxglove.RawImage", image_to_raw(
+            np.full((48, 64), 1000, np.uint16), timestamp_ns=ns, frame_id="camera")),
+        "/tf": ("foxglove.FrameTransform", transform),
+    }
+    with open(path, "wb") as file:
+        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=16 * MB,
+                        index_types=IndexType.CHUNK)  # no per-message index: a small file
+        writer.start()
+        channels = {}
+        for topic, (schema_name, message) in messages.items():
+            schema = writer.register_schema(schema_name, "protobuf", b"")
+            channels[topic] = (writer.register_channel(topic, "protobuf", schema),
+                               message.SerializeToString())
+        for topic in ("/camera/calibration", "/camera/color", "/camera/depth"):
+            channel, data = channels[topic]
+            writer.add_message(channel, log_time=ns, data=data, publish_time=ns)
+        channel, data = channels["/tf"]
+        for _ in range(TRANSFORM_FLOOD):
+            writer.add_message(channel, log_time=ns, data=data, publish_time=ns)
+        writer.finish()
+    return path
 
 
 def main() -> None:
@@ -246,8 +335,11 @@ def main() -> None:
         seconds = time.monotonic() - began
         router.send_signal(signal.SIGINT)
         router.wait(30)
-        reason = next((line.split("ERROR services.capture: ", 1)[1] for line in
-                       log.read_text().splitlines() if "ERROR services.capture: " in line), "")
+        lines = log.read_text().splitlines()
+        reason = next((line.split("ERROR services.capture: ", 1)[1] for line in lines
+                       if "ERROR services.capture: " in line), "")
+        reason = reason or next((line.split(": ", 2)[-1] for line in lines
+                                 if "WARNING" in line and "(--max-" in line), "")
         capture_rows.append((label, path.stat().st_size, code, seconds, reason))
     time.sleep(0.2)
     peaks.stop()

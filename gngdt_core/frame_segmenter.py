@@ -92,32 +92,30 @@ class FrameSegmenter:
             raise ValueError(f"colors {colors.shape} do not match points {points.shape}")
         clock = _Clock()
         height, width, _ = points.shape
-        flat_points = points.reshape(-1, 3)
-        valid = np.flatnonzero(np.isfinite(flat_points).all(axis=1))
-        learnable = self._learnable(points, valid)
-        labels = np.zeros(height * width, dtype=np.int32)
+        learnable = self._learnable(points).reshape(-1)
+        positions = np.compress(learnable, points.reshape(-1, 3), axis=0)
         clock.lap("prepare")
-        if learnable.size < 2:
+        if len(positions) < 2:
             model = self.model_
-            return FrameResult(labels.reshape(height, width), model.n_nodes_ if model else 0, 0,
-                               0, False, clock.laps)
-        learned = self.stream.learn_frame(flat_points[learnable],
-                                          colors.reshape(-1, 3)[learnable], independent)
+            return FrameResult(np.zeros((height, width), dtype=np.int32),
+                               model.n_nodes_ if model else 0, 0, 0, False, clock.laps)
+        learned = self.stream.learn_frame(
+            positions, np.compress(learnable, colors.reshape(-1, 3), axis=0), independent)
         clock.lap("learn")
-        node_labels = learned.segmentation.labels
-        labels[valid] = node_labels[self.model_.predict(flat_points[valid])] + 1
+        labels = self.model_.label_pixels(points, learned.segmentation.labels)
         clock.lap("label")
-        return FrameResult(labels.reshape(height, width), self.model_.n_nodes_,
+        return FrameResult(labels, self.model_.n_nodes_,
                            learned.segmentation.n_segments, learned.steps, learned.from_scratch,
                            clock.laps)
 
-    def _learnable(self, points: np.ndarray, valid: np.ndarray) -> np.ndarray:
-        """Flat indices of the valid pixels learned: in the depth range and not veil points."""
-        keep = self.stream.in_depth_range(points.reshape(-1, 3)[valid])
+    def _learnable(self, points: np.ndarray) -> np.ndarray:
+        """(H, W) bool: the pixels learned: a point in the depth range (so not NaN), not a veil
+        point."""
+        keep = self.stream.in_depth_range(points.reshape(-1, 3)).reshape(points.shape[:2])
         ratio = self.stream.schedule.veil_ratio
         if ratio > 0:
-            keep &= ~veil_pixels(points[..., 2], ratio).reshape(-1)[valid]
-        return valid[keep]
+            keep &= ~veil_pixels(points[..., 2], ratio)
+        return keep
 
 
 class _Clock:

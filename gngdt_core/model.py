@@ -410,22 +410,66 @@ class _GrowingGas:
         winners = np.asarray(winners, dtype=np.int64)
         return (winners, np.asarray(distances, dtype=np.float64)) if return_distance else winners
 
+    def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
+        """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1; 0 where the
+        pixel has no point (NaN depth) or its node has label -1.
+
+        points: (H, W, 3) float32/float64 metres, an organized cloud: one point per pixel, in
+        the network's frame, x and y finite wherever z is (as deprojection gives them);
+        node_labels: (n_nodes,) int, e.g. ``segment()``. The nearest node is searched at every
+        second pixel of every second row; a pixel between such pixels that all agree takes their
+        label without a search (a label region narrower than two pixels can be missed there),
+        every other pixel is searched exactly. On a 640x480 Kinect frame 0.02-0.05 % of the
+        pixels differ from ``node_labels[predict(...)]``, at a third of its CPU time.
+        """
+        if self.n_nodes_ == 0:
+            raise ValueError("the model has no nodes yet: call fit or partial_fit first")
+        if self._dim != 3 or self._MODE != K.MODE_GNGDT:
+            raise ValueError("label_pixels needs a GNG-DT network of 3D positions")
+        if points.ndim != 3 or points.shape[2] != 3:
+            raise ValueError(f"points must have shape (H, W, 3), got {points.shape}")
+        node_labels = np.asarray(node_labels, dtype=np.int32)
+        if node_labels.shape != (self.n_nodes_,):
+            raise ValueError(f"node_labels must have shape ({self.n_nodes_},), got "
+                             f"{node_labels.shape}")
+        if points.dtype not in (np.float32, np.float64):
+            points = points.astype(np.float64)
+        points = np.ascontiguousarray(points)
+        valid = np.isfinite(points[..., 2])
+        out = np.empty(valid.shape, dtype=np.int32)
+        grid = self._grid_arrays()
+        min_rows = PARALLEL_MIN_POINTS // max(points.shape[1], 1)
+        for anchors in (True, False):  # every anchor first: the second pass reads them
+            self._in_parallel(points.shape[0], min_rows,
+                              lambda start, stop, anchors=anchors: SK.label_pixels(
+                                  points, valid, node_labels, anchors, start, stop, *grid, out))
+        return out
+
+    def _grid_arrays(self) -> tuple:
+        """Node positions, count and spatial grid, as the nearest-node kernels take them."""
+        a = self._arrays
+        return (a["pos"], self.n_nodes_, a["ghead"], a["gnext"],
+                bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL])
+
+    @staticmethod
+    def _in_parallel(n_items: int, min_part: int, work: Any) -> None:
+        """``work(start, stop)`` over ``range(n_items)``, split over the CPUs when large (the
+        kernels release the GIL)."""
+        bounds = split_range(n_items, min_part)
+        if len(bounds) == 2:
+            work(0, n_items)
+            return
+        with ThreadPoolExecutor(len(bounds) - 1) as pool:
+            list(pool.map(work, bounds[:-1], bounds[1:]))
+
     def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
-        large batches are split over the CPUs (the kernel releases the GIL)."""
+        large batches are split over the CPUs."""
         winners = np.empty(points.shape[0], dtype=np.int32)
         sq_distances = np.empty(points.shape[0])
-        a = self._arrays
-        grid = (self.n_nodes_, a["ghead"], a["gnext"], bool(self._istate[K.I_GRID]),
-                self._fstate[K.F_CELL], winners, sq_distances)
-        bounds = split_range(points.shape[0], PARALLEL_MIN_POINTS)
-        if len(bounds) == 2:
-            SK.nearest_nodes(points, 0, points.shape[0], a["pos"], *grid)
-        else:
-            with ThreadPoolExecutor(len(bounds) - 1) as pool:
-                list(pool.map(lambda start, stop: SK.nearest_nodes(points, start, stop,
-                                                                   a["pos"], *grid),
-                              bounds[:-1], bounds[1:]))
+        grid = (*self._grid_arrays(), winners, sq_distances)
+        self._in_parallel(points.shape[0], PARALLEL_MIN_POINTS,
+                          lambda start, stop: SK.nearest_nodes(points, start, stop, *grid))
         return winners, sq_distances
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:

@@ -44,7 +44,7 @@ class FrameSchedule:
     #: learning steps for a frame learned from scratch (independent, first frame, new scene)
     steps_first_frame: int = 200_000
     #: learning steps for each later frame of a stream
-    steps_per_frame: int = 20_000
+    steps_per_frame: int = 10_000
     #: organized frames only (depth images): a pixel is a veil point (a depth edge's mixed
     #: measurement) and is not learned when its depth differs from a 4-neighbour's by more
     #: than this share of the nearer depth; 0 keeps every pixel
@@ -225,7 +225,8 @@ class StreamLearner:
         rows = np.arange(len(positions))
         draw = min(len(positions), int(ATTENTION_DRAW * steps))
         if draw < len(positions):
-            rows = self._rng.choice(len(positions), size=draw, replace=False)
+            # in scan order: each nearest-node search starts from the previous row's node
+            rows = np.sort(self._rng.choice(len(positions), size=draw, replace=False))
         on_large = on_surface[self.model_.predict(positions[rows])]
         keep = ~on_large | (self._rng.random(rows.size) < share)
         return rows[keep]

@@ -148,12 +148,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-pending-mb", type=int, default=defaults.max_held_bytes >> 20, metavar="MB",
         help="images held while waiting for their colour/depth partner or a calibration "
         f"(default {defaults.max_held_bytes >> 20})")
+    limits.add_argument(
+        "--max-transforms", type=int, default=defaults.max_transform_samples, metavar="N",
+        help="transform samples (/tf) read for camera poses, 64 bytes each, ~40 s a million "
+        f"(default {defaults.max_transform_samples:,}); the rest are not read, with a warning")
     add_zenoh_arguments(parser)
 
 
 def read_limits(args: argparse.Namespace) -> ReadLimits:
     """The reading limits of the command line (``ValueError`` for a non-positive one)."""
-    return ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20, args.max_pending_mb << 20)
+    return ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20, args.max_pending_mb << 20,
+                      args.max_transforms)
 
 
 @dataclass

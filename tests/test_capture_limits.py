@@ -148,6 +148,71 @@ def test_a_chunk_that_inflates_beyond_the_limit_is_refused_before_decompression(
     assert peak_mb < 300, f"{peak_mb:.0f} MB"
 
 
+def _write_lz4_chunk_hiding_its_size(path: Path, inflated_bytes: int) -> None:
+    """One lz4 chunk of zeros whose frame states no size and whose record claims 100 bytes."""
+    import struct
+
+    import lz4.frame
+    from mcap.writer import CompressionType, Writer
+
+    real_compress = lz4.frame.compress
+    lz4.frame.compress = lambda data, **_: real_compress(data, store_size=False)
+    try:
+        with open(path, "wb") as file:
+            writer = Writer(file, compression=CompressionType.LZ4, chunk_size=2 * inflated_bytes)
+            writer.start()
+            schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
+            channel = writer.register_channel("/camera/color", "protobuf", schema)
+            writer.add_message(channel, log_time=1, data=bytes(inflated_bytes), publish_time=1)
+            writer.finish()
+    finally:
+        lz4.frame.compress = real_compress
+    data = path.read_bytes()
+    stated = struct.pack("<Q", inflated_bytes + 125)  # the message record and its header
+    assert stated in data
+    path.write_bytes(data.replace(stated, struct.pack("<Q", 100), 1))  # the chunk record's
+
+
+@pytest.mark.timeout(120)
+def test_an_lz4_chunk_that_hides_its_size_is_refused_before_it_is_inflated(
+    router_endpoint: str, tmp_path: Path
+) -> None:
+    path = tmp_path / "lz4-bomb.mcap"
+    _write_lz4_chunk_hiding_its_size(path, 256 * 1024 * 1024)
+    assert path.stat().st_size < 1_200_000  # 1.1 MB of lz4 for 256 MB of zeros
+    code, output, peak_mb = _capture(router_endpoint, path)
+    assert code == 2, output
+    assert "lz4-bomb.mcap: a lz4 chunk of" in output and "--max-chunk-mb" in output
+    assert "Traceback" not in output
+    assert peak_mb < 300, f"{peak_mb:.0f} MB"  # mcap inflated it whole: 544 MB
+
+
+@pytest.mark.timeout(120)
+def test_chunks_that_overlap_in_time_are_inflated_one_at_a_time(
+    router_endpoint: str, tmp_path: Path
+) -> None:
+    from mcap.writer import CompressionType, Writer
+
+    path = tmp_path / "overlap.mcap"
+    chunk_bytes = 40 * 1024 * 1024
+    with open(path, "wb") as file:
+        writer = Writer(file, compression=CompressionType.ZSTD, chunk_size=chunk_bytes)
+        writer.start()
+        schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
+        channel = writer.register_channel("/camera/color", "protobuf", schema)
+        for index in range(16):  # each chunk starts early and ends late: all overlap
+            writer.add_message(channel, log_time=index + 1, data=b"", publish_time=1)
+            writer.add_message(channel, log_time=10**12, data=bytes(chunk_bytes), publish_time=1)
+        writer.finish()
+    assert path.stat().st_size < 100_000
+    code, output, peak_mb = _capture(router_endpoint, path)
+    assert code == 2, output  # 40 MB of zeros is no image: every message is a bad frame
+    assert "overlap.mcap: no color or depth image channel found" in output, output
+    assert "Traceback" not in output
+    # a merge by log time held all 16 chunks inflated at once (about 640 MB more)
+    assert peak_mb < 400, f"{peak_mb:.0f} MB"
+
+
 def test_a_cloud_never_exceeds_what_a_learner_accepts_and_a_message_holds() -> None:
     import numpy as np
 

@@ -76,6 +76,34 @@ def test_frame_segmenter_labels_every_valid_pixel_of_an_organized_frame() -> Non
     assert result.from_scratch and result.steps == 15_000
 
 
+def test_pixel_labels_are_the_nearest_nodes_labels_but_where_a_region_is_a_pixel_thin() -> None:
+    frame = next(iter(read_frames(ROOT / "recordings" / "tabletop_small.mcap")))
+    points = Deprojector().organized(frame.depth, frame.intrinsics)
+    valid = np.isfinite(points[..., 2])
+    stream = StreamLearner(QUICK, schedule=QUICK_SCHEDULE, random_state=0)
+    stream.learn_frame(points[valid], frame.color[valid])
+    model = stream.model_
+    anchors = np.zeros_like(valid)
+    anchors[::2, ::2] = True
+
+    def labels_and_exact(node_labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        exact = np.zeros(valid.shape, dtype=np.int64)
+        exact[valid] = node_labels[model.predict(points[valid])] + 1
+        return model.label_pixels(points, node_labels), exact
+
+    # every node its own label (Voronoi cells, corners poking between anchors: the worst case),
+    # then the segments (what it is for)
+    every_node = np.arange(model.n_nodes_, dtype=np.int32)
+    every_node[::7] = -1
+    for node_labels, tolerance in ((every_node, 0.01), (model.segment(), 0.001)):
+        labels, exact = labels_and_exact(node_labels)
+        assert labels.shape == valid.shape and (labels[~valid] == 0).all()
+        assert (labels[anchors] == exact[anchors]).all()
+        assert np.mean(labels[valid] != exact[valid]) < tolerance
+    with pytest.raises(ValueError, match="node_labels"):
+        model.label_pixels(points, every_node[:-1])
+
+
 def test_veil_pixels_are_the_two_sides_of_a_depth_jump() -> None:
     depth = np.full((6, 8), 1000, dtype=np.uint16)
     depth[:, 4:] = 1500  # a 50 cm jump between columns 3 and 4

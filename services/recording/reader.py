@@ -22,7 +22,9 @@ fixed frame and the camera gives frames without a pose, with one warning naming 
 frame whose time the transforms do not cover has no pose either (warned), and says why in
 ``frame.extras["pose_error"]``: the recording has poses, only not for that frame.
 
-Frames: a colour image and a depth image are paired when their stamps (the message's own
+Messages are read in file order, one chunk inflated at a time (MCAP writers write in log-time
+order; see ``_open_messages`` for why not mcap's merge by log time). Frames: a colour image and a
+depth image are paired when their stamps (the message's own
 timestamp/header stamp, else the MCAP ``log_time``) differ by at most ``max_skew_ns`` (default
 0: the same stamp, as gngdt writes them). The frame takes the colour stamp, the latest
 calibration (frames wait for the first one, up to ``MAX_FRAMES_WITHOUT_CALIBRATION`` of them),
@@ -69,11 +71,14 @@ class ReadLimits:
     max_frame_pixels: largest image (width x height); default 4096 x 2160.
     max_chunk_bytes: largest MCAP chunk once decompressed (and largest record).
     max_held_bytes: images held while they wait for their partner or for a calibration.
+    max_transform_samples: transform samples read for camera poses (at most 64 bytes each kept;
+    ~30-45 s to read a million); the rest are not read.
     """
 
     max_frame_pixels: int = 4096 * 2160
     max_chunk_bytes: int = 64 * 1024 * 1024
     max_held_bytes: int = 256 * 1024 * 1024
+    max_transform_samples: int = 1_000_000
 
     def __post_init__(self) -> None:
         for item in fields(self):
@@ -271,30 +276,26 @@ class _MessageDecoder:
 def _open_messages(
     stream: IO[bytes], max_record_bytes: int = ReadLimits.max_chunk_bytes
 ) -> Iterator[tuple[Any, Any, Any]]:
-    """(schema, channel, message) in log-time order when the file has an index, else file order.
+    """(schema, channel, message) in file order, streamed one chunk at a time, so that a damaged
+    file still delivers everything before the damage and memory stays within one chunk.
 
-    An intact file is read through its chunk index; a file without a readable summary (e.g.
-    truncated by a crash) is streamed record by record so that everything before the damage is
-    still delivered. Records larger than ``max_record_bytes`` are refused (mcap raises).
+    Not mcap's log-time merge of the chunk index: it inflates every chunk whose time range
+    overlaps the next message's time before yielding it, so chunks that each start early and end
+    late are all held at once (12 such chunks in 18 kB held 480 MB). MCAP writers (gngdt's,
+    rosbag2's) write messages in log-time order, and frames are paired by their stamps anyway.
+    Records larger than ``max_record_bytes`` are refused (mcap raises).
     """
-    from mcap.reader import NonSeekingReader, SeekingReader
+    from mcap.reader import NonSeekingReader
 
-    try:
-        summary = SeekingReader(stream, record_size_limit=max_record_bytes).get_summary()
-    except Exception:  # missing or damaged footer/summary: fall back to streaming
-        summary = None
-    stream.seek(0)
-    if summary is not None and summary.chunk_indexes:
-        return SeekingReader(stream, validate_crcs=True, record_size_limit=max_record_bytes
-                             ).iter_messages(log_time_order=True)
     return NonSeekingReader(stream, validate_crcs=True, record_size_limit=max_record_bytes
                             ).iter_messages(log_time_order=False)
 
 
 def check_chunks(stream: IO[bytes], path: Path, max_chunk_bytes: int) -> None:
     """Refuse (``RecordingError``) a file holding a chunk that would inflate beyond
-    ``max_chunk_bytes``, by the sizes its record and its compressed frame declare, before any
-    chunk is decompressed (an 8 kB chunk of zeros can declare 256 MB). Reads the file once;
+    ``max_chunk_bytes``, by the sizes its record and its zstd frame declare (an 8 kB chunk of
+    zeros can declare 256 MB) or, for lz4, by inflating at most that much of it, before mcap
+    inflates any chunk. Reads the file once, a chunk at a time;
     damage is left for the reading itself to report, after the frames before it."""
     from mcap.records import Chunk
     from mcap.stream_reader import StreamReader
@@ -304,12 +305,12 @@ def check_chunks(stream: IO[bytes], path: Path, max_chunk_bytes: int) -> None:
         reader = StreamReader(stream, emit_chunks=True, record_size_limit=max_chunk_bytes)
         for record in reader.records:
             if isinstance(record, Chunk):
-                declared = max(record.uncompressed_size, _frame_content_size(record))
+                declared = max(record.uncompressed_size, _inflated_size(record, max_chunk_bytes))
                 if declared > max_chunk_bytes:
                     raise RecordingError(
                         path, None, f"a {record.compression or 'raw'} chunk of "
                         f"{len(record.data)} bytes (at log time {record.message_start_time}) "
-                        f"inflates to {declared} bytes, more than the limit of "
+                        f"inflates to {declared} bytes or more, beyond the limit of "
                         f"{max_chunk_bytes} (--max-chunk-mb)")
             offset += 1
     except RecordingError:
@@ -320,8 +321,14 @@ def check_chunks(stream: IO[bytes], path: Path, max_chunk_bytes: int) -> None:
         stream.seek(0)
 
 
-def _frame_content_size(chunk: Any) -> int:
-    """What the chunk's compressed frame says it inflates to (0 when it does not say)."""
+def _inflated_size(chunk: Any, limit: int) -> int:
+    """What the chunk inflates to, as far as matters before mcap inflates it (0: unknown).
+
+    zstd: the size its frame header states (mcap inflates a frame that states none into at most
+    the record's ``uncompressed_size``). lz4: mcap inflates the frame whole, whatever any header
+    says (1 MB of lz4 is 256 MB of zeros), so the frame is inflated here, at most ``limit + 1``
+    bytes of it, and counted.
+    """
     try:
         if chunk.compression == "zstd":
             import zstandard
@@ -330,8 +337,9 @@ def _frame_content_size(chunk: Any) -> int:
         if chunk.compression == "lz4":
             import lz4.frame
 
-            return int(lz4.frame.get_frame_info(chunk.data).get("content_size") or 0)
-    except Exception:  # an unreadable frame header fails decompression later
+            decompressor = lz4.frame.LZ4FrameDecompressor()
+            return len(decompressor.decompress(chunk.data, max_length=limit + 1))
+    except Exception:  # an unreadable frame fails decompression later, with its place
         return 0
     return 0
 
@@ -563,25 +571,35 @@ def _may_have_transforms(stream: IO[bytes]) -> bool:
 
 
 def read_transforms(stream: IO[bytes], path: Path,
-                    max_record_bytes: int = ReadLimits.max_chunk_bytes) -> TransformTree:
-    """Every transform of the recording (first pass). A bad transform message is warned about
-    (naming its frames) and skipped; damage to the file ends the pass, the main pass reports it."""
+                    limits: ReadLimits | None = None) -> TransformTree:
+    """Every transform of the recording (first pass), up to ``limits.max_transform_samples``
+    (warned: later frames may have no pose). A bad transform message is warned about (naming its
+    frames) and skipped; damage to the file ends the pass, the main pass reports it."""
+    limits = limits or ReadLimits()
     tree = TransformTree()
     if not _may_have_transforms(stream):
         return tree
     decoder = _MessageDecoder()
-    bad = 0
+    bad = read = 0
     try:
-        for schema, channel, message in _open_messages(stream, max_record_bytes):
+        for schema, channel, message in _open_messages(stream, limits.max_chunk_bytes):
             if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
                 continue
             try:
                 for parent, child, stamp, translation, rotation, static in _transform_samples(
                     schema, channel, message, decoder
                 ):
+                    read += 1  # bad and replaced (static) samples cost the time too
+                    if read > limits.max_transform_samples:
+                        logger.warning(
+                            "%s: more than %d transform samples (--max-transforms); the rest "
+                            "(from log time %.3f s) are not read, so later frames may have no "
+                            "pose", path, limits.max_transform_samples, message.log_time / 1e9)
+                        return tree
                     tree.add(parent, child, stamp, translation, rotation, static)
             except (_DecodeFailure, TransformError) as error:
                 bad += 1
+                read += 1
                 if bad <= MAX_POSE_WARNINGS:
                     logger.warning("%s: %s: %s; skipped", path, channel.topic, error)
     except Exception as error:  # damaged file: keep the transforms read so far
@@ -670,7 +688,7 @@ def read_frames(
     fixed_frame: str | None = "auto",
     limits: ReadLimits | None = None,
 ) -> Iterator[Frame]:
-    """Yield the frames of an MCAP recording in log-time order (see the module docstring).
+    """Yield the frames of an MCAP recording in file order (see the module docstring).
 
     camera_prefix: only topics under it (``"/camera"``, ``"/kinect"``). intrinsics: used until a
     calibration message arrives (and when the recording has none). max_skew_ns: largest stamp
@@ -692,7 +710,7 @@ def read_frames(
         check_chunks(stream, path, limits.max_chunk_bytes)
         poses = None
         if fixed_frame is not None:
-            transforms = read_transforms(stream, path, limits.max_chunk_bytes)
+            transforms = read_transforms(stream, path, limits)
             if len(transforms):
                 poses = PoseLookup(path, transforms, fixed_frame)
             stream.seek(0)

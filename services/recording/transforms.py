@@ -15,7 +15,7 @@ one within it is normalised.
 
 from __future__ import annotations
 
-from bisect import insort
+from array import array
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +34,10 @@ QUATERNION_TOLERANCE = 0.01
 #: a lookup may use the first/last sample this far outside the samples' time span (20 ms: a
 #: camera frame stamped just after the last transform of a 50 Hz stream still gets it)
 DEFAULT_MAX_EXTRAPOLATION_NS = 20_000_000
+#: links (frames with a parent) a tree holds: each new link walks its parent's chain, so a
+#: tree of a million frames would cost hours; a robot's has a few dozen
+MAX_LINKS = 1024
+INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
 
 
 class TransformError(ValueError):
@@ -101,11 +105,16 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, fraction: float) -> np.ndarray:
     return (np.sin((1.0 - fraction) * angle) * q0 + np.sin(fraction * angle) * q1) / np.sin(angle)
 
 
-def pose_to_matrix(translation: object, quaternion: object, what: str = "pose") -> np.ndarray:
-    """(4, 4) float64 rigid transform from a translation (3,) and a quaternion (x, y, z, w)."""
+def _checked_translation(translation: object, what: str) -> np.ndarray:
     t = np.asarray(translation, dtype=np.float64).reshape(-1)
     if t.shape != (3,) or not np.isfinite(t).all():
         raise TransformError(f"{what}: translation must be 3 finite numbers, got {t}")
+    return t
+
+
+def pose_to_matrix(translation: object, quaternion: object, what: str = "pose") -> np.ndarray:
+    """(4, 4) float64 rigid transform from a translation (3,) and a quaternion (x, y, z, w)."""
+    t = _checked_translation(translation, what)
     matrix = np.eye(4)
     matrix[:3, :3] = _rotation_matrix(unit_quaternion(quaternion, what))
     matrix[:3, 3] = t
@@ -128,58 +137,68 @@ def _inverse(matrix: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Link:
-    """The samples of one parent -> child transform, kept sorted by time."""
+    """The samples of one parent -> child transform: 64 bytes each (a recording may hold
+    millions), appended in any order and sorted by time when first looked up."""
 
     parent: str
     static: bool
-    samples: list[tuple[int, tuple[float, ...], tuple[float, ...]]] = field(default_factory=list)
-    #: (S,) int64 stamps of ``samples``, rebuilt after a change
-    _stamps: np.ndarray | None = None
+    #: stamps (S,) in ns and (S, 7) translation + quaternion (x, y, z, w) rows, as added
+    _stamps: array = field(default_factory=lambda: array("q"))
+    _values: array = field(default_factory=lambda: array("d"))
+    #: the same, sorted by stamp (stable), built at the first lookup after a change
+    _sorted: tuple[np.ndarray, np.ndarray] | None = None
+
+    def __len__(self) -> int:
+        return len(self._stamps)
 
     def add(self, stamp_ns: int, translation: np.ndarray, quaternion: np.ndarray) -> None:
-        sample = (stamp_ns, tuple(translation.tolist()), tuple(quaternion.tolist()))
-        self._stamps = None
-        if self.static:
-            self.samples = [sample]  # the latest static transform replaces the previous one
-        elif not self.samples or stamp_ns > self.samples[-1][0]:
-            self.samples.append(sample)
-        else:
-            insort(self.samples, sample, key=lambda item: item[0])
+        if self.static:  # the latest static transform replaces the previous one
+            del self._stamps[:], self._values[:]
+        self._stamps.append(stamp_ns)
+        self._values.extend(translation.tolist() + quaternion.tolist())
+        self._sorted = None
 
-    def span_ns(self) -> tuple[int, int]:
-        return self.samples[0][0], self.samples[-1][0]
+    def samples(self) -> tuple[np.ndarray, np.ndarray]:
+        """(S,) int64 stamps and (S, 7) float64 poses, sorted by stamp."""
+        if self._sorted is None:
+            stamps = np.frombuffer(self._stamps, dtype=np.int64)
+            order = np.argsort(stamps, kind="stable")
+            values = np.frombuffer(self._values, dtype=np.float64).reshape(-1, 7)
+            self._sorted = stamps[order], values[order]
+        return self._sorted
 
     def at(self, stamp_ns: int, max_extrapolation_ns: int, child: str) -> np.ndarray:
         """(4, 4) parent_from_child at ``stamp_ns``."""
+        stamps, values = self.samples()
         if self.static:
-            _, translation, quaternion = self.samples[0]
-            return pose_to_matrix(translation, quaternion)
-        first, last = self.span_ns()
+            return pose_to_matrix(values[0, :3], values[0, 3:])
+        first, last = int(stamps[0]), int(stamps[-1])
         if stamp_ns <= first or stamp_ns >= last:
-            nearest = self.samples[0] if stamp_ns <= first else self.samples[-1]
-            if abs(stamp_ns - nearest[0]) > max_extrapolation_ns:
+            nearest = 0 if stamp_ns <= first else -1
+            if abs(stamp_ns - int(stamps[nearest])) > max_extrapolation_ns:
                 raise TransformError(
                     f"no transform {self.parent!r} -> {child!r} at {stamp_ns / 1e9:.3f} s: "
-                    f"its {len(self.samples)} samples span {first / 1e9:.3f}-{last / 1e9:.3f} s"
+                    f"its {len(stamps)} samples span {first / 1e9:.3f}-{last / 1e9:.3f} s"
                 )
-            return pose_to_matrix(nearest[1], nearest[2])
-        if self._stamps is None:
-            self._stamps = np.array([sample[0] for sample in self.samples], dtype=np.int64)
-        after = int(np.searchsorted(self._stamps, stamp_ns))
-        (t0, p0, q0), (t1, p1, q1) = self.samples[after - 1], self.samples[after]
+            return pose_to_matrix(values[nearest, :3], values[nearest, 3:])
+        after = int(np.searchsorted(stamps, stamp_ns))
+        (t0, t1), (v0, v1) = stamps[after - 1: after + 1].tolist(), values[after - 1: after + 1]
         fraction = (stamp_ns - t0) / (t1 - t0) if t1 > t0 else 1.0
         matrix = np.eye(4)
-        matrix[:3, :3] = _rotation_matrix(_slerp(np.asarray(q0), np.asarray(q1), fraction))
-        matrix[:3, 3] = np.asarray(p0) + fraction * (np.asarray(p1) - np.asarray(p0))
+        matrix[:3, :3] = _rotation_matrix(_slerp(v0[3:], v1[3:], fraction))
+        matrix[:3, 3] = v0[:3] + fraction * (v1[:3] - v0[:3])
         return matrix
 
 
 class TransformTree:
     """Transforms between named frames over time; see the module docstring."""
 
-    def __init__(self, max_extrapolation_ns: int = DEFAULT_MAX_EXTRAPOLATION_NS) -> None:
+    def __init__(self, max_extrapolation_ns: int = DEFAULT_MAX_EXTRAPOLATION_NS,
+                 max_links: int = MAX_LINKS) -> None:
         self.max_extrapolation_ns = int(max_extrapolation_ns)
+        self.max_links = int(max_links)
         self._links: dict[str, _Link] = {}  # child -> link to its parent
+        self.samples = 0  # samples held, over every link
 
     def __len__(self) -> int:
         return len(self._links)
@@ -193,13 +212,20 @@ class TransformTree:
             quaternion: object, static: bool = False) -> None:
         """Add one sample of ``parent -> child``; ``TransformError`` naming the frames for an
         invalid one (empty or equal names, non-finite numbers, a non-unit quaternion, a child
-        that already has another parent, a static/dynamic mix on one link)."""
+        that already has another parent, a static/dynamic mix on one link, a stamp beyond
+        int64 ns, more than ``max_links`` links)."""
         what = f"transform {parent!r} -> {child!r}"
         if not parent or not child or parent == child:
             raise TransformError(f"{what}: frame ids must be two different non-empty names")
-        matrix = pose_to_matrix(translation, quaternion, what)  # validates both
+        if not INT64_MIN <= stamp_ns <= INT64_MAX:
+            raise TransformError(f"{what}: stamp {stamp_ns} ns is beyond 64 bits")
+        t = _checked_translation(translation, what)
+        q = unit_quaternion(quaternion, what)
         link = self._links.get(child)
         if link is None:
+            if len(self._links) >= self.max_links:
+                raise TransformError(f"{what}: more than {self.max_links} frames (a robot has "
+                                     "a few dozen)")
             if child in self._ancestors(parent):
                 raise TransformError(f"{what}: would close a loop")
             link = self._links[child] = _Link(parent, static)
@@ -207,7 +233,8 @@ class TransformTree:
             raise TransformError(f"{what}: {child!r} already has the parent {link.parent!r}")
         elif link.static != static:
             raise TransformError(f"{what}: published both as static and as dynamic")
-        t, q = matrix_to_pose(matrix)
+        q = -q if q[3] < 0 else q  # one sign for each rotation, as matrix_to_pose gives
+        self.samples += 0 if link.static and len(link) else 1  # a static one replaces
         link.add(int(stamp_ns), t, q)
 
     def _ancestors(self, frame: str) -> list[str]:
