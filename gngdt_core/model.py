@@ -89,6 +89,8 @@ class _GrowingGas:
         self._fstate = np.array([1.0, 0.0, 0.0, 1.0])
         #: the last batch's camera pose (None: the model's frame is the camera's)
         self._camera_pose: np.ndarray | None = None
+        #: stored normals are eq. 16 of the current positions (refreshed after the last step)
+        self._normals_fresh = False
 
     def _allocate(self, dim: int, has_col: bool) -> None:
         cap = self._params["max_nodes"]
@@ -194,6 +196,7 @@ class _GrowingGas:
         # Fewer steps than samples (a large frame): convert only the sampled rows, so a frame
         # costs what its steps cost. A pass or more: convert the batch once, visit it by index.
         whole_batch = None
+        self._normals_fresh = False
         if steps >= n_samples:
             camera_samples, sample_colors = gather(batch, batch_colors, finite_rows)
             self._judge(camera_samples, camera_pose)
@@ -241,6 +244,7 @@ class _GrowingGas:
         SK.refresh_property_bits(n, a["col"], a["nor"], a["nbr"], a["emask"], a["rev"], a["deg"],
                                  bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
                                  fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
+        self._normals_fresh = bool(iparams[K.Q_HAS_NOR])
 
     def _checked_pose(self, camera_pose: Any, dim: int) -> np.ndarray | None:
         """(4, 4) float64 rigid camera-to-world transform, or None; ValueError otherwise."""
@@ -606,6 +610,8 @@ class GNGDT(_GrowingGas):
         """
         if self._dim != 3:
             raise ValueError("normals need 3-D positions")
+        if self._normals_fresh:  # refreshed after the last step (``normal_refresh_steps``)
+            return self.normals_
         a = self._arrays
         normals = a["nor"].copy()
         fparams, iparams = self._kernel_parameters()
