@@ -40,7 +40,8 @@ _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 _STATE_VERSION = 3  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
 # a fifth counter: nodes forgotten)
 #: a nearest-node batch is split over the CPUs when each part gets at least this many points
-PARALLEL_MIN_POINTS = 50_000
+#: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
+PARALLEL_MIN_POINTS = 15_000
 #: largest deviation of a camera pose's rotation from orthonormal (and of its last row)
 POSE_TOLERANCE = 1e-6
 
