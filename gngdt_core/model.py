@@ -629,8 +629,8 @@ class GNGDT(_GrowingGas):
 
     def segment(self, params: SegmentationParams | None = None) -> np.ndarray:
         """(n_nodes,) int32 segment of each node, 0..k-1 by decreasing size: one segment per
-        object, support surfaces apart (see `gngdt_core.segmentation`). Label points or pixels
-        with ``labels[model.predict(points)]``."""
+        object, support surfaces apart (see `gngdt_core.segmentation`). Label points with
+        ``labels[model.predict(points)]``, an organized frame's pixels with `label_pixels`."""
         return self.segmentation(params).labels
 
 
