@@ -3,10 +3,13 @@ RSS over time (and its slope), dropped frames and latency percentiles at start a
 
     python benchmarks/bench_soak.py --minutes 10
     python benchmarks/bench_soak.py --minutes 3 --width 640 --height 480 --save-rrd
+    python benchmarks/bench_soak.py --minutes 5 --recording real.mcap --save-rrd --mcap
 
 Processes: ``gngdt router``, ``learn``, ``log`` (``--stdout`` into /dev/null by default, so a
 long soak does not fill the disk; ``--save-rrd`` writes a real .rrd in a temporary directory
-instead) and ``capture --loop`` at the recorded 30 fps. Not a test: it prints figures.
+instead, and reports its growth in MB per minute; ``--mcap`` also records every stream into an
+MCAP file) and ``capture --loop`` at the recorded 30 fps (a synthetic tabletop, or
+``--recording``). Not a test: it prints figures.
 """
 
 from __future__ import annotations
@@ -100,10 +103,16 @@ def main() -> int:
     parser.add_argument("--sample-every", type=float, default=10.0, metavar="SECONDS")
     parser.add_argument("--save-rrd", action="store_true",
                         help="the logger writes a .rrd (default: --stdout to /dev/null)")
+    parser.add_argument("--mcap", action="store_true",
+                        help="the logger also records every stream into an MCAP file")
+    parser.add_argument("--recording", type=Path,
+                        help="loop this recording instead of a synthetic tabletop")
+    parser.add_argument("--logger-args", default="",
+                        help="extra `gngdt log` options, e.g. \"--keep-everything\"")
     args = parser.parse_args()
 
     work = Path(tempfile.mkdtemp(prefix="gngdt-soak-"))
-    recording = make_recording(work, args.width, args.height, args.frames)
+    recording = args.recording or make_recording(work, args.width, args.height, args.frames)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     connect = ["--zenoh-connect", endpoint]
     processes: dict[str, subprocess.Popen] = {}
@@ -114,6 +123,8 @@ def main() -> int:
         processes["learn"] = start(["learn", "--samples-per-frame", str(args.samples_per_frame),
                                     *connect], work / "learn.log")
         viewer = ["--save", str(work / "soak.rrd")] if args.save_rrd else ["--stdout"]
+        viewer += ["--mcap", str(work / "soak-log.mcap")] if args.mcap else []
+        viewer += args.logger_args.split()
         processes["log"] = start(["log", *viewer, "--keep-running", *connect], work / "log.log",
                                  stdout=None if args.save_rrd else devnull)
         session = open_config(client_config([endpoint]))
@@ -126,11 +137,16 @@ def main() -> int:
                                      work / "capture.log")
         duration = args.minutes * 60.0
         rss: dict[str, list[tuple[float, float]]] = {name: [] for name in processes}
+        files = {"rrd": work / "soak.rrd", "mcap": work / "soak-log.mcap"}
+        sizes: dict[str, list[tuple[float, float]]] = {name: [] for name in files}
         while (elapsed := time.monotonic() - statuses.started) < duration:
             for name, process in processes.items():
                 if process.poll() is not None:
                     raise SystemExit(f"{name} exited with {process.returncode}; see {work}")
                 rss[name].append((elapsed, status_mb(process.pid, "VmRSS")))
+            for name, path in files.items():
+                if path.exists():
+                    sizes[name].append((elapsed, path.stat().st_size / 1e6))
             time.sleep(min(args.sample_every, max(0.0, duration - elapsed)))
         for name, process in processes.items():
             rss[name].append((time.monotonic() - statuses.started, status_mb(process.pid, "VmRSS")))
@@ -146,9 +162,16 @@ def main() -> int:
                 os.killpg(process.pid, signal.SIGKILL)
         devnull.close()
 
-    print(f"soak: {args.minutes:g} min, {args.width}x{args.height} at 30 fps looped "
-          f"({args.frames} frames), {args.samples_per_frame} steps/frame, logger "
-          f"{'to .rrd' if args.save_rrd else 'to --stdout > /dev/null'}; logs in {work}")
+    source = (str(args.recording) if args.recording
+              else f"{args.width}x{args.height} tabletop ({args.frames} frames)")
+    print(f"soak: {args.minutes:g} min, {source} looped at 30 fps, {args.samples_per_frame} "
+          f"steps/frame, logger {'to .rrd' if args.save_rrd else 'to --stdout > /dev/null'}"
+          f"{' + MCAP' if args.mcap else ''} {args.logger_args}; logs in {work}")
+    for name, samples in sizes.items():
+        if samples:
+            steady = [sample for sample in samples if sample[0] >= 60.0] or samples
+            print(f".{name}: {files[name].stat().st_size / 1e6:.1f} MB at the end, growing "
+                  f"{slope_mb_per_min(steady):.1f} MB/min after the first minute")
     print("RSS (MB) over time; slope fitted after the first minute:")
     for name, samples in rss.items():
         steady = [sample for sample in samples if sample[0] >= 60.0] or samples

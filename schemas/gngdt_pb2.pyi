@@ -28,17 +28,19 @@ class EdgeSet(_message.Message):
     def __init__(self, property: _Optional[str] = ..., pairs: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
 
 class Clustering(_message.Message):
-    __slots__ = ("name", "labels", "cluster_count")
+    __slots__ = ("name", "labels", "cluster_count", "cluster_ids")
     NAME_FIELD_NUMBER: _ClassVar[int]
     LABELS_FIELD_NUMBER: _ClassVar[int]
     CLUSTER_COUNT_FIELD_NUMBER: _ClassVar[int]
+    CLUSTER_IDS_FIELD_NUMBER: _ClassVar[int]
     name: str
     labels: PackedArray
     cluster_count: int
-    def __init__(self, name: _Optional[str] = ..., labels: _Optional[_Union[PackedArray, _Mapping]] = ..., cluster_count: _Optional[int] = ...) -> None: ...
+    cluster_ids: PackedArray
+    def __init__(self, name: _Optional[str] = ..., labels: _Optional[_Union[PackedArray, _Mapping]] = ..., cluster_count: _Optional[int] = ..., cluster_ids: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
 
 class Topology(_message.Message):
-    __slots__ = ("timestamp", "frame_sequence", "steps", "frame_id", "positions", "colors", "normals", "errors", "edges", "clusterings", "quantization_error")
+    __slots__ = ("timestamp", "frame_sequence", "steps", "frame_id", "positions", "colors", "normals", "errors", "edges", "clusterings", "quantization_error", "node_ids")
     class QuantizationErrorEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -57,6 +59,7 @@ class Topology(_message.Message):
     EDGES_FIELD_NUMBER: _ClassVar[int]
     CLUSTERINGS_FIELD_NUMBER: _ClassVar[int]
     QUANTIZATION_ERROR_FIELD_NUMBER: _ClassVar[int]
+    NODE_IDS_FIELD_NUMBER: _ClassVar[int]
     timestamp: _timestamp_pb2.Timestamp
     frame_sequence: int
     steps: int
@@ -68,7 +71,8 @@ class Topology(_message.Message):
     edges: _containers.RepeatedCompositeFieldContainer[EdgeSet]
     clusterings: _containers.RepeatedCompositeFieldContainer[Clustering]
     quantization_error: _containers.ScalarMap[str, float]
-    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., steps: _Optional[int] = ..., frame_id: _Optional[str] = ..., positions: _Optional[_Union[PackedArray, _Mapping]] = ..., colors: _Optional[_Union[PackedArray, _Mapping]] = ..., normals: _Optional[_Union[PackedArray, _Mapping]] = ..., errors: _Optional[_Union[PackedArray, _Mapping]] = ..., edges: _Optional[_Iterable[_Union[EdgeSet, _Mapping]]] = ..., clusterings: _Optional[_Iterable[_Union[Clustering, _Mapping]]] = ..., quantization_error: _Optional[_Mapping[str, float]] = ...) -> None: ...
+    node_ids: PackedArray
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., steps: _Optional[int] = ..., frame_id: _Optional[str] = ..., positions: _Optional[_Union[PackedArray, _Mapping]] = ..., colors: _Optional[_Union[PackedArray, _Mapping]] = ..., normals: _Optional[_Union[PackedArray, _Mapping]] = ..., errors: _Optional[_Union[PackedArray, _Mapping]] = ..., edges: _Optional[_Iterable[_Union[EdgeSet, _Mapping]]] = ..., clusterings: _Optional[_Iterable[_Union[Clustering, _Mapping]]] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., node_ids: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
 
 class LearnerStatus(_message.Message):
     __slots__ = ("timestamp", "frame_sequence", "frame_id", "steps", "steps_per_second", "nodes", "frames_received", "frames_used", "frames_dropped", "malformed_messages", "latency_ms", "latency_p50_ms", "latency_p99_ms", "quantization_error", "cluster_counts", "settled", "seen_nodes", "ghost_share", "ghost_distance_m", "nodes_forgotten", "frames_other_frame")

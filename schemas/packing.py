@@ -555,8 +555,10 @@ class TopologySnapshot:
     """One decoded ``gngdt.Topology``.
 
     positions: (N, 3) float32 metres; colors: (N, 3) uint8 RGB; normals: (N, 3) float32;
-    errors: (N,) float32 -- each None if the publisher left it out.
-    edges: property -> (E, 2) uint32 node-index pairs. clusterings: name -> (N,) int32 labels.
+    errors: (N,) float32; node_ids: (N,) int64 persistent node ids -- each None if the publisher
+    left it out. edges: property -> (E, 2) uint32 node-index pairs. clusterings: name -> (N,) int32
+    labels; cluster_ids: name -> (K,) int64 persistent id of each label 0..K-1, for the
+    clusterings whose publisher tracks them.
     """
 
     positions: np.ndarray
@@ -571,6 +573,8 @@ class TopologySnapshot:
     frame_id: str
     quantization_error: dict[str, float] = field(default_factory=dict)
     cluster_counts: dict[str, int] = field(default_factory=dict)
+    node_ids: np.ndarray | None = None
+    cluster_ids: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def node_count(self) -> int:
@@ -602,6 +606,8 @@ def encode_topology(
     timestamp_ns: int,
     frame_id: str,
     quantization_error: Mapping[str, float] | None = None,
+    node_ids: np.ndarray | None = None,
+    cluster_ids: Mapping[str, np.ndarray] | None = None,
 ) -> gngdt_pb2.Topology:
     """Build a ``gngdt.Topology``; see :class:`TopologySnapshot` for shapes.
 
@@ -623,6 +629,13 @@ def encode_topology(
         message.normals.CopyFrom(pack_array(_node_array(normals, "normals", count, 3), np.float32))
     if errors is not None:
         message.errors.CopyFrom(pack_array(_node_array(errors, "errors", count, None), np.float32))
+    if node_ids is not None:
+        message.node_ids.CopyFrom(
+            pack_array(_node_array(node_ids, "node_ids", count, None), np.int64))
+    cluster_ids = cluster_ids or {}
+    unknown = sorted(set(cluster_ids) - set(clusterings))
+    if unknown:
+        raise ValueError(f"encode_topology: cluster_ids for unknown clusterings {unknown}")
     for prop, pairs in edges.items():
         pairs = np.asarray(pairs)
         if pairs.size == 0:
@@ -636,9 +649,16 @@ def encode_topology(
         message.edges.add(property=prop, pairs=pack_array(pairs, np.uint32))
     for name, labels in clusterings.items():
         labels = _node_array(labels, f"clusterings[{name!r}]", count, None).astype(np.int32)
-        message.clusterings.add(
+        clustering = message.clusterings.add(
             name=name, labels=pack_array(labels), cluster_count=_count_clusters(labels)
         )
+        if name in cluster_ids:
+            ids = np.asarray(cluster_ids[name])
+            n_labels = int(labels.max()) + 1 if labels.size else 0
+            if ids.shape != (n_labels,):
+                raise ValueError(f"encode_topology: cluster_ids[{name!r}] must have shape "
+                                 f"({n_labels},), one id per label, got {ids.shape}")
+            clustering.cluster_ids.CopyFrom(pack_array(ids, np.int64))
     for prop, value in (quantization_error or {}).items():
         message.quantization_error[prop] = float(value)
     return message
@@ -700,6 +720,7 @@ def decode_topology(
         edges[edge_set.property] = pairs
     clusterings: dict[str, np.ndarray] = {}
     cluster_counts: dict[str, int] = {}
+    cluster_ids: dict[str, np.ndarray] = {}
     for clustering in message.clusterings:
         label = f"clusterings[{clustering.name!r}]"
         if clustering.name in clusterings:
@@ -713,6 +734,14 @@ def decode_topology(
             raise MessageError(f"{label}: label {int(labels.min())} < -1")
         clusterings[clustering.name] = labels
         cluster_counts[clustering.name] = int(clustering.cluster_count)
+        if clustering.HasField("cluster_ids"):
+            n_labels = int(labels.max()) + 1 if labels.size else 0
+            ids = unpack_array(clustering.cluster_ids, dtype=np.int64, ndim=1,
+                               max_elements=n_labels, name=f"{label}.cluster_ids")
+            if ids.shape != (n_labels,):
+                raise MessageError(f"{label}.cluster_ids: {ids.shape[0]} ids for {n_labels} "
+                                   "labels")
+            cluster_ids[clustering.name] = ids
     return TopologySnapshot(
         positions=positions,
         colors=node_array("colors", np.uint8, 3),
@@ -726,6 +755,8 @@ def decode_topology(
         frame_id=message.frame_id,
         quantization_error=dict(message.quantization_error),
         cluster_counts=cluster_counts,
+        node_ids=node_array("node_ids", np.int64, None),
+        cluster_ids=cluster_ids,
     )
 
 

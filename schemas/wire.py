@@ -20,6 +20,7 @@ ENCODING_POINT_CLOUD = "application/protobuf;foxglove.PointCloud"
 ENCODING_TOPOLOGY = "application/protobuf;gngdt.Topology"
 ENCODING_STATUS = "application/protobuf;gngdt.LearnerStatus"
 ENCODING_STREAM_END = "application/protobuf;gngdt.StreamEnd"
+ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
 
 _ATTACHMENT = struct.Struct("<Qq")
 
@@ -59,6 +60,8 @@ class FrameStamp:
         if data is None or len(data) != _ATTACHMENT.size:
             raise ValueError("missing or malformed frame attachment")
         sequence, capture_time_ns = _ATTACHMENT.unpack(data)
+        if sequence >= 2**63:  # timelines (rerun's, MCAP's) hold signed 64-bit sequences
+            raise ValueError(f"frame sequence {sequence} is out of range")
         return cls(sequence, capture_time_ns)
 
     def check_clock(self, now_ns: int) -> None:

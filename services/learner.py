@@ -12,9 +12,13 @@ profile turns forgetting on (``LEARNER_MODEL_DEFAULTS``): nodes the camera could
 longer stand for anything are removed, the out-of-view map is kept. Each status reports the
 ghost share of the frame just learned (seen nodes farther than ``ghost_distance_m`` from it).
 
-After each learned frame the learner publishes the topology (edges per property and the
-clusterings ``pos``, ``col``, ``nor``, ``col+nor``) and a status message; a queryable on the
-topology key answers a late joiner with the latest topology. The model is checkpointed
+After each learned frame the learner publishes the topology (edges per property, the
+clusterings ``pos``, ``col``, ``nor``, ``col+nor`` and ``segments`` with persistent cluster ids,
+and persistent node ids), the objects (one per cluster of ``objects_from``, as a foxglove
+SceneUpdate) and a status message, and every ``scene_every_frames`` frames the whole scene as a
+foxglove SceneUpdate; a queryable on the topology key answers a late joiner with the latest
+topology. Objects and scene are published latest-wins (congestion control DROP): a consumer that
+cannot keep up misses updates, and never slows the learner down. The model is checkpointed
 periodically and on SIGINT/SIGTERM, and resumed from the checkpoint on start.
 """
 
@@ -36,6 +40,7 @@ import numpy as np
 
 from schemas.wire import (
     DEFAULT_CAMERA,
+    ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
     ENCODING_TOPOLOGY,
     FrameStamp,
@@ -51,6 +56,9 @@ from services.zenoh_session import (
 
 if TYPE_CHECKING:
     import zenoh
+
+    from gngdt_core.objects import ObjectSet
+    from gngdt_core.tracking import ClusterTracker
 
 log = logging.getLogger(__name__)
 
@@ -76,6 +84,8 @@ CLUSTERINGS = ("pos", "col", "nor", "col+nor")
 #: the local-convexity topology and the segmentation built on it (`gngdt_core.segmentation`)
 CONVEXITY_PROPERTY = "cvx"
 SEGMENTS = "segments"
+#: clustering the objects come from when ``objects_from`` names one the learner does not publish
+FALLBACK_OBJECTS_FROM = "pos"
 
 
 @dataclass
@@ -99,6 +109,10 @@ class LearnerOptions:
     ghost_distance_m: float = 0.05
     #: points of each frame the ghost share is measured against (0: not measured)
     ghost_sample: int = 10_000
+    #: clustering whose clusters are published as objects ("pos" when it is not published)
+    objects_from: str = "segments"
+    #: publish the scene (nodes, edges, clusters) every this many learned frames; 0: never
+    scene_every_frames: int = 3
 
     def validate(self) -> None:
         """Raise ``ValueError`` naming the option for a wrong type or a non-positive value."""
@@ -117,9 +131,11 @@ class LearnerOptions:
         for name in ("checkpoint_every_seconds", "ghost_distance_m"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"learner option {name} must be positive")
-        for name in ("settle_max_steps", "ghost_sample"):
+        for name in ("settle_max_steps", "ghost_sample", "scene_every_frames"):
             if getattr(self, name) < 0:
                 raise ValueError(f"learner option {name} must be >= 0")
+        if not self.objects_from:
+            raise ValueError("learner option objects_from must name a clustering")
 
 
 #: accepted types of each option (TOML integers are accepted where floats are)
@@ -134,6 +150,8 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
     "seed": (int, type(None)),
     "ghost_distance_m": (int, float),
     "ghost_sample": (int,),
+    "objects_from": (str,),
+    "scene_every_frames": (int,),
 }
 
 
@@ -234,6 +252,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--checkpoint-every", type=int, metavar="FRAMES",
                         help="checkpoint every this many learned frames (default 30)")
     parser.add_argument("--seed", type=int, help="random seed of the model (default 0)")
+    parser.add_argument("--objects-from", metavar="CLUSTERING",
+                        help="clustering published as objects on gngdt/<cam>/objects (default "
+                        "segments; pos when segments are not published; any of "
+                        f"{', '.join(CLUSTERINGS)})")
+    parser.add_argument("--scene-every", type=int, metavar="FRAMES",
+                        help="publish the foxglove scene on gngdt/<cam>/scene every this many "
+                        "learned frames (default 3; 0: never)")
     parser.add_argument("--exit-on-eos", action="store_true",
                         help="exit after learning the last frame of a stream (used by `gngdt run`)")
     add_zenoh_arguments(parser)
@@ -247,6 +272,8 @@ def config_from_args(args: argparse.Namespace) -> LearnerConfig:
         "min_cluster_size": args.min_cluster_size,
         "checkpoint_every_frames": args.checkpoint_every,
         "seed": args.seed,
+        "objects_from": args.objects_from,
+        "scene_every_frames": args.scene_every,
     }
     for name, value in overrides.items():
         if value is not None:
@@ -340,8 +367,18 @@ class Ghosts:
     ghost_share: float = 0.0
 
 
+@dataclass
+class LearnedFrame:
+    """What one learned frame shows: edges (E, 2) int64 per property, cluster labels (N,) int32
+    per clustering, and the persistent id (K,) int64 of each label of each clustering."""
+
+    edges: dict[str, np.ndarray]
+    labels: dict[str, np.ndarray]
+    cluster_ids: dict[str, np.ndarray]
+
+
 class Learner:
-    """One GNG-DT model fed frame by frame; builds the topology and status messages.
+    """One GNG-DT model fed frame by frame; builds the topology, objects, scene and status.
 
     ``frame_id``: the frame the network is learned in, set by the first cloud (None before).
     """
@@ -377,6 +414,7 @@ class Learner:
         self.last_pose: np.ndarray | None = None
         self.ghosts = Ghosts()
         self._rng = np.random.default_rng(config.options.seed)
+        self._trackers: dict[str, ClusterTracker] = {}
 
     def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
               pose: np.ndarray | None = None) -> None:
@@ -410,6 +448,8 @@ class Learner:
             if learned.from_scratch and self.model.n_nodes_:
                 log.info("frame %d shows a new scene: learning a new network",
                          self.counters.frames_used)
+                for tracker in self._trackers.values():
+                    tracker.forget()  # new nodes, new ids: no cluster carries over
             self.model = self.stream.model_
             self.last_segmentation = learned.segmentation
             steps = learned.steps
@@ -447,33 +487,96 @@ class Learner:
         errors = self.model.quantization_error(self.placed(positions[chosen]), colors[chosen])
         return {name: float(value) for name, value in errors.items()}
 
-    def topology(self, stamp: FrameStamp, quantization_error: dict[str, float]) -> Any:
+    def learned_frame(self) -> LearnedFrame:
+        """Edges and clusterings of the model now, each cluster with its persistent id (kept from
+        the previous call by node membership)."""
+        from gngdt_core.tracking import ClusterTracker
+
+        model = self.model
+        min_size = self.options.min_cluster_size
+        segmentation = self.last_segmentation or model.segmentation(self.segmentation)
+        edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
+        edges[CONVEXITY_PROPERTY] = edges["pos"][segmentation.convex]
+        labels = {name: model.clusters(*name.split("+"), min_size=min_size)
+                  for name in CLUSTERINGS}
+        labels[SEGMENTS] = segmentation.labels
+        node_ids = model.node_ids_
+        cluster_ids = {}
+        for name, values in labels.items():
+            tracker = self._trackers.setdefault(name, ClusterTracker())
+            cluster_ids[name] = tracker.update(node_ids, values)
+        return LearnedFrame(edges=edges, labels=labels, cluster_ids=cluster_ids)
+
+    def topology(self, stamp: FrameStamp, quantization_error: dict[str, float],
+                 learned: LearnedFrame | None = None) -> Any:
         """The current ``gngdt.Topology`` (protobuf message)."""
         from schemas.packing import encode_topology
 
         model = self.model
-        min_size = self.options.min_cluster_size
-        position_edges = model.edges("pos")
-        segmentation = self.last_segmentation or model.segmentation(self.segmentation)
-        edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
-        edges[CONVEXITY_PROPERTY] = position_edges[segmentation.convex]
-        clusterings = {
-            name: model.clusters(*name.split("+"), min_size=min_size) for name in CLUSTERINGS
-        }
-        clusterings[SEGMENTS] = segmentation.labels
+        learned = learned or self.learned_frame()
         return encode_topology(
             positions=model.positions_,
             colors=model.colors_,
             normals=model.normals_,
             errors=model.errors_,
-            edges=edges,
-            clusterings=clusterings,
+            edges=learned.edges,
+            clusterings=learned.labels,
             steps=int(model.n_steps_),
             frame_sequence=stamp.sequence,
             timestamp_ns=stamp.capture_time_ns,
             frame_id=self.frame_id or self.camera,
             quantization_error=quantization_error,
+            node_ids=model.node_ids_,
+            cluster_ids=learned.cluster_ids,
         )
+
+    def objects_clustering(self, learned: LearnedFrame) -> str:
+        """The clustering the objects come from: ``objects_from``, or "pos" without it."""
+        wanted = self.options.objects_from
+        return wanted if wanted in learned.labels else FALLBACK_OBJECTS_FROM
+
+    def objects(self, learned: LearnedFrame) -> ObjectSet:
+        """One object per cluster of at least ``min_cluster_size`` nodes of the objects
+        clustering, ids persistent."""
+        from gngdt_core.objects import describe_objects, drop_small
+
+        name = self.objects_clustering(learned)
+        model = self.model
+        labels = drop_small(learned.labels[name], self.options.min_cluster_size)
+        return describe_objects(model.positions_, model.colors_, model.normals_, labels,
+                                learned.cluster_ids[name])
+
+    def objects_update(self, stamp: FrameStamp, objects: ObjectSet) -> Any:
+        """The objects as a ``foxglove.SceneUpdate``, coloured as the logger colours clusters."""
+        from schemas.scene import objects_to_scene_update
+        from services.display import id_colors
+
+        return objects_to_scene_update(
+            ids=objects.ids, centers=objects.centers, quaternions_xyzw=objects.quaternions_xyzw,
+            sizes=objects.sizes, colors=id_colors(objects.ids), node_counts=objects.node_counts,
+            centroids=objects.centroids, mean_colors=objects.colors, normals=objects.normals,
+            timestamp_ns=stamp.capture_time_ns, frame_id=self.frame_id or self.camera)
+
+    def scene_update(self, stamp: FrameStamp, learned: LearnedFrame) -> Any:
+        """Nodes in their learned colours and every clustering's edges coloured by cluster, as a
+        ``foxglove.SceneUpdate``."""
+        from schemas.scene import topology_to_scene_update
+        from services.display import clustering_edges, node_colors
+
+        positions = self.model.positions_
+        layers = {}
+        for name, labels in learned.labels.items():
+            pairs = clustering_edges(name, learned.edges, labels)
+            layers[name] = (pairs, node_colors(labels, learned.cluster_ids[name],
+                                               self.options.min_cluster_size))
+        pos_edges = learned.edges["pos"]
+        spacing = (float(np.median(np.linalg.norm(
+            positions[pos_edges[:, 0]] - positions[pos_edges[:, 1]], axis=1)))
+            if len(pos_edges) else 0.02)
+        return topology_to_scene_update(
+            positions=positions, colors=np.clip(np.rint(self.model.colors_), 0, 255),
+            node_size=0.5 * spacing, edge_layers=layers, timestamp_ns=stamp.capture_time_ns,
+            frame_id=self.frame_id or self.camera)
 
     def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
         """Learn the stream's last frame on until the network is settled: the node budget
@@ -649,10 +752,9 @@ def decode_points(
 
 
 def warm_up(config: LearnerConfig) -> None:
-    """Run every model operation once on random points, so that numba compiles (or loads its
-    cache) before the first frame instead of adding seconds to its latency."""
+    """Run every model and message operation once on random points, so that numba compiles (or
+    loads its cache) and modules load before the first frame instead of adding to its latency."""
     from gngdt_core import GNGDT
-    from gngdt_core.segmentation import SegmentationParams
 
     rng = np.random.default_rng(0)
     positions = rng.random((500, 3), dtype=np.float32)
@@ -662,11 +764,14 @@ def warm_up(config: LearnerConfig) -> None:
     pose = np.eye(4)
     pose[:3, 3] = 0.1
     model.partial_fit(positions, colors, n_steps=2_000, camera_pose=pose)
-    for name in CLUSTERINGS:
-        model.clusters(*name.split("+"), min_size=config.options.min_cluster_size)
-    model.segmentation(SegmentationParams.from_dict(config.segmentation))
     model.quantization_error(positions, colors)
-    Learner("warm-up", config, model=model).measure_ghosts(positions, pose)
+    learner = Learner("warm-up", config, model=model)
+    learner.measure_ghosts(positions, pose)
+    learned = learner.learned_frame()
+    stamp = FrameStamp(0, 1)
+    learner.topology(stamp, {}, learned)
+    learner.objects_update(stamp, learner.objects(learned))
+    learner.scene_update(stamp, learned)
 
 
 def warn_other_frame(error: OtherFrameError, count: int) -> None:
@@ -854,6 +959,11 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
                                            ENCODING_TOPOLOGY, latest_wins=True)
     status_publisher = declare_publisher(session, topic(args.cam, "learner/status"),
                                          ENCODING_STATUS, latest_wins=False)
+    # latest-wins views: a consumer that never reads must not hold the learner back
+    objects_publisher = declare_publisher(session, topic(args.cam, "objects"),
+                                          ENCODING_SCENE_UPDATE, latest_wins=True)
+    scene_publisher = declare_publisher(session, topic(args.cam, "scene"),
+                                        ENCODING_SCENE_UPDATE, latest_wins=True)
     queryable = session.declare_queryable(topic(args.cam, "topology"), latest.reply)
     token = session.liveliness().declare_token(f"gngdt/{args.cam}/learner/alive")
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
@@ -862,8 +972,11 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
 
     def publish(stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray | None,
                 settled: str = "") -> float:
-        """Publish the topology and status after learning a frame; the latency in ms."""
-        topology = learner.topology(stamp, learner.quantization_error(positions, colors))
+        """Publish the topology and status after learning a frame, then its objects and (every
+        ``scene_every_frames`` frames, and the settled last one) the scene; the latency in ms."""
+        learned = learner.learned_frame()
+        topology = learner.topology(stamp, learner.quantization_error(positions, colors),
+                                    learned)
         payload = topology.SerializeToString()
         attachment = stamp.to_attachment()
         latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
@@ -871,6 +984,12 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
         latest.set(payload, attachment)
         status = learner.status(stamp, latency_ms, topology, settled)
         status_publisher.put(status.SerializeToString(), attachment=attachment)
+        objects = learner.objects_update(stamp, learner.objects(learned))
+        objects_publisher.put(objects.SerializeToString(), attachment=attachment)
+        scene_every = config.options.scene_every_frames
+        if scene_every and (settled or counters.frames_used % scene_every == 1 % scene_every):
+            scene = learner.scene_update(stamp, learned)
+            scene_publisher.put(scene.SerializeToString(), attachment=attachment)
         return latency_ms
 
     frames_since_checkpoint = 0
@@ -934,7 +1053,7 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: Learner) -> 
             learner.save(args.checkpoint)
         token.undeclare()
         instances.close()
-        for entity in (queryable, eos_subscriber, points):
+        for entity in (queryable, eos_subscriber, points, objects_publisher, scene_publisher):
             entity.undeclare()
         time.sleep(0.1)  # let the last BLOCK puts reach the router
         session.close()

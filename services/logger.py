@@ -1,11 +1,21 @@
-"""Log every gngdt stream (``gngdt/**``) to rerun: images, cloud, topologies, clusters, metrics.
+"""Log every gngdt stream (``gngdt/**``) to rerun: images, cloud, topologies, clusters, objects,
+metrics; optionally record every stream as it is into an MCAP file (``--mcap``).
 
 Entities (DESIGN.md "Rerun") for the default camera ``camera``: ``world/camera`` (Pinhole),
-``world/camera/image/rgb``, ``world/camera/image/depth``, ``world/points`` (at most
-``--max-cloud-points``), ``world/gng/nodes`` (learned colours), ``world/gng/edges/<prop>``,
-``world/gng/clusters/<clustering>`` (nodes coloured by cluster) and ``metrics/<name>``. Any other
-camera ``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/``. Timelines:
-``frame`` (sequence) and ``capture_time``.
+``world/camera/image/rgb`` (JPEG), ``world/camera/image/depth``, ``world/points``,
+``world/gng/nodes`` (learned colours), ``world/gng/edges/<clustering>`` and
+``world/gng/clusters/<clustering>`` (the clustering's edges and its nodes, coloured by cluster:
+one colour per persistent cluster id, grey for nodes in no cluster), ``world/objects`` (Boxes3D,
+one per object, labelled with its persistent id) and ``metrics/<name>``. Any other camera
+``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/``. Timelines: ``frame``
+(sequence) and ``capture_time``. The blueprint: the images, a 3D view per clustering plus one of
+the cloud and the learned colours, all starting from the camera's viewpoint, and one plot per
+metric.
+
+What goes into the .rrd is thinned by default (`DisplayRates`): a 30 fps camera would otherwise
+write ~1 GB a minute. Metrics and objects are logged for every frame; images, topologies and
+clouds for every Nth frame (by frame sequence), colour as JPEG, clouds capped in points.
+``--keep-everything`` logs every frame in full.
 
 The logger stops on its own once every camera it knows of (from its first message, or from its
 capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of
@@ -46,6 +56,7 @@ if TYPE_CHECKING:
     import zenoh
 
     from schemas.packing import LearnerStatusInfo, TopologySnapshot
+    from schemas.scene import ObjectBoxes
     from services.recording.frame import CameraIntrinsics
 
 log = logging.getLogger(__name__)
@@ -57,9 +68,12 @@ EXAMPLES = """examples:
   gngdt log --stdout | rerun -
 """
 
-TOPOLOGY_VIEWS = ("pos", "col", "nor", "col+nor")
+#: clusterings with a 3D view, in view order; "segments" is the segmentation, when published
+CLUSTERING_VIEWS = ("segments", "pos", "col", "nor", "col+nor")
 #: streams where only the newest sample matters when the logger falls behind
-LATEST_ONLY_STREAMS = ("color", "depth", "points")
+LATEST_ONLY_STREAMS = ("color", "depth", "points", "objects")
+#: streams the .rrd does not show (the scene is the topology again, drawn for Foxglove)
+NOT_LOGGED_STREAMS = ("scene",)
 RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
 #: how often the .rrd is flushed to disk: what a killed logger can lose at most
@@ -105,9 +119,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from services.rerun_output import DEFAULT_MAX_RRD_MB, DEFAULT_MIN_FREE_MB
 
     add_viewer_arguments(parser)
-    parser.add_argument("--max-cloud-points", type=int, default=50_000,
-                        help="decimate the logged point cloud to at most this many points "
-                        "(default 50000)")
+    add_rate_arguments(parser)
+    parser.add_argument("--mcap", type=Path, metavar="PATH",
+                        help="also record every gngdt stream as it is (images, clouds, topology, "
+                        "scene, objects, status) into this MCAP file, which Foxglove and rerun "
+                        "open directly; <name>.1.mcap if it exists")
     parser.add_argument("--eos-drain", type=float, default=10.0, metavar="SECONDS",
                         help="after an end-of-stream, wait at most this long for the last "
                         "topology (default 10)")
@@ -130,6 +146,92 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="messages held while the logger is busy, in MB (default "
                         f"{DEFAULT_QUEUE_MB}); the oldest make room")
     add_zenoh_arguments(parser)
+
+
+@dataclass(frozen=True)
+class DisplayRates:
+    """What goes into the .rrd: every ``*_every``-th frame (by sequence) of each stream.
+
+    Metrics and objects are logged for every frame. ``jpeg_quality`` 0 logs raw colour images;
+    ``max_cloud_points`` None logs whole clouds. Defaults keep a 30 fps 640x480 camera under
+    ~200 MB of .rrd a minute (README "Performance").
+    """
+
+    image_every: int = 3
+    depth_every: int = 15
+    topology_every: int = 3
+    cloud_every: int = 15
+    max_cloud_points: int | None = 20_000
+    jpeg_quality: int = 80
+
+    def __post_init__(self) -> None:
+        for name in ("image_every", "depth_every", "topology_every", "cloud_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"--{name.replace('_', '-')} must be >= 1, got "
+                                 f"{getattr(self, name)}")
+        if self.max_cloud_points is not None and self.max_cloud_points <= 0:
+            raise ValueError("--max-cloud-points must be positive (0: whole clouds)")
+        if not 0 <= self.jpeg_quality <= 100:
+            raise ValueError(f"--jpeg-quality must be 0..100, got {self.jpeg_quality}")
+
+    @classmethod
+    def everything(cls) -> DisplayRates:
+        return cls(1, 1, 1, 1, None, 0)
+
+    def describe(self) -> str:
+        """One line for the run summary."""
+        if self == DisplayRates.everything():
+            return "every frame in full (--keep-everything)"
+
+        def every(n: int) -> str:
+            return "every frame" if n == 1 else f"1 frame in {n}"
+
+        colour = f"JPEG q{self.jpeg_quality}" if self.jpeg_quality else "raw"
+        cap = (f", at most {self.max_cloud_points:,} points" if self.max_cloud_points else "")
+        return (f"colour {every(self.image_every)} ({colour}), depth {every(self.depth_every)}, "
+                f"topology {every(self.topology_every)}, cloud {every(self.cloud_every)}{cap}, "
+                "metrics and objects every frame (--keep-everything: all in full)")
+
+
+def add_rate_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of `DisplayRates` (shared by ``gngdt log`` and ``gngdt run``)."""
+    defaults = DisplayRates()
+    rates = parser.add_argument_group(
+        "what goes into the .rrd (metrics and objects: every frame)")
+    rates.add_argument("--image-every", type=int, default=defaults.image_every, metavar="N",
+                       help="log the colour image of every Nth frame (default %(default)s)")
+    rates.add_argument("--depth-every", type=int, default=defaults.depth_every, metavar="N",
+                       help="log the depth image of every Nth frame (default %(default)s)")
+    rates.add_argument("--topology-every", type=int, default=defaults.topology_every,
+                       metavar="N", help="log nodes, edges and clusters of every Nth frame "
+                       "(default %(default)s)")
+    rates.add_argument("--cloud-every", type=int, default=defaults.cloud_every, metavar="N",
+                       help="log the point cloud of every Nth frame (default %(default)s)")
+    rates.add_argument("--max-cloud-points", type=int, default=defaults.max_cloud_points,
+                       metavar="N", help="decimate each logged cloud to at most N points "
+                       "(default %(default)s; 0: whole clouds)")
+    rates.add_argument("--jpeg-quality", type=int, default=defaults.jpeg_quality, metavar="Q",
+                       help="log colour as JPEG of this quality (default %(default)s; 0: raw)")
+    rates.add_argument("--keep-everything", action="store_true",
+                       help="log every frame in full: raw images, whole clouds (~1 GB/min at "
+                       "30 fps 640x480)")
+
+
+def rates_from_args(args: argparse.Namespace) -> DisplayRates:
+    if args.keep_everything:
+        return DisplayRates.everything()
+    return DisplayRates(args.image_every, args.depth_every, args.topology_every,
+                        args.cloud_every, args.max_cloud_points or None, args.jpeg_quality)
+
+
+def rate_arguments(args: argparse.Namespace) -> list[str]:
+    """The `DisplayRates` options of ``args`` as command-line arguments (for ``gngdt run``)."""
+    if args.keep_everything:
+        return ["--keep-everything"]
+    return ["--image-every", str(args.image_every), "--depth-every", str(args.depth_every),
+            "--topology-every", str(args.topology_every), "--cloud-every", str(args.cloud_every),
+            "--max-cloud-points", str(args.max_cloud_points),
+            "--jpeg-quality", str(args.jpeg_quality)]
 
 
 def default_rrd_path(name: str) -> Path:
@@ -179,8 +281,12 @@ class EntityPaths:
     def nodes(self) -> str:
         return f"{self.world}/gng/nodes"
 
-    def edges(self, prop: str) -> str:
-        return f"{self.world}/gng/edges/{prop}"
+    @property
+    def objects(self) -> str:
+        return f"{self.world}/objects"
+
+    def edges(self, clustering: str) -> str:
+        return f"{self.world}/gng/edges/{clustering}"
 
     def clusters(self, clustering: str) -> str:
         return f"{self.world}/gng/clusters/{clustering}"
@@ -191,63 +297,154 @@ class EntityPaths:
         return f"metrics/{self.camera}/{name}"
 
 
-def cluster_colors(labels: np.ndarray) -> np.ndarray:
-    """(N, 3) uint8 colour per cluster label (N,) int32; -1 (too small a cluster) is grey."""
-    hue = (labels.astype(np.float64) * 0.618033988749895) % 1.0
-    sector = hue * 6.0
-    channel = np.clip(np.abs((sector[:, None] - np.array([3.0, 1.0, 5.0])) % 6.0 - 3.0) - 1.0, 0, 1)
-    colors = (64 + 191 * channel).astype(np.uint8)  # saturated, never black
-    colors[labels < 0] = 128
-    return colors
+#: the metric plots: title (with unit) and the metric names each shows
+METRIC_PLOTS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("nodes (count)", ("nodes",)),
+    # segments are many (single nodes at creases count): their objects are plotted instead
+    ("clusters per clustering (count)", tuple(f"clusters/{name}" for name in CLUSTERING_VIEWS
+                                              if name != "segments")),
+    ("objects (count)", ("objects",)),
+    ("quantization error, position (m)", ("quantization_error/pos",)),
+    ("quantization error, colour (RGB 0-255)", ("quantization_error/col",)),
+    ("learning speed (steps/s)", ("steps_per_second",)),
+    ("latency, capture to topology (ms)", ("latency_ms",)),
+    ("frames dropped (count)", ("frames_dropped",)),
+    ("ghost share of the seen nodes", ("ghost_share",)),
+    ("nodes forgotten (count)", ("nodes_forgotten",)),
+)
+#: clusters (segments) of fewer nodes are drawn grey, as the learner's own minimum cluster size
+DISPLAY_MIN_NODES = 5
 
 
-def blueprint(cameras: list[str]) -> Any:
-    """One 3D view per topology (pos, col, nor, col+nor) beside the images, metrics below."""
+@dataclass(frozen=True)
+class Framing:
+    """Where a camera's 3D views start. In the camera's own frame (RDF: at the origin, looking
+    along +z), the topology views start from the camera itself, looking along its axis at the
+    scene's median depth, so that they show the nodes as the colour image shows the scene
+    (rerun's views are wider than a depth camera's field of view, so a little smaller); the
+    overview starts behind and above the camera, so that the camera (frustum and image) is in
+    sight with the scene beyond. With camera poses the same places are taken from the camera's
+    pose when the views were framed, in the fixed frame.
+    """
+
+    depth: float = 1.5
+    #: camera-to-frame pose (4, 4), row-major, as a tuple (identity: the camera's own frame)
+    pose: tuple[float, ...] = tuple(np.eye(4).ravel())
+
+    def _place(self, x: float, y: float, z: float) -> tuple[float, float, float]:
+        pose = np.asarray(self.pose).reshape(4, 4)
+        return tuple(float(v) for v in pose[:3, :3] @ (x, y, z) + pose[:3, 3])
+
+    @property
+    def target(self) -> tuple[float, float, float]:
+        return self._place(0.0, 0.0, self.depth)
+
+    @property
+    def camera_eye(self) -> tuple[float, float, float]:
+        return self._place(0.0, 0.0, 0.0)
+
+    @property
+    def overview_eye(self) -> tuple[float, float, float]:
+        return self._place(0.0, -0.2 * self.depth, -0.15 * self.depth)
+
+    @property
+    def up(self) -> tuple[float, float, float]:
+        """The camera's up (-y in RDF) in the frame."""
+        rotation = np.asarray(self.pose).reshape(4, 4)[:3, :3]
+        return tuple(float(v) for v in rotation @ (0.0, -1.0, 0.0))
+
+    @classmethod
+    def of(cls, positions: np.ndarray, pose: np.ndarray | None = None) -> Framing:
+        """Framing the nodes ``positions`` (N, 3), metres, seen by a camera at ``pose``
+        (camera-to-frame (4, 4); None: the nodes are in the camera's frame)."""
+        pose = np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
+        local = (np.asarray(positions, dtype=np.float64) - pose[:3, 3]) @ pose[:3, :3]
+        depth = float(np.median(local[:, 2]))
+        return cls(depth if depth > 0.05 else cls.depth, tuple(pose.ravel()))
+
+
+def _spatial_view(name: str, origin: str, contents: list[str], framing: Framing,
+                  eye: tuple[float, float, float]) -> Any:
+    """A 3D view starting at ``eye``, looking at the scene, on a dark background."""
     import rerun.blueprint as rrb
 
-    columns = []
-    for camera in cameras:
-        paths = EntityPaths(camera)
-        suffix = "" if camera == DEFAULT_CAMERA else f" ({camera})"
-        topology_views = [
-            rrb.Spatial3DView(
-                name=f"{clustering}{suffix}",
-                origin=paths.world,
-                contents=[paths.clusters(clustering)]
-                + [paths.edges(prop) for prop in clustering.split("+")],
-            )
-            for clustering in TOPOLOGY_VIEWS
-        ]
-        learned = rrb.Spatial3DView(
-            name=f"nodes and cloud{suffix}",
-            origin=paths.world,
-            contents=[paths.points, paths.nodes, paths.edges("pos")],
-        )
-        images = rrb.Vertical(
-            rrb.Spatial2DView(name=f"rgb{suffix}", origin=paths.pinhole,
-                              contents=[paths.rgb]),
-            rrb.Spatial2DView(name=f"depth{suffix}", origin=paths.pinhole,
-                              contents=[paths.depth]),
-        )
-        columns.append(rrb.Horizontal(images, rrb.Grid(*topology_views, learned),
-                                      column_shares=[1, 3]))
-    metrics = rrb.TimeSeriesView(name="metrics", origin="metrics")
-    return rrb.Blueprint(rrb.Vertical(*columns, metrics, row_shares=[3] * len(columns) + [1]),
-                         collapse_panels=True)
+    return rrb.Spatial3DView(
+        name=name, origin=origin, contents=contents,
+        eye_controls=rrb.EyeControls3D(position=eye, look_target=framing.target,
+                                       eye_up=framing.up),
+        background=rrb.Background(color=[22, 24, 28]))
+
+
+def _camera_row(camera: str, framing: Framing) -> Any:
+    """The images beside a grid of six 3D views: objects and segments, one per clustering of
+    properties, and the cloud with the nodes in their learned colours."""
+    import rerun.blueprint as rrb
+
+    paths = EntityPaths(camera)
+    suffix = "" if camera == DEFAULT_CAMERA else f" ({camera})"
+    eye = framing.camera_eye
+    views = [_spatial_view(f"objects and segments{suffix}", paths.world, [
+        paths.objects, paths.clusters("segments"), paths.edges("segments")], framing, eye)]
+    views += [_spatial_view(f"{name} clusters{suffix}", paths.world,
+                            [paths.clusters(name), paths.edges(name)], framing, eye)
+              for name in CLUSTERING_VIEWS if name != "segments"]
+    views.append(_spatial_view(f"cloud, learned colours and the camera{suffix}", paths.world,
+                               [paths.points, paths.nodes, paths.pinhole, paths.rgb], framing,
+                               framing.overview_eye))
+    images = rrb.Vertical(
+        rrb.Spatial2DView(name=f"rgb{suffix}", origin=paths.pinhole, contents=[paths.rgb]),
+        rrb.Spatial2DView(name=f"depth{suffix}", origin=paths.pinhole, contents=[paths.depth]),
+    )
+    return rrb.Horizontal(images, rrb.Grid(*views, grid_columns=3), column_shares=[1, 3])
+
+
+def blueprint(cameras: list[str], framings: dict[str, Framing] | None = None) -> Any:
+    """Per camera a row (`_camera_row`), then one plot per metric (all cameras in each); the
+    time cursor follows the newest data (a finished file opens on its last frame)."""
+    import rerun.blueprint as rrb
+
+    framings = framings or {}
+    rows = [_camera_row(camera, framings.get(camera, Framing())) for camera in cameras]
+    plots = [
+        rrb.TimeSeriesView(name=title, origin="/",
+                           contents=[EntityPaths(camera).metric(name)
+                                     for camera in cameras for name in names])
+        for title, names in METRIC_PLOTS
+    ]
+    return rrb.Blueprint(
+        rrb.Vertical(*rows, rrb.Grid(*plots, grid_columns=5),
+                     row_shares=[3] * len(rows) + [1.4]),
+        rrb.TimePanel(timeline="frame", play_state="following", state="collapsed"),
+        collapse_panels=True)
 
 
 class RerunLog:
-    """Writes decoded gngdt messages into one ``rr.RecordingStream``."""
+    """Writes decoded gngdt messages into one ``rr.RecordingStream``, thinned by `DisplayRates`."""
 
-    def __init__(self, recording: rr.RecordingStream, max_cloud_points: int = 50_000) -> None:
+    def __init__(self, recording: rr.RecordingStream, rates: DisplayRates | None = None) -> None:
         import rerun as rr
 
-        if max_cloud_points <= 0:
-            raise ValueError(f"--max-cloud-points must be positive, got {max_cloud_points}")
         self.rec = recording
-        self.max_cloud_points = max_cloud_points
+        self.rates = rates or DisplayRates()
+        self._last_logged: dict[tuple[str, str], int] = {}
+        #: per camera, where its views start, once its first topology showed the scene
+        self.framings: dict[str, Framing] = {}
+        #: per camera, its latest camera-to-world pose (moving cameras only)
+        self.poses: dict[str, np.ndarray] = {}
         self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
         self._world_up = False
+
+    def due(self, paths: EntityPaths, stream: str, sequence: int, every: int) -> bool:
+        """Whether frame ``sequence`` of ``stream`` is logged: ``every`` frames after the last
+        one logged (so frames the learner skipped do not starve a stream), or a new stream."""
+        if every == 1:
+            return True
+        key = (paths.camera, stream)
+        last = self._last_logged.get(key)
+        if last is not None and last <= sequence < last + every:
+            return False
+        self._last_logged[key] = sequence
+        return True
 
     def set_time(self, stamp: FrameStamp) -> None:
         self.rec.set_time("frame", sequence=stamp.sequence)
@@ -261,51 +458,104 @@ class RerunLog:
             principal_point=[intrinsics.cx, intrinsics.cy],
             resolution=[intrinsics.width, intrinsics.height],
             camera_xyz=rr.ViewCoordinates.RDF,
+            image_plane_distance=0.3,
         ))
 
     def color(self, paths: EntityPaths, image: np.ndarray) -> None:
         import rerun as rr
 
-        self.rec.log(paths.rgb, rr.Image(image))
+        quality = self.rates.jpeg_quality
+        if not quality:
+            self.rec.log(paths.rgb, rr.Image(image))
+            return
+        import cv2
+
+        ok, encoded = cv2.imencode(".jpg", np.ascontiguousarray(image[..., ::-1]),
+                                   [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if not ok:
+            raise ValueError(f"colour image {image.shape} could not be JPEG-encoded")
+        self.rec.log(paths.rgb, rr.EncodedImage(contents=encoded.tobytes(),
+                                                media_type="image/jpeg"))
 
     def depth(self, paths: EntityPaths, depth_mm: np.ndarray) -> None:
         import rerun as rr
 
         self.rec.log(paths.depth, rr.DepthImage(depth_mm, meter=1000.0))
 
+    def camera_pose(self, paths: EntityPaths, pose: np.ndarray) -> None:
+        """A moving camera's pose (camera-to-world (4, 4)): the camera follows it."""
+        import rerun as rr
+
+        if not self._world_up:  # a fixed frame (world/map/odom): z up, as ROS and our scenes
+            self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+            self._world_up = True
+        self.poses[paths.camera] = pose
+        self.rec.log(paths.pinhole, rr.Transform3D(translation=pose[:3, 3], mat3x3=pose[:3, :3]))
+
     def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None,
                pose: np.ndarray | None = None) -> None:
-        """The cloud at ``world/points``; with a ``pose`` (camera-to-world, the cloud was taken
-        by a moving camera) the points are put in the world and the camera follows the pose."""
+        """The cloud at ``world/points``, at most ``max_cloud_points``; with a ``pose``
+        (camera-to-world, the cloud was taken by a moving camera) the points are put in the
+        world and the camera follows the pose (`camera_pose`)."""
         import rerun as rr
 
-        stride = max(1, -(-len(positions) // self.max_cloud_points))
+        cap = self.rates.max_cloud_points or len(positions)
+        stride = max(1, -(-len(positions) // cap))
         shown = positions[::stride]
         if pose is not None:
-            if not self._world_up:  # a fixed frame (world/map/odom): z up, as ROS and our scenes
-                self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-                self._world_up = True
-            self.rec.log(paths.pinhole, rr.Transform3D(translation=pose[:3, 3],
-                                                       mat3x3=pose[:3, :3]))
+            self.camera_pose(paths, pose)
             shown = shown @ pose[:3, :3].T.astype(np.float32) + pose[:3, 3].astype(np.float32)
         self.rec.log(paths.points, rr.Points3D(
-            shown, colors=None if colors is None else colors[::stride], radii=0.002))
+            shown, colors=None if colors is None else colors[::stride],
+            radii=rr.Radius.ui_points(1.5)))
 
-    def topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
-        import rerun as rr
-
-        positions = snapshot.positions
-        self.rec.log(paths.nodes, rr.Points3D(positions, colors=snapshot.colors, radii=0.006))
-        for prop, pairs in snapshot.edges.items():
-            segments = positions[pairs.astype(np.int64)] if len(pairs) else np.zeros((0, 2, 3))
-            self.rec.log(paths.edges(prop), rr.LineStrips3D(segments, radii=0.0015))
-        for clustering, labels in snapshot.clusterings.items():
-            self.rec.log(paths.clusters(clustering),
-                         rr.Points3D(positions, colors=cluster_colors(labels), radii=0.008))
+    def topology(self, paths: EntityPaths, snapshot: TopologySnapshot, draw: bool) -> None:
+        """Metrics of every topology; nodes, edges and clusters when ``draw``."""
+        for clustering in snapshot.clusterings:
             self.scalar(paths, f"clusters/{clustering}", snapshot.cluster_counts[clustering])
         for prop, value in snapshot.quantization_error.items():
             self.scalar(paths, f"quantization_error/{prop}", value)
         self.scalar(paths, "nodes", snapshot.node_count)
+        if draw:
+            self._draw_topology(paths, snapshot)
+
+    def _draw_topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
+        import rerun as rr
+
+        from services.display import clustering_edges, edge_colors, id_colors, node_cluster_ids
+
+        positions = snapshot.positions
+        if paths.camera not in self.framings and snapshot.node_count >= 50:
+            framing = self.framings[paths.camera] = Framing.of(
+                positions, self.poses.get(paths.camera))
+            # a small frustum near the camera: the image on it stays a thumbnail in the
+            # overview instead of covering the scene
+            self.rec.log(paths.pinhole, rr.Pinhole.from_fields(
+                image_plane_distance=0.1 * framing.depth))
+        self.rec.log(paths.nodes, rr.Points3D(positions, colors=snapshot.colors,
+                                              radii=rr.Radius.ui_points(4.0)))
+        for clustering, labels in snapshot.clusterings.items():
+            ids = node_cluster_ids(labels, snapshot.cluster_ids.get(clustering),
+                                   DISPLAY_MIN_NODES)
+            colors = id_colors(ids)
+            self.rec.log(paths.clusters(clustering), rr.Points3D(
+                positions, colors=colors, radii=rr.Radius.ui_points(4.0)))
+            pairs = clustering_edges(clustering, snapshot.edges, labels)
+            self.rec.log(paths.edges(clustering), rr.LineStrips3D(
+                positions[pairs] if len(pairs) else np.zeros((0, 2, 3)),
+                colors=edge_colors(pairs, colors, ids), radii=rr.Radius.ui_points(1.5)))
+
+    def objects(self, paths: EntityPaths, boxes: ObjectBoxes) -> None:
+        """Boxes3D, one per object: colour and label by its persistent id (``object_id``)."""
+        import rerun as rr
+
+        ids = [rr.AnyValues(object_id=boxes.ids, node_count=boxes.node_counts)] if len(
+            boxes.ids) else []  # no objects: empty boxes clear the previous ones
+        self.rec.log(paths.objects, rr.Boxes3D(
+            centers=boxes.centers, half_sizes=boxes.half_sizes,
+            quaternions=boxes.quaternions_xyzw, colors=boxes.colors, labels=boxes.labels,
+            radii=rr.Radius.ui_points(2.0), fill_mode="majorwireframe"), *ids)
+        self.scalar(paths, "objects", len(boxes.ids))
 
     def status(self, paths: EntityPaths, status: LearnerStatusInfo) -> None:
         self.scalar(paths, "steps_per_second", status.steps_per_second)
@@ -366,6 +616,8 @@ class Inbox:
     def put(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         stream = stream_of(key)
+        if stream in NOT_LOGGED_STREAMS:
+            return
         size = len(sample.payload)
         if size > STREAM_BYTE_LIMITS.get(stream, OTHER_STREAM_BYTE_LIMIT) or size > self.max_bytes:
             with self._lock:
@@ -486,23 +738,29 @@ class Dispatcher:
 
     def handle(self, key: str, payload: bytes, attachment: bytes | None) -> None:
         from schemas import packing
+        from schemas.scene import decode_object_boxes
 
         parts = key.split("/")
         if len(parts) < 3 or parts[0] != "gngdt":
             return
         camera, stream = parts[1], "/".join(parts[2:])
         paths = EntityPaths(camera)
+        rerun_log, rates = self.rerun_log, self.rerun_log.rates
         handlers = {
-            "calibration": lambda: self.rerun_log.calibration(
+            "calibration": lambda: rerun_log.calibration(
                 paths, packing.calibration_to_intrinsics(payload)),
-            "color": lambda: self.rerun_log.color(paths, packing.raw_to_image(payload)),
-            "depth": lambda: self.rerun_log.depth(paths, packing.raw_to_image(payload)),
-            "points": lambda: self._points(paths, payload),
+            "color": lambda: rerun_log.color(paths, packing.raw_to_image(payload)),
+            "depth": lambda: rerun_log.depth(paths, packing.raw_to_image(payload)),
+            "points": lambda: self._points(paths, payload, stamp),
             "topology": lambda: self._topology(camera, paths, packing.decode_topology(
-                payload, max_nodes=self.max_topology_nodes)),
+                payload, max_nodes=self.max_topology_nodes), stamp),
+            "objects": lambda: rerun_log.objects(paths, decode_object_boxes(payload)),
             "learner/status": lambda: self._status(camera, paths, packing.decode_status(payload)),
             "eos": lambda: self._eos(camera, packing.decode_stream_end(payload)),
         }
+        #: images thinned for the .rrd, skipped before they are decoded (clouds and topologies
+        #: are thinned after: their poses and metrics are logged for every frame)
+        thinned = {"color": rates.image_every, "depth": rates.depth_every}
         handler = handlers.get(stream)
         if handler is None:
             return
@@ -512,6 +770,9 @@ class Dispatcher:
         try:
             stamp = FrameStamp.from_attachment(attachment)
             stamp.check_clock(time.time_ns())
+            if stream in thinned and not rerun_log.due(paths, stream, stamp.sequence,
+                                                       thinned[stream]):
+                return
             if new_camera:
                 self.cameras[camera] = CameraProgress()
             self.rerun_log.set_time(stamp)
@@ -522,7 +783,12 @@ class Dispatcher:
             self.malformed += 1
             log.warning("%s: malformed message skipped: %s", key, error)
             return
-        if new_camera and self._on_new_camera is not None:
+        if new_camera:
+            self._layout_changed()
+
+    def _layout_changed(self) -> None:
+        """A camera appeared or its views were framed: a new blueprint."""
+        if self._on_new_camera is not None:
             self._on_new_camera(list(self.cameras))
 
     def _admit(self, camera: str) -> bool:
@@ -535,17 +801,21 @@ class Dispatcher:
         self.refused += 1
         return False
 
-    def _points(self, paths: EntityPaths, payload: bytes) -> None:
+    def _points(self, paths: EntityPaths, payload: bytes, stamp: FrameStamp) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
         from schemas import packing
 
+        rerun_log = self.rerun_log
         message = packing.parse_message(PointCloud, payload)
-        # views: the logger decimates, so only the logged points are copied
-        positions, colors = packing.msg_to_cloud(message, copy=False)
         pose = packing.cloud_pose(message)
-        self.rerun_log.points(paths, positions, colors,
-                              None if np.array_equal(pose, np.eye(4)) else pose)
+        moving = not np.array_equal(pose, np.eye(4))
+        if rerun_log.due(paths, "points", stamp.sequence, rerun_log.rates.cloud_every):
+            # views: the logger decimates, so only the logged points are copied
+            positions, colors = packing.msg_to_cloud(message, copy=False)
+            rerun_log.points(paths, positions, colors, pose if moving else None)
+        elif moving:  # the camera's pose: every frame, whether its cloud is logged or not
+            rerun_log.camera_pose(paths, pose)
 
     def capture_seen(self, camera: str, alive: bool) -> None:
         """A capture of ``camera`` started (``alive``) or left."""
@@ -559,8 +829,14 @@ class Dispatcher:
             if self._on_new_camera is not None:
                 self._on_new_camera(list(self.cameras))
 
-    def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
-        self.rerun_log.topology(paths, snapshot)
+    def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot,
+                  stamp: FrameStamp) -> None:
+        rerun_log = self.rerun_log
+        draw = rerun_log.due(paths, "topology", stamp.sequence, rerun_log.rates.topology_every)
+        framed = camera in rerun_log.framings
+        rerun_log.topology(paths, snapshot, draw)
+        if not framed and camera in rerun_log.framings:
+            self._layout_changed()  # the views now start looking at this camera's scene
         progress = self.cameras[camera]
         progress.last_topology_sequence = max(progress.last_topology_sequence,
                                               snapshot.frame_sequence)
@@ -620,6 +896,7 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
 
 
 def main(args: argparse.Namespace) -> int:
+    from services.mcap_recorder import McapRecorder
     from services.rerun_output import RrdFile, exit_now_if_stuck
 
     for name in ("max_rrd_mb", "min_free_mb", "max_queue_mb"):
@@ -631,19 +908,24 @@ def main(args: argparse.Namespace) -> int:
             log.error("--%s must be >= 1, got %s", name.replace("_", "-"), getattr(args, name))
             return 2
     try:
+        rates = rates_from_args(args)
         rec, destination, path, server = open_recording(args)
-        rerun_log = RerunLog(rec, args.max_cloud_points)
+        rerun_log = RerunLog(rec, rates)
+        recorder = McapRecorder(unused_rrd_path(args.mcap)) if args.mcap else None
     except (ValueError, OSError) as error:
         log.error("%s", error)
         return 2
     if not args.stdout:
         print(f"logging to {destination}", flush=True)
+        if recorder is not None:
+            print(f"recording to {recorder.path}", flush=True)
     output = None if path is None else RrdFile(
         rerun_log, path, args.max_rrd_mb * 10**6, args.min_free_mb * 10**6, FLUSH_EVERY_SECONDS)
 
     inbox = Inbox(args.max_queue_mb * 1024 * 1024)
     dispatcher = Dispatcher(
-        rerun_log, on_new_camera=lambda cams: rerun_log.rec.send_blueprint(blueprint(cams)),
+        rerun_log, on_new_camera=lambda cams: rerun_log.rec.send_blueprint(
+            blueprint(cams, rerun_log.framings)),
         max_cameras=args.max_cameras, max_topology_nodes=args.max_topology_nodes)
     try:
         session = open_session(args)
@@ -652,8 +934,12 @@ def main(args: argparse.Namespace) -> int:
         rec.disconnect()
         if server is not None:
             server.stop()
+        if recorder is not None:
+            recorder.close()
         return 1
     subscriber = session.declare_subscriber("gngdt/**", inbox.put)
+    recording = (session.declare_subscriber("gngdt/**", recorder.put)
+                 if recorder is not None else None)
     captures = CaptureWatch()
     capture_tokens = session.liveliness().declare_subscriber(
         CaptureWatch.KEY, captures.on_token, history=True)
@@ -680,6 +966,8 @@ def main(args: argparse.Namespace) -> int:
         token.undeclare()
         capture_tokens.undeclare()
         subscriber.undeclare()
+        if recording is not None:
+            recording.undeclare()
         session.close()
         for key, payload, attachment in inbox.take():
             dispatcher.handle(key, payload, attachment)
@@ -690,6 +978,8 @@ def main(args: argparse.Namespace) -> int:
             rec.disconnect()  # writes the .rrd footer
         if server is not None:
             server.stop()
+        if recorder is not None:
+            recorder.close()  # writes the MCAP index and footer
     log.info("logger done: %d malformed, %d dropped, %d oversized, %d refused (cameras beyond "
              "--max-cameras)%s", dispatcher.malformed, inbox.dropped, inbox.oversized,
              dispatcher.refused,

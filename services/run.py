@@ -32,8 +32,11 @@ from schemas.wire import DEFAULT_CAMERA, topic
 from services import lifecycle
 from services.logger import (
     LIVELINESS_KEY,
+    add_rate_arguments,
     add_serve_arguments,
     default_rrd_path,
+    rate_arguments,
+    rates_from_args,
     unused_rrd_path,
 )
 from services.zenoh_session import (
@@ -55,6 +58,8 @@ EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap                 # writes runs/tabletop-<time>.rrd
   gngdt run recordings/tabletop.mcap --fast --save out.rrd   # out.1.rrd if out.rrd exists
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
+  gngdt run recordings/tabletop.mcap --mcap runs/tabletop.mcap   # + every stream for Foxglove
+  gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
 """
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -72,6 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="serve a web viewer (on this machine only unless --bind says)")
     parser.add_argument("--url", help="rerun viewer URL for --connect")
     add_serve_arguments(parser)
+    parser.add_argument("--mcap", type=Path, metavar="PATH",
+                        help="also record every gngdt stream (images, clouds, topology, scene, "
+                        "objects, status) into this MCAP file for Foxglove or rerun")
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -93,6 +101,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drain-timeout", type=float, default=30.0, metavar="SECONDS",
                         help="after the stream ends, how long learner and logger may take to "
                         "finish before they are interrupted (default 30)")
+    add_rate_arguments(parser)
 
 
 @dataclass
@@ -298,18 +307,29 @@ def sensor_veil_ratio(params: Path | None) -> float | None:
     return None if frames is None else frames.get("veil_ratio")
 
 
-def logger_arguments(args: argparse.Namespace, rrd_path: Path | None) -> list[str]:
+def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
+                     mcap_path: Path | None = None) -> list[str]:
+    arguments = rate_arguments(args)
+    if mcap_path is not None:
+        arguments += ["--mcap", str(mcap_path)]
     if args.connect:
-        return ["--connect"] + (["--url", args.url] if args.url else [])
+        return [*arguments, "--connect", *(["--url", args.url] if args.url else [])]
     if args.serve:
-        return ["--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
+        return [*arguments, "--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
                 str(args.grpc_port), "--web-port", str(args.web_port)]
-    return ["--save", str(rrd_path)]
+    return [*arguments, "--save", str(rrd_path)]
+
+
+def file_size(path: Path | None) -> str:
+    """``"12.3 MB"``, or a note that the file is missing."""
+    if path is None or not path.is_file():
+        return "not written"
+    return f"{path.stat().st_size / 1e6:.1f} MB"
 
 
 def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
                    destination: str, recorded_frames: int | None = None,
-                   early_end: str = "") -> str:
+                   early_end: str = "", outputs: list[str] | None = None) -> str:
     """The lines ``run`` prints at the end; ``early_end`` says why the stream ended before the
     recording did."""
     sent = str(end.frames_sent) if end else "no end of stream"
@@ -334,6 +354,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"p99 {status.latency_p99_ms:.1f} ms",
         ]
     lines.append(f"rerun:              {destination}")
+    lines += outputs or []
     return "\n".join(lines)
 
 
@@ -364,6 +385,14 @@ def main(args: argparse.Namespace) -> int:
         log.error("%s", error)
         return 2
     topic(args.cam, "points")  # validates the camera name
+    try:
+        rates = rates_from_args(args)
+    except ValueError as error:
+        log.error("%s", error)
+        return 2
+    mcap_path = unused_rrd_path(args.mcap) if args.mcap else None
+    if mcap_path is not None:
+        mcap_path.parent.mkdir(parents=True, exist_ok=True)
     rrd_path = None
     if not (args.connect or args.serve):
         # the logger never overwrites a file: name the one it will really write
@@ -391,7 +420,8 @@ def main(args: argparse.Namespace) -> int:
     early_end = ""
     try:
         with lifecycle.graceful() as stop:
-            early_end = supervise(args, pipeline, observed, stop, rrd_path, veil_ratio)
+            early_end = supervise(args, pipeline, observed, stop, rrd_path, veil_ratio,
+                                  mcap_path)
         failure = pipeline.failed()
     except StartupTimeout:
         return 1
@@ -404,9 +434,15 @@ def main(args: argparse.Namespace) -> int:
         status, end = observed.status, observed.end
     if stop.is_set():
         early_end = early_end or f"interrupted ({lifecycle.stop_reason()})"
+    outputs = [f"  in the .rrd:      {rates.describe()}"]
+    if rrd_path is not None:
+        outputs[0:0] = [f"  .rrd size:        {file_size(rrd_path)}"]
+    if mcap_path is not None:
+        outputs.append(f"mcap:               {mcap_path} ({file_size(mcap_path)}; every stream, "
+                       "for Foxglove or `rerun`)")
     try:  # after a SIGHUP the terminal may be gone: nothing more to say then
         print(format_summary(status, end, destination, recorded_frames(args.recording),
-                             early_end), flush=True)
+                             early_end, outputs), flush=True)
         if failure is not None:
             print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"
                   f"{failure.stderr_tail()}", file=sys.stderr)
@@ -426,12 +462,12 @@ class StartupTimeout(Exception):
 
 def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
               stop: threading.Event, rrd_path: Path | None,
-              veil_ratio: float | None = None) -> str:
+              veil_ratio: float | None = None, mcap_path: Path | None = None) -> str:
     """Start the services and see the stream through; why it ended early, or ``""``."""
     log.info("starting the learner and the logger (the first run on a machine compiles the "
              "learning kernels, ~20 s)")
     learner = pipeline.start("learn", learner_arguments(args))
-    logger = pipeline.start("log", logger_arguments(args, rrd_path))
+    logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
     ready = wait_until(
         lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
         and observed.has_alive(LIVELINESS_KEY),

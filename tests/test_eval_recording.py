@@ -95,8 +95,13 @@ def test_eval_recording_report(tiny_recording, tmp_path) -> None:
     assert references["voxel_grid"]["points"] == pytest.approx(last["nodes"], rel=0.2)
     dbscan = data["references"]["dbscan"]
     assert -1.0 <= dbscan["ari"] <= 1.0 and dbscan["points"] <= 4000
+    identity = summary["identity"]
+    assert set(identity) == {"pos", "col", "nor", "col+nor", "segments"}
+    assert identity["pos"]["id_comparisons"] > 0  # every labelled segment, frame to frame
+    assert 0.0 <= identity["pos"]["id_kept"]["mean"] <= 1.0
     markdown = (out / "recording.md").read_text()
-    for heading in ("## Last frame, per method", "## References on the last frame", "## Per frame"):
+    for heading in ("## Last frame, per method", "## References on the last frame", "## Per frame",
+                    "## Object identity"):
         assert heading in markdown
     for plot in data["plots"]:
         assert (out / plot).stat().st_size > 1000
@@ -199,3 +204,23 @@ def test_eval_recording_reports_metrics_over_time_for_a_changing_scene(tmp_path)
     settings = RecordingSettings(world_frame=False, max_frames=2)
     for points in frame_points(path, settings):
         assert points.pose is None and points.positions is points.camera_positions
+
+
+def test_identity_score_counts_switches_and_kept_tracks() -> None:
+    from services.evaluation.identity import MIN_SEGMENT_POINTS, IdentityScore
+
+    score = IdentityScore(min_nodes=1)
+    node_ids = np.arange(4)
+    truth = np.repeat([7, 8], MIN_SEGMENT_POINTS)  # two segments, each on its own node pair
+    winners = np.repeat([0, 2], MIN_SEGMENT_POINTS)
+    first = score.update("c", node_ids, np.array([0, 0, 1, 1]), winners, truth)
+    # relabelled (ids persist): no switch
+    score.update("c", node_ids, np.array([1, 1, 0, 0]), winners, truth)
+    # segment 8's nodes now in a cluster of all-new nodes: a new id, one switch
+    ids = score.update("c", np.array([0, 1, 10, 11]), np.array([0, 0, 1, 1]), winners, truth)
+    assert ids[2] not in first
+    result = score.summary()["c"]
+    assert result["id_comparisons"] == 4 and result["id_switches"] == 1
+    assert result["id_kept"] == 0.75
+    assert result["tracks_kept"] == 3 / 4  # 2 of 2 kept, then 1 of 2
+    assert IdentityScore().summary() == {}

@@ -17,11 +17,11 @@ def dispatcher():
     """The logger's real per-sample path into an in-memory recording."""
     import rerun as rr
 
-    from services.logger import Dispatcher, RerunLog
+    from services.logger import Dispatcher, DisplayRates, RerunLog
 
     recording = rr.RecordingStream("gngdt-test")
     recording.memory_recording()
-    yield Dispatcher(RerunLog(recording, max_cloud_points=100))
+    yield Dispatcher(RerunLog(recording, DisplayRates(max_cloud_points=100)))
     recording.disconnect()
 
 
@@ -195,8 +195,9 @@ def test_the_rrd_stops_at_its_cap_complete_and_the_logger_goes_on(
     from rerun.chunk import RrdReader
 
     rrd_path = tmp_path / "capped.rrd"
+    # --keep-everything: every image raw, so that the flood's volume reaches the file
     logger = spawn("log", "--save", str(rrd_path), "--max-rrd-mb", "1", "--eos-drain", "1",
-                   "--zenoh-connect", router_endpoint)
+                   "--keep-everything", "--zenoh-connect", router_endpoint)
     wait_for(lambda: "logging to" in log_text(logger), 60, "the logger")
     flood = ImageFlood(router_endpoint)
     flood.run(seconds=1.0)
@@ -234,7 +235,7 @@ def test_a_logger_whose_disk_fills_up_says_so_and_keeps_serving(
     with open(log_path, "wb") as output:
         logger = subprocess.Popen(
             [sys.executable, "-c", FILE_SIZE_LIMITED, "log", "--save", str(rrd_path),
-             "--eos-drain", "1", "--zenoh-connect", router_endpoint],
+             "--eos-drain", "1", "--keep-everything", "--zenoh-connect", router_endpoint],
             cwd=Path(__file__).resolve().parents[1], stdout=output, stderr=output,
             start_new_session=True)
     try:

@@ -327,11 +327,25 @@ def test_run_refuses_a_wrong_params_file_before_starting(
     assert "learn failed" not in completed.stderr  # nothing was started
 
 
+def _blueprint_only_rrd_bytes(path: Path) -> int:
+    """Size of an .rrd holding only the logger's blueprint (what it writes before any frame)."""
+    import rerun as rr
+
+    from services.logger import blueprint
+
+    recording = rr.RecordingStream("gngdt")
+    recording.save(str(path), default_blueprint=blueprint(["camera"]))
+    recording.flush()
+    recording.disconnect()
+    return path.stat().st_size
+
+
 @pytest.mark.timeout(180)
 def test_interrupted_run_stops_cleanly_and_leaves_a_readable_rrd(
     tabletop_recording: Path, tmp_path: Path
 ) -> None:
     rrd_path = tmp_path / "interrupted.rrd"
+    flowing_bytes = _blueprint_only_rrd_bytes(tmp_path / "blueprint.rrd") + 100_000
     process = subprocess.Popen(
         [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
          str(rrd_path), "--rate", "0.05", "--samples-per-frame", "2000"],
@@ -341,7 +355,7 @@ def test_interrupted_run_stops_cleanly_and_leaves_a_readable_rrd(
     try:
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and process.poll() is None:
-            if rrd_path.exists() and rrd_path.stat().st_size > 100_000:
+            if rrd_path.exists() and rrd_path.stat().st_size > flowing_bytes:
                 break  # frames are flowing
             time.sleep(0.2)
         process.send_signal(signal.SIGINT)

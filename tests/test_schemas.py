@@ -272,6 +272,8 @@ def _topology_arrays(nodes: int = 6) -> dict:
         timestamp_ns=STAMP_NS,
         frame_id="camera",
         quantization_error={"pos": 0.01, "col": 12.5},
+        node_ids=np.array([3, 10, 11, 40, 41, 7])[:nodes],
+        cluster_ids={"pos": np.array([12, 5])},
     )
 
 
@@ -288,6 +290,10 @@ def test_topology_round_trip() -> None:
     assert snapshot.edges["col"].shape == (0, 2) and snapshot.edges["pos"].dtype == np.uint32
     np.testing.assert_array_equal(snapshot.clusterings["pos"], arrays["clusterings"]["pos"])
     assert snapshot.cluster_counts == {"pos": 2, "col+nor": 6}
+    np.testing.assert_array_equal(snapshot.node_ids, arrays["node_ids"])
+    assert snapshot.node_ids.dtype == np.int64
+    assert snapshot.cluster_ids.keys() == {"pos"}  # "col+nor" is published untracked
+    np.testing.assert_array_equal(snapshot.cluster_ids["pos"], [12, 5])
     assert (snapshot.steps, snapshot.frame_sequence, snapshot.timestamp_ns) == (1234, 42, STAMP_NS)
     assert snapshot.frame_id == "camera" and snapshot.quantization_error == {
         "pos": 0.01,
@@ -303,6 +309,10 @@ def test_topology_encoder_validates_inputs() -> None:
         encode_topology(**(arrays | {"normals": np.zeros((5, 3))}))
     with pytest.raises(ValueError, match="clusterings"):
         encode_topology(**(arrays | {"clusterings": {"pos": np.zeros(4)}}))
+    with pytest.raises(ValueError, match="one id per label"):
+        encode_topology(**(arrays | {"cluster_ids": {"pos": np.array([1, 2, 3])}}))
+    with pytest.raises(ValueError, match="unknown clusterings"):
+        encode_topology(**(arrays | {"cluster_ids": {"nor": np.array([1])}}))
 
 
 def test_topology_decoder_rejects_inconsistent_messages() -> None:
@@ -320,6 +330,17 @@ def test_topology_decoder_rejects_inconsistent_messages() -> None:
         decode_topology(message)
     with pytest.raises(MessageError, match="limit"):
         decode_topology(encode_topology(**_topology_arrays()), max_nodes=5)
+    message = encode_topology(**_topology_arrays())
+    message.node_ids.CopyFrom(pack_array(np.arange(5), np.int64))
+    with pytest.raises(MessageError, match="node_ids"):
+        decode_topology(message)
+    message = encode_topology(**_topology_arrays())
+    message.clusterings[0].cluster_ids.CopyFrom(pack_array(np.arange(1), np.int64))
+    with pytest.raises(MessageError, match="1 ids for 2 labels"):
+        decode_topology(message)
+    message.clusterings[0].cluster_ids.CopyFrom(pack_array(np.arange(10**6), np.int64))
+    with pytest.raises(MessageError, match="limit"):  # refused before it is allocated
+        decode_topology(message)
 
 
 # ---------------------------------------------------------------------- status and stream end
@@ -382,3 +403,15 @@ def test_negative_timestamp_round_trips() -> None:
     message = image_to_raw(np.zeros((1, 1), np.uint8), timestamp_ns=-1_500_000_000)
     assert message.timestamp.seconds == -2 and message.timestamp.nanos == 500_000_000
     assert math.isclose(message.timestamp.seconds + message.timestamp.nanos / 1e9, -1.5)
+
+
+def test_frame_attachment_refuses_sequences_beyond_signed_64_bits() -> None:
+    import struct
+
+    from schemas.wire import FrameStamp
+
+    largest = FrameStamp(2**63 - 1, 5).to_attachment()
+    assert FrameStamp.from_attachment(largest).sequence == 2**63 - 1
+    # rerun's and MCAP's timelines are signed: such a frame would crash a consumer, not log it
+    with pytest.raises(ValueError, match="out of range"):
+        FrameStamp.from_attachment(struct.pack("<Qq", 2**63, 0))

@@ -180,10 +180,12 @@ def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intr
 def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> dict[str, Any]:
     """One method, one seed, every frame: per-frame metrics and the final model's topology."""
     from gngdt_core import adjusted_rand_index, cluster_count
+    from services.evaluation.identity import IdentityScore
     from services.recording.reader import recording_metadata
 
     forgetting = {"utility_k": settings.utility_k} if method == "GNG-DT" else {}
     model = make_model(method, settings.max_nodes, random_state=trial, **forgetting)
+    identity = IdentityScore()
     frames: list[dict[str, Any]] = []
     last: FramePoints | None = None
     tracker: DynamicsTracker | None = None
@@ -218,10 +220,19 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
             name = "+".join(props)
             node_labels = np.asarray(model.clusters(*props, min_size=settings.min_cluster_size))
             record["clusters"][name] = cluster_count(node_labels)
+            has_truth = labelled is not None and labelled.any()
+            identity.update(name, model.node_ids_, node_labels,
+                            winners if has_truth else None,
+                            points.labels[labelled] if has_truth else None)
             if labelled is not None and labelled.any():
                 record["ari"][name] = float(
                     adjusted_rand_index(points.labels[labelled], node_labels[winners])
                 )
+        if method == "GNG-DT":  # the objects the learner publishes: its segments, tracked
+            has_truth = labelled is not None and labelled.any()
+            identity.update("segments", model.node_ids_, np.asarray(model.segment()),
+                            winners if has_truth else None,
+                            points.labels[labelled] if has_truth else None)
         record["dynamics"] = tracker.after_learning(
             model, points.index, points.camera_positions, points.positions, points.pose,
             points.view)
@@ -235,7 +246,8 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
     if "world_qe_pos" not in frames[-1]["dynamics"]:  # the last frame is always a reference
         frames[-1]["dynamics"].update(tracker.world_reference(model))
     return {"method": method, "trial": trial, "frames": frames, "model": model, "last": last,
-            "changes": tracker.summary(), "posed": last.pose is not None}
+            "changes": tracker.summary(), "posed": last.pose is not None,
+            "identity": identity.summary()}
 
 
 def references(
@@ -329,7 +341,8 @@ def evaluate_recording(
         "posed": runs[0]["posed"],
         "summary": summary,
         "references": refs,
-        "runs": [{"method": r["method"], "trial": r["trial"], "frames": r["frames"]} for r in runs],
+        "runs": [{"method": r["method"], "trial": r["trial"], "frames": r["frames"],
+                  "identity": r["identity"]} for r in runs],
         "plots": [p.name for p in plots],
     }
     write_report(out_dir, "recording", render_markdown(data, settings, plots), data)
@@ -355,6 +368,8 @@ def summarise_runs(runs: list[dict[str, Any]], refs: dict[str, Any]) -> dict[str
         }
         if "ari" in finals[0]:
             entry["ari"] = {n: mean_std(f["ari"][n] for f in finals) for n in finals[0]["ari"]}
+        entry["identity"] = _identity_summary([r["identity"] for r in runs
+                                               if r["method"] == method])
         nodes = round(entry["nodes"]["mean"])
         reference = refs["by_nodes"].get(nodes)
         if reference is not None:
@@ -367,6 +382,21 @@ def summarise_runs(runs: list[dict[str, Any]], refs: dict[str, Any]) -> dict[str
         entry["over_time"] = summarise_over_time([r for r in runs if r["method"] == method])
         summary[method] = entry
     return summary
+
+
+def _identity_summary(per_trial: list[dict[str, dict[str, Any]]]) -> dict[str, dict[str, Any]]:
+    """Per clustering: mean ± std over trials of tracks_kept and id_kept, total id switches."""
+    result = {}
+    for name in per_trial[0]:
+        scores = [trial[name] for trial in per_trial]
+        result[name] = {
+            "tracks_kept": mean_std(s["tracks_kept"] for s in scores
+                                    if s["tracks_kept"] is not None),
+            "id_kept": mean_std(s["id_kept"] for s in scores if s["id_kept"] is not None),
+            "id_switches": sum(s["id_switches"] for s in scores),
+            "id_comparisons": sum(s["id_comparisons"] for s in scores),
+        }
+    return result
 
 
 def summarise_over_time(runs: list[dict[str, Any]]) -> dict[str, Any]:
@@ -647,6 +677,21 @@ def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: li
             row.append(", ".join(f"C^{n}: {s['mean']:.3f}" for n, s in entry["ari"].items()))
         rows.append(row)
     parts.append(markdown_table(headers, rows))
+    parts.append("## Object identity (persistent cluster ids, as the learner publishes them)")
+    parts.append(
+        "Each cluster keeps an id from frame to frame by node membership "
+        "(`gngdt_core.tracking`). *Tracks kept*: share of the objects (≥ 10 nodes) of a frame "
+        "whose id is still there in the next. With ground truth, each segment is represented by "
+        "the id most of its points fall in (when it covers at least half of them); an *id "
+        "switch* is a segment represented by another id than the last time, *id kept* the share "
+        "of frame-to-frame comparisons without one. Mean ± std over trials; switches summed.")
+    identity_rows = [
+        [method, name, format_mean_std(score["tracks_kept"], 3),
+         format_mean_std(score["id_kept"], 3), score["id_switches"], score["id_comparisons"]]
+        for method, entry in summary.items() for name, score in entry["identity"].items()
+    ]
+    parts.append(markdown_table(["method", "clustering", "tracks kept", "id kept", "id switches",
+                                 "comparisons"], identity_rows))
     parts.append(f"## References on the last frame's {refs['points']:,} points")
     reference_rows = []
     for nodes, ref in refs["by_nodes"].items():

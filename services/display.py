@@ -1,0 +1,86 @@
+"""How gngdt draws a learned topology, the same in rerun and in Foxglove.
+
+Colours follow persistent cluster ids (the learner's ``cluster_ids``), so a cluster keeps its colour
+from frame to frame; nodes in no cluster are grey. Each clustering is drawn with its own edges: a
+clustering of properties (``pos``, ``col+nor``) with the edges every named property has, any other
+(``segments``) with the position edges inside one cluster.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+#: colour of nodes in no cluster (label -1), and of edges leaving a cluster
+UNCLUSTERED_RGB = (150, 150, 150)
+_GOLDEN = 0.618033988749895
+
+
+def id_colors(ids: np.ndarray) -> np.ndarray:
+    """(N, 3) uint8 saturated colour per integer id (N,); -1 is grey. The same id always gets the
+    same colour, and consecutive ids get distant hues (golden-ratio steps around the hue circle)."""
+    ids = np.asarray(ids, dtype=np.int64)
+    hue = (ids.astype(np.float64) * _GOLDEN) % 1.0
+    sector = hue * 6.0
+    channel = np.clip(np.abs((sector[:, None] - np.array([3.0, 1.0, 5.0])) % 6.0 - 3.0) - 1.0, 0, 1)
+    # vary brightness a little with the id too, so hues that come close differ in lightness
+    value = 0.75 + 0.25 * ((ids % 3) / 2.0)
+    colors = (40 + (215 * value)[:, None] * channel).astype(np.uint8)
+    colors[ids < 0] = UNCLUSTERED_RGB
+    return colors
+
+
+def node_cluster_ids(labels: np.ndarray, cluster_ids: np.ndarray | None,
+                     min_nodes: int = 1) -> np.ndarray:
+    """(N,) int64 persistent cluster id of each node (labels (N,) int, -1 = none), -1 also for
+    clusters of fewer than ``min_nodes`` nodes; without ``cluster_ids`` the labels themselves
+    (stable only within one frame)."""
+    labels = np.asarray(labels, dtype=np.int64)
+    clustered = labels >= 0
+    if min_nodes > 1 and clustered.any():
+        too_small = np.bincount(labels[clustered]) < min_nodes
+        labels = np.where(clustered & too_small[np.maximum(labels, 0)], -1, labels)
+    if cluster_ids is None or len(cluster_ids) == 0:
+        return labels
+    return np.where(labels >= 0, np.asarray(cluster_ids)[np.maximum(labels, 0)], -1)
+
+
+def node_colors(labels: np.ndarray, cluster_ids: np.ndarray | None,
+                min_nodes: int = 1) -> np.ndarray:
+    """(N, 3) uint8 colour of each node by its cluster's persistent id (grey: no cluster, or
+    one of fewer than ``min_nodes`` nodes)."""
+    return id_colors(node_cluster_ids(labels, cluster_ids, min_nodes))
+
+
+def clustering_edges(name: str, edges: Mapping[str, np.ndarray], labels: np.ndarray) -> np.ndarray:
+    """(E, 2) int64 edges drawn for clustering ``name``.
+
+    ``edges``: property -> (E, 2) node-index pairs. A name made of properties ("col+nor") gets the
+    edges all of them have; any other name (a segmentation) the position edges whose two ends are
+    in the same cluster.
+    """
+    props = name.split("+")
+    if all(prop in edges for prop in props):
+        keys = None
+        for prop in props:
+            pairs = np.sort(np.asarray(edges[prop], dtype=np.int64).reshape(-1, 2), axis=1)
+            prop_keys = np.unique(pairs[:, 0] << 32 | pairs[:, 1])
+            keys = prop_keys if keys is None else np.intersect1d(keys, prop_keys)
+        return np.stack([keys >> 32, keys & 0xFFFFFFFF], axis=1)
+    pairs = np.asarray(edges.get("pos", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
+    labels = np.asarray(labels)
+    inside = (labels[pairs[:, 0]] >= 0) & (labels[pairs[:, 0]] == labels[pairs[:, 1]])
+    return pairs[inside]
+
+
+def edge_colors(pairs: np.ndarray, colors: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(E, 3) uint8 colour per edge: its cluster's colour when both ends share a cluster, else
+    grey. colors: (N, 3) node colours; labels: (N,) cluster labels or persistent ids (-1: none)."""
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    labels = np.asarray(labels)
+    same = (labels[pairs[:, 0]] >= 0) & (labels[pairs[:, 0]] == labels[pairs[:, 1]])
+    result = np.empty((len(pairs), 3), dtype=np.uint8)
+    result[:] = UNCLUSTERED_RGB
+    result[same] = colors[pairs[same, 0]]
+    return result

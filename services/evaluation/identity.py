@@ -1,0 +1,99 @@
+"""Do objects keep their ids? Persistent cluster ids scored frame by frame.
+
+For each clustering, a `ClusterTracker` gives every cluster a persistent id, as the learner does.
+Two figures per clustering:
+
+- ``tracks_kept``: of the objects (clusters of at least ``min_nodes`` nodes) present in one frame,
+  the share whose id is still present in the next. Needs no ground truth.
+- with ground-truth labels, ``id_kept`` and ``id_switches``: each ground-truth segment is
+  represented in a frame by the id that most of its points fall in (through their winner nodes),
+  when that id covers at least half of its points. An id switch is a segment represented by a
+  different id than the last time it was represented (the MOT "IDSW"); ``id_kept`` is the share
+  of such comparisons without a switch.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gngdt_core.tracking import ClusterTracker
+
+#: a ground-truth segment needs this many points in a frame to be scored there
+MIN_SEGMENT_POINTS = 50
+
+
+@dataclass
+class _ClusteringScore:
+    tracker: ClusterTracker = field(default_factory=ClusterTracker)
+    previous_objects: set[int] | None = None
+    tracks_seen: int = 0
+    tracks_kept: int = 0
+    last_id: dict[int, int] = field(default_factory=dict)
+    comparisons: int = 0
+    switches: int = 0
+
+
+class IdentityScore:
+    """Accumulates id persistence over the frames of one replay, per clustering."""
+
+    def __init__(self, min_nodes: int = 10) -> None:
+        self.min_nodes = min_nodes
+        self._scores: dict[str, _ClusteringScore] = {}
+
+    def update(self, name: str, node_ids: np.ndarray, node_labels: np.ndarray,
+               point_winners: np.ndarray | None = None,
+               point_truth: np.ndarray | None = None) -> np.ndarray:
+        """Score one frame of clustering ``name``; returns (N,) int64 object id per node (-1).
+
+        node_ids, node_labels: (N,) per node; point_winners: (M,) winner node of each labelled
+        point, point_truth: (M,) its ground-truth segment (both None without ground truth).
+        """
+        score = self._scores.setdefault(name, _ClusteringScore())
+        cluster_ids = score.tracker.update(node_ids, node_labels)
+        labels = np.asarray(node_labels)
+        node_objects = np.where(labels >= 0, cluster_ids[np.maximum(labels, 0)]
+                                if len(cluster_ids) else -1, -1)
+        ids, sizes = np.unique(node_objects[node_objects >= 0], return_counts=True)
+        present = set(ids.tolist())
+        if score.previous_objects is not None:
+            score.tracks_seen += len(score.previous_objects)
+            score.tracks_kept += len(score.previous_objects & present)
+        score.previous_objects = set(ids[sizes >= self.min_nodes].tolist())
+        if point_winners is not None and point_truth is not None:
+            self._score_segments(score, node_objects[point_winners], point_truth)
+        return node_objects
+
+    @staticmethod
+    def _score_segments(score: _ClusteringScore, point_objects: np.ndarray,
+                        truth: np.ndarray) -> None:
+        for segment in np.unique(truth):
+            objects = point_objects[truth == segment]
+            if objects.size < MIN_SEGMENT_POINTS:
+                continue
+            ids, counts = np.unique(objects, return_counts=True)
+            best = int(np.argmax(np.where(ids >= 0, counts, -1)))
+            if ids[best] < 0 or counts[best] < 0.5 * objects.size:
+                continue  # no object covers most of the segment in this frame
+            represented = int(ids[best])
+            last = score.last_id.get(int(segment))
+            if last is not None:
+                score.comparisons += 1
+                score.switches += represented != last
+            score.last_id[int(segment)] = represented
+
+    def summary(self) -> dict[str, dict[str, float | int | None]]:
+        """Per clustering: tracks_kept (share), and id_kept (share), id_switches, comparisons
+        (None / 0 without ground truth)."""
+        result = {}
+        for name, score in self._scores.items():
+            result[name] = {
+                "tracks_kept": (score.tracks_kept / score.tracks_seen
+                                if score.tracks_seen else None),
+                "id_kept": (1.0 - score.switches / score.comparisons
+                            if score.comparisons else None),
+                "id_switches": score.switches,
+                "id_comparisons": score.comparisons,
+            }
+        return result
