@@ -11,7 +11,7 @@ the world seen so far over that of k-means with as many centres (fitted on the o
 same world sample; steady-state mean and last), the out-of-view nodes kept at the end, and for a
 changed object the frames until its old-place nodes were gone.
 
-    python benchmarks/bench_dynamic.py [--width 640 --height 480] [--quick]
+    python benchmarks/bench_dynamic.py [--width 640 --height 480] [--quick] [--scenes ...]
 """
 
 from __future__ import annotations
@@ -56,13 +56,18 @@ def run(path: Path, forgetting: bool, world: bool, reference_every: int) -> dict
     return result
 
 
+def frames_until_gone(summary: dict | None) -> str:
+    """'never' when some trial's old place kept nodes to the end, else the mean frames."""
+    return "never" if summary is None else f"{summary['mean']:g}"
+
+
 def line(name: str, result: dict) -> str:
     over = summarise_over_time([result])
     frames = [frame["dynamics"] for frame in result["frames"]]
     steady = frames[len(frames) // 2:]
     ratios = [d["world_ratio_to_kmeans"] for d in steady if "world_ratio_to_kmeans" in d]
     changes = ", ".join(
-        f"{name}: {'never' if c['frames_until_gone'] is None else c['frames_until_gone']['mean']:g}"
+        f"{name}: {frames_until_gone(c['frames_until_gone'])}"
         f" (from {c['old_place_nodes_at_change']} nodes)"
         for name, c in over["changes"].items()) or "-"
     ratio = (f"{np.mean(ratios):.3f} / {ratios[-1]:.3f}" if ratios else "-")
@@ -79,9 +84,12 @@ def main() -> None:
     parser.add_argument("--height", type=int, default=480)
     parser.add_argument("--quick", action="store_true",
                         help="320x240 and the walk one way only (a smoke run)")
+    parser.add_argument("--scenes", nargs="+", choices=sorted(SCENES), default=list(SCENES),
+                        help="scenes to run (default: all three)")
     args = parser.parse_args()
     width, height = (320, 240) if args.quick else (args.width, args.height)
-    scenes = dict(SCENES, tabletop_walk=120) if args.quick else SCENES
+    frames = dict(SCENES, tabletop_walk=120) if args.quick else SCENES
+    scenes = {scene: frames[scene] for scene in args.scenes}
     print(f"virtual Kinect {width}x{height} at 30 fps; learner: 10,000 steps a frame, 1,000 "
           f"nodes; forgetting = {LEARNER_MODEL_DEFAULTS}")
     print(f"{'run':>34} {'ghost':>7} {'worst':>7} {'nodes':>6} {'err/k-means':>15} "

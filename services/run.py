@@ -348,6 +348,9 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"{status.malformed_messages} malformed)",
             f"learning steps:     {status.steps} ({status.steps_per_second:,.0f} steps/s)",
             f"nodes:              {status.nodes}",
+            f"forgetting:         {status.nodes_forgotten} nodes forgotten; ghost share "
+            f"{status.ghost_share:.1%} (seen nodes > {status.ghost_distance_m * 100:g} cm from "
+            "the last frame)",
             *([f"last frame:         {status.settled}"] if status.settled else []),
             f"clusters:           {clusters}",
             f"latency:            p50 {status.latency_p50_ms:.1f} ms, "

@@ -134,6 +134,10 @@ def test_run_learns_the_scene_and_writes_the_rrd(data2_recording: Path, tmp_path
     assert re.search(r"frames sent:\s+8", completed.stdout), completed.stdout
     learned = int(re.search(r"frames learned:\s+(\d+)", completed.stdout).group(1))
     assert learned >= 4, completed.stdout
+    # a static scene: the learner's forgetting leaves next to no ghosts
+    ghosts = re.search(r"forgetting:\s+(\d+) nodes forgotten; ghost share ([\d.]+)% \(seen nodes "
+                       r"> 5 cm from the last frame\)", completed.stdout)
+    assert ghosts is not None and float(ghosts.group(2)) < 2.0, completed.stdout
     assert str(rrd_path) in completed.stdout
 
     entities, scalars = rrd_entities_and_scalars(rrd_path)
