@@ -40,7 +40,8 @@ _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 _STATE_VERSION = 3  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
 # a fifth counter: nodes forgotten)
 #: a nearest-node batch is split over the CPUs when each part gets at least this many points
-PARALLEL_MIN_POINTS = 50_000
+#: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
+PARALLEL_MIN_POINTS = 15_000
 #: largest deviation of a camera pose's rotation from orthonormal (and of its last row)
 POSE_TOLERANCE = 1e-6
 
@@ -89,6 +90,8 @@ class _GrowingGas:
         self._fstate = np.array([1.0, 0.0, 0.0, 1.0])
         #: the last batch's camera pose (None: the model's frame is the camera's)
         self._camera_pose: np.ndarray | None = None
+        #: stored normals are eq. 16 of the current positions (refreshed after the last step)
+        self._normals_fresh = False
 
     def _allocate(self, dim: int, has_col: bool) -> None:
         cap = self._params["max_nodes"]
@@ -194,6 +197,7 @@ class _GrowingGas:
         # Fewer steps than samples (a large frame): convert only the sampled rows, so a frame
         # costs what its steps cost. A pass or more: convert the batch once, visit it by index.
         whole_batch = None
+        self._normals_fresh = False
         if steps >= n_samples:
             camera_samples, sample_colors = gather(batch, batch_colors, finite_rows)
             self._judge(camera_samples, camera_pose)
@@ -241,6 +245,7 @@ class _GrowingGas:
         SK.refresh_property_bits(n, a["col"], a["nor"], a["nbr"], a["emask"], a["rev"], a["deg"],
                                  bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
                                  fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
+        self._normals_fresh = bool(iparams[K.Q_HAS_NOR])
 
     def _checked_pose(self, camera_pose: Any, dim: int) -> np.ndarray | None:
         """(4, 4) float64 rigid camera-to-world transform, or None; ValueError otherwise."""
@@ -606,6 +611,8 @@ class GNGDT(_GrowingGas):
         """
         if self._dim != 3:
             raise ValueError("normals need 3-D positions")
+        if self._normals_fresh:  # refreshed after the last step (``normal_refresh_steps``)
+            return self.normals_
         a = self._arrays
         normals = a["nor"].copy()
         fparams, iparams = self._kernel_parameters()
@@ -622,8 +629,8 @@ class GNGDT(_GrowingGas):
 
     def segment(self, params: SegmentationParams | None = None) -> np.ndarray:
         """(n_nodes,) int32 segment of each node, 0..k-1 by decreasing size: one segment per
-        object, support surfaces apart (see `gngdt_core.segmentation`). Label points or pixels
-        with ``labels[model.predict(points)]``."""
+        object, support surfaces apart (see `gngdt_core.segmentation`). Label points with
+        ``labels[model.predict(points)]``, an organized frame's pixels with `label_pixels`."""
         return self.segmentation(params).labels
 
 
