@@ -609,6 +609,7 @@ class Learner:
         self.counters.learning_seconds += time.perf_counter() - started
         self.counters.learning_steps = min(self.counters.learning_steps + steps, MAX_COUNTER)
         self.last_segmentation = None
+        self.ghosts = self.measure_ghosts(positions, self.last_pose)  # the settled network's
         log.info("%s", reason)
         return reason
 

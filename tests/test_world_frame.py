@@ -14,7 +14,7 @@ from test_pipeline import Watcher, log_text, points_publisher, wait_exit
 
 from schemas.packing import MessageError, cloud_to_msg, decode_topology
 from schemas.wire import FrameStamp
-from services.learner import Learner, LearnerConfig, OtherFrameError, decode_points
+from services.learner import Ghosts, Learner, LearnerConfig, OtherFrameError, decode_points
 from services.recording.synth import render_scene
 from services.recording.writer import RecordingWriter
 from services.zenoh_session import client_config, open_config
@@ -78,8 +78,13 @@ def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path:
     assert learner.quantization_error(*last)["pos"] < 0.2
     # settling on the last frame learns it where it was, in the world
     learner.options.settle_max_steps = 2_000
+    learner.ghosts = Ghosts(seen_nodes=-1)
     learner.settle(*last)
     assert learner.model.positions_[:, 0].max() > 1.3
+    # the final status's ghost share is the settled network's, not the last frame's before
+    assert len(last[0]) <= learner.options.ghost_sample  # all points: the measure is exact
+    assert learner.ghosts == learner.measure_ghosts(last[0], message.pose)
+    assert learner.ghosts.seen_nodes > 0
     assert learner.quantization_error(*last)["pos"] < 0.2
     unposed = decode_points(posed_cloud(None, "camera"), attachment(3))
     assert unposed.pose is None and unposed.frame_id == "camera"
