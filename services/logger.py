@@ -832,12 +832,17 @@ class Dispatcher:
     def _topology(self, camera: str, paths: EntityPaths, snapshot: TopologySnapshot,
                   stamp: FrameStamp) -> None:
         rerun_log = self.rerun_log
-        draw = rerun_log.due(paths, "topology", stamp.sequence, rerun_log.rates.topology_every)
+        progress = self.cameras[camera]
+        # the stream's last frame is always drawn: after its end the learner settles on it and
+        # publishes the final network again under the same frame sequence
+        last_frame = (progress.eos_last_sequence is not None
+                      and snapshot.frame_sequence >= progress.eos_last_sequence)
+        draw = last_frame or rerun_log.due(paths, "topology", stamp.sequence,
+                                           rerun_log.rates.topology_every)
         framed = camera in rerun_log.framings
         rerun_log.topology(paths, snapshot, draw)
         if not framed and camera in rerun_log.framings:
             self._layout_changed()  # the views now start looking at this camera's scene
-        progress = self.cameras[camera]
         progress.last_topology_sequence = max(progress.last_topology_sequence,
                                               snapshot.frame_sequence)
 
