@@ -537,7 +537,7 @@ class GNGDT(_GrowingGas):
     normal lags behind its neighbours' moves; with it, eq. 16 is recomputed for every node, and
     eqs. 4/9 for every edge, every that many steps and at the end of each `partial_fit`.
 
-    Forgetting (off by default, as in the paper): with ``utility_k`` set, nodes that stop
+    Forgetting (off by default, as in the paper): with ``utility_k`` > 0, nodes that stop
     representing data are removed as in GNG-U (Fritzke 1997): each node's utility accumulates,
     for the samples it wins, the squared distance to the second winner minus that to the winner,
     and decays by ``utility_decay`` per step (GNG-U2's chi, Toda et al. 2016: slower than

@@ -58,7 +58,7 @@ def drop_small(labels: np.ndarray, min_size: int) -> np.ndarray:
     """(N,) labels with the clusters of fewer than ``min_size`` nodes set to -1 (copies)."""
     labels = np.array(labels, copy=True)
     member = labels >= 0
-    sizes = np.bincount(labels[member])
+    sizes = np.bincount(labels[member], minlength=1)  # every label may be -1 already
     labels[member & (sizes[np.maximum(labels, 0)] < min_size)] = -1
     return labels
 

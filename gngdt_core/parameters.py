@@ -76,7 +76,8 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
             )
         checked["viewpoint"] = tuple(float(v) for v in viewpoint)
     if params.get("utility_k") is not None:
-        checked["utility_k"] = check_real("utility_k", params["utility_k"], 0.0, low_open=True)
+        # 0 turns forgetting off, like None: params files (TOML) have no None
+        checked["utility_k"] = (check_real("utility_k", params["utility_k"], 0.0) or None)
     if "utility_decay" in params:
         checked["utility_decay"] = check_real("utility_decay", params["utility_decay"], 0.0, 1.0)
         if checked["utility_decay"] >= 1.0:

@@ -25,10 +25,11 @@ position topology is here):
    components of the patch graph).
 5. Fragments. Segments of fewer than ``min_segment_nodes`` nodes (typically single nodes that
    straddle a crease) join the adjacent larger segment they share most convex edges with; they
-   never bridge two larger segments.
+   never bridge two larger segments. Those with no larger neighbour (chains of single nodes
+   along cables, thin edges, noise) are no segment (-1).
 
 Support surfaces come out as their own segments because everything standing on them meets them
-concavely. Labels are ordered by decreasing segment size.
+concavely. Labels are ordered by decreasing segment size; -1 is no segment.
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ class SegmentationParams:
     convex_share: float = 0.5
     #: ... and the boundary has at least this many edges
     min_boundary_edges: int = 3
-    #: segments smaller than this many nodes join a larger neighbour
+    #: segments smaller than this many nodes join a larger neighbour, or are no segment (-1)
     min_segment_nodes: int = 4
 
     def __post_init__(self) -> None:
@@ -83,7 +84,7 @@ class SegmentationParams:
 class Segmentation:
     """Result of `segment_network` for a network of n nodes and E position edges."""
 
-    #: (n,) int32 segment of each node, 0..n_segments-1 by decreasing size
+    #: (n,) int32 segment of each node, 0..n_segments-1 by decreasing size, -1 = none
     labels: np.ndarray
     #: (n,) int32 smooth patch of each node (step 2)
     patches: np.ndarray
@@ -138,7 +139,7 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
                               math.cos(math.radians(params.patch_angle_deg)))
     objects = _merge_convex_patches(patches, edges, concavity, params)
     labels = _absorb_fragments(objects, edges, convex, params.min_segment_nodes)
-    return Segmentation(rank_by_size(labels), patches, convex)
+    return Segmentation(rank_by_size(labels, params.min_segment_nodes), patches, convex)
 
 
 def _sine(degrees: float) -> float:

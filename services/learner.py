@@ -219,8 +219,6 @@ def load_params(path: Path | None) -> LearnerConfig:
     option_names = {item.name for item in fields(LearnerOptions)}
     for key, value in flat.items():
         name = "lambda_" if key == "lambda" else key
-        if name == "utility_k" and value == 0:
-            value = None  # forgetting off: the paper's GNG-DT
         if name in model_names:
             config.model[name] = value
         elif name in option_names:

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from gngdt_core import GNGDT, make_data2
-from gngdt_core.objects import ObjectTracker, describe_objects
+from gngdt_core.objects import ObjectTracker, describe_objects, drop_small
 from gngdt_core.tracking import ClusterTracker
 
 
@@ -145,3 +145,9 @@ def test_objects_of_a_static_scene_keep_their_ids_frame_to_frame():
         previous = current
     assert total >= 20 * 3
     assert kept / total >= 0.95, (kept, total)
+
+
+def test_drop_small_sets_small_clusters_to_none_even_when_none_is_left() -> None:
+    labels = np.array([0, 0, 0, 1, -1, 2, 2])
+    assert drop_small(labels, 2).tolist() == [0, 0, 0, -1, -1, 2, 2]
+    assert drop_small(np.array([-1, -1]), 2).tolist() == [-1, -1]  # a segmentation of fragments

@@ -134,6 +134,29 @@ def test_one_concave_edge_does_not_split_a_flat_patch() -> None:
     assert not result.convex.all()  # the tilted node's edges are not convex ...
 
 
+def test_lone_fragments_are_no_segment_and_fragments_by_a_surface_join_it() -> None:
+    # a flat 5 x 5 patch, one node hanging off it, and a separate chain of three nodes whose
+    # normals turn by 60 degrees from node to node (a cable): three one-node patches
+    side = 5
+    grid = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
+    plane = np.column_stack([grid.reshape(-1, 2) * 0.01, np.ones(side * side)])
+    index = np.arange(side * side).reshape(side, side)
+    plane_edges = np.vstack([np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
+                             np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    hanging = [[0.05, 0.0, 1.0]]
+    chain = [[0.5, 0.0, 1.0], [0.51, 0.0, 1.0], [0.52, 0.0, 1.0]]
+    positions = np.vstack([plane, hanging, chain])
+    turn = np.radians([0.0, 60.0, 120.0])
+    normals = np.vstack([np.tile([0.0, 0.0, -1.0], (side * side + 1, 1)),
+                         np.column_stack([np.sin(turn), np.zeros(3), -np.cos(turn)])])
+    n_plane = side * side
+    edges = np.vstack([plane_edges, [[index[-1, 0], n_plane]],
+                       [[n_plane + 1, n_plane + 2], [n_plane + 2, n_plane + 3]]])
+    labels = segment_network(positions, normals, edges, SegmentationParams()).labels
+    assert (labels[: n_plane + 1] == 0).all()  # the hanging node joined the plane
+    assert (labels[n_plane + 1:] == -1).all()  # the chain has no larger neighbour
+
+
 def test_segmentation_parameters_are_validated() -> None:
     with pytest.raises(ValueError, match="concavity_angle_deg"):
         SegmentationParams(concavity_angle_deg=0.0)

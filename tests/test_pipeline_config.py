@@ -38,9 +38,8 @@ def test_the_learner_forgets_unless_told_not_to(tmp_path: Path) -> None:
     assert load_params(None).model["utility_k"] == LEARNER_MODEL_DEFAULTS["utility_k"] > 0
     path = tmp_path / "paper.toml"
     path.write_text("[gngdt]\nutility_k = 0   # the paper's GNG-DT: no forgetting\n")
-    config = load_params(path)
-    assert config.model["utility_k"] is None
-    assert GNGDT(**config.model).n_forgotten_ == 0
+    model = GNGDT(**load_params(path).model)
+    assert model.utility_k is None and model.n_forgotten_ == 0
 
 
 def test_unknown_params_key_is_named(tmp_path: Path) -> None:
