@@ -425,7 +425,7 @@ class _GrowingGas:
         second pixel of every second row; a pixel between such pixels that all agree takes their
         label without a search (a label region narrower than two pixels can be missed there),
         every other pixel is searched exactly. On a 640x480 Kinect frame 0.02-0.05 % of the
-        pixels differ from ``node_labels[predict(...)]``, at a third of its CPU time.
+        pixels differ from ``node_labels[predict(...)]``, at under half its CPU time.
         """
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
