@@ -26,7 +26,6 @@ from __future__ import annotations
 import re
 import signal
 import struct
-import subprocess
 import sys
 import tempfile
 import threading
@@ -45,7 +44,7 @@ from hostile_recordings import (  # noqa: E402  (tests/: the tests make the same
     overlapping_chunks,
     zstd_bomb,
 )
-from procstat import status_mb  # noqa: E402  (benchmarks/, beside this script)
+from procstat import gngdt, status_mb  # noqa: E402  (benchmarks/, beside this script)
 
 from schemas.packing import (  # noqa: E402
     cloud_to_msg,
@@ -81,13 +80,6 @@ class Peaks:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join()
-
-
-def gngdt(*arguments: str, log: Path) -> subprocess.Popen:
-    with open(log, "wb") as output:
-        return subprocess.Popen([sys.executable, "-m", "services.cli", *arguments],
-                                cwd=REPO_ROOT, stdout=output, stderr=subprocess.STDOUT,
-                                start_new_session=True)
 
 
 def wait_until(condition, timeout_s: float, what: str) -> None:

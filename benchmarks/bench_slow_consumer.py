@@ -30,6 +30,8 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
+from procstat import gngdt  # noqa: E402  (benchmarks/, beside this script)
+
 from schemas.packing import decode_status, decode_topology  # noqa: E402
 from services.run import DEFAULT_MAX_POINTS  # noqa: E402
 from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
@@ -99,13 +101,6 @@ def make_recording(directory: Path) -> Path:
         for frame in render_scene("tabletop", 30, width=640, height=480):
             writer.write_frame(frame)
     return path
-
-
-def gngdt(*arguments: str, log: Path) -> subprocess.Popen:
-    with open(log, "wb") as output:
-        return subprocess.Popen([sys.executable, "-m", "services.cli", *arguments],
-                                cwd=REPO_ROOT, stdout=output, stderr=subprocess.STDOUT,
-                                start_new_session=True)
 
 
 def wait_until(condition, timeout_s: float, what: str) -> float:

@@ -1,9 +1,22 @@
-"""Memory and CPU of a live process from /proc, for the benchmarks (Linux)."""
+"""Processes of the benchmarks (Linux): gngdt services started in the background, and a live
+process's memory and CPU from /proc."""
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def gngdt(*arguments: str, log: Path) -> subprocess.Popen:
+    """``gngdt <arguments>`` started in its own session from the repository, output to ``log``."""
+    with open(log, "wb") as output:
+        return subprocess.Popen([sys.executable, "-m", "services.cli", *arguments],
+                                cwd=REPO_ROOT, stdout=output, stderr=subprocess.STDOUT,
+                                start_new_session=True)
 
 
 def status_mb(pid: int, field: str) -> float:
