@@ -178,6 +178,18 @@ def model_parameter_names() -> set[str]:
     return {name for name in inspect.signature(GNGDT.__init__).parameters if name not in excluded}
 
 
+def read_toml(path: Path, name: str) -> dict[str, Any]:
+    """The TOML document in ``path``; ValueError starting with ``name`` when it cannot be read
+    or parsed (params files of `gngdt learn` and sensor profiles of `gngdt segment`)."""
+    try:
+        with open(path, "rb") as file:
+            return tomllib.load(file)
+    except OSError as error:
+        raise ValueError(f"{name}: {error.strerror or error}") from error
+    except tomllib.TOMLDecodeError as error:
+        raise ValueError(f"{name}: invalid TOML: {error}") from error
+
+
 def load_params(path: Path | None) -> LearnerConfig:
     """Read a params TOML: GNG-DT constructor keys and learner options (flat, [gngdt],
     [learner]), segmentation parameters ([segmentation]) and a sensor profile's frame schedule
@@ -189,13 +201,7 @@ def load_params(path: Path | None) -> LearnerConfig:
     config = LearnerConfig()
     if path is None:
         return config
-    try:
-        with open(path, "rb") as file:
-            document = tomllib.load(file)
-    except OSError as error:
-        raise ValueError(f"--params {path}: {error.strerror}") from error
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"--params {path}: invalid TOML: {error}") from error
+    document = read_toml(path, f"--params {path}")
     flat: dict[str, Any] = {}
     for key, value in document.items():
         if isinstance(value, dict) and key in ("gngdt", "learner"):

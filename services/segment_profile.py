@@ -10,7 +10,6 @@ an error naming the file and the key. Keys left out take the classes' defaults.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -62,16 +61,10 @@ class SegmenterProfile:
 def load_profile(path: str | Path | None = None) -> SegmenterProfile:
     """The profile in ``path``, else the default sensor profile (`default_profile`). ValueError
     naming the file and key for unknown tables or keys and invalid values."""
-    from services.learner import LearnerOptions, model_parameter_names
+    from services.learner import LearnerOptions, model_parameter_names, read_toml
 
     path = Path(path) if path is not None else default_profile()
-    try:
-        with open(path, "rb") as file:
-            document = tomllib.load(file)
-    except OSError as error:
-        raise ValueError(f"{path}: {error.strerror or error}") from error
-    except tomllib.TOMLDecodeError as error:
-        raise ValueError(f"{path}: invalid TOML: {error}") from error
+    document = read_toml(path, str(path))
     tables: dict[str, dict[str, Any]] = {"gngdt": {}, "segmentation": {}, "frames": {}}
     learner_options = {item.name for item in fields(LearnerOptions)}
     for key, value in document.items():
