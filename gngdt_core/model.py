@@ -628,8 +628,9 @@ class GNGDT(_GrowingGas):
         return segment_network(self.positions_, self.fresh_normals(), self.edges("pos"), params)
 
     def segment(self, params: SegmentationParams | None = None) -> np.ndarray:
-        """(n_nodes,) int32 segment of each node, 0..k-1 by decreasing size: one segment per
-        object, support surfaces apart (see `gngdt_core.segmentation`). Label points with
+        """(n_nodes,) int32 segment of each node, 0..k-1 by decreasing size, -1 for lone
+        fragments: one segment per object, support surfaces apart (see
+        `gngdt_core.segmentation`). Label points with
         ``labels[model.predict(points)]``, an organized frame's pixels with `label_pixels`."""
         return self.segmentation(params).labels
 
