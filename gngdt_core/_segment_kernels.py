@@ -151,6 +151,24 @@ def _nearest(pos, n, x0, x1, x2, ghead, gnext, grid_on, cell_size, inv_cell, gue
     return _nearest_brute(pos, n, x0, x1, x2)
 
 
+@inlined
+def _agreed_label(out, valid, r0, r1, c0, c1):
+    """The label that the valid ones of the distinct anchors (r0|r1, c0|c1) share, when at
+    least two are valid and all valid ones agree; -1 otherwise."""
+    label = -1
+    n_valid = 0
+    for corner in range(4):
+        rr = r1 if corner & 2 else r0
+        cc = c1 if corner & 1 else c0
+        if (corner & 2 and r1 == r0) or (corner & 1 and c1 == c0) or not valid[rr, cc]:
+            continue
+        if n_valid and out[rr, cc] != label:
+            return -1
+        label = out[rr, cc]
+        n_valid += 1
+    return label if n_valid >= 2 else -1
+
+
 @njit(cache=True, nogil=True)
 def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_stop, pos, n, ghead,
                  gnext, grid_on, cell_size, out):
@@ -182,10 +200,8 @@ def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_sto
             if not anchors:
                 c0 = c - col_offset
                 c1 = c0 + stride if col_offset and c0 + stride < width else c0
-                label = out[r0, c0]
-                if (valid[r0, c0] and valid[r0, c1] and valid[r1, c0] and valid[r1, c1]
-                        and out[r0, c1] == label and out[r1, c0] == label
-                        and out[r1, c1] == label):
+                label = _agreed_label(out, valid, r0, r1, c0, c1)
+                if label >= 0:
                     out[r, c] = label
                     continue
             s, _ = _nearest(pos, n, np.float64(points[r, c, 0]), np.float64(points[r, c, 1]),

@@ -197,8 +197,9 @@ class StreamLearner:
 
     def _sample_distances(self, positions: np.ndarray) -> np.ndarray:
         """Distances (metres) from a random sample of the points to their nearest nodes."""
-        sample = self._rng.choice(len(positions), size=min(len(positions), SCENE_SAMPLE),
-                                  replace=False)
+        # in scan order, as `_attend` draws
+        sample = np.sort(self._rng.choice(len(positions), size=min(len(positions), SCENE_SAMPLE),
+                                          replace=False))
         return self.model_.predict(positions[sample], return_distance=True)[1]
 
     def _learn(self, positions: np.ndarray, colors: np.ndarray | None, steps: int,
