@@ -177,7 +177,8 @@ def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_sto
 
     ``anchors`` True: the anchor pixels (row and column multiples of ``stride``), each searched.
     False: every other pixel; one whose surrounding anchors (2 or 4, at most ``stride`` pixels
-    away, in the image) are all valid and share one label takes it, any other is searched.
+    away, in the image) include at least two valid ones, all of one label, takes it; any other
+    is searched.
     points: (H, W, 3) float32/float64 metres; valid: (H, W) bool; node_labels: (n,) int32, -1 =
     no label; out: (H, W) int32, written at the pass's pixels only.
     """
