@@ -94,7 +94,7 @@ def main() -> None:
     frames = dict(SCENES, tabletop_walk=120) if args.quick else SCENES
     scenes = {scene: frames[scene] for scene in args.scenes}
     print(f"virtual Kinect {width}x{height} at 30 fps; learner: 10,000 steps a frame, 1,000 "
-          f"nodes; forgetting = {LEARNER_MODEL_DEFAULTS}")
+          f"nodes; the learner's profile = {LEARNER_MODEL_DEFAULTS}")
     print(f"{'run':>40} {'ghost':>7} {'worst':>7} {'nodes':>6} {'err/k-means':>15} "
           f"{'kept':>6} {'forgot':>6}  frames until the old place is empty")
     print(f"{'':>40} {'steady':>7} {'frame':>7} {'max':>6} {'steady / last':>15} "

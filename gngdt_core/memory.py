@@ -1,9 +1,10 @@
 """A bounded memory of the samples a learner has seen, kept current by what the sensor sees.
 
 Used by `GNGDT`'s rehearsal (``replay_share``): a moving camera shows one part of the world at a
-time, so a network that learns only the current batch spends its node budget on the parts seen
-first and on the part in view now. Drawing part of each batch's steps from this memory makes the
-network learn the world seen so far. The memory is a uniform random sample of every sample
+time, so a network that learns only the current batch fits the view, not the world: nodes in
+view follow the current batch, and a part out of view keeps what its last view made of it.
+Drawing part of each batch's steps from this memory makes the network learn the world seen so
+far. The memory is a uniform random sample of every sample
 offered (reservoir sampling, Vitter's Algorithm R), less the samples a later view saw through
 (the place is empty now): what vanished or moved is forgotten here as soon as the sensor looks.
 Pure computation on arrays.

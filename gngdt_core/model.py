@@ -615,10 +615,10 @@ class GNGDT(_GrowingGas):
     uniform random sample of every batch sample learned so far, less those a later batch saw
     through (in front of the nearest depth measured there by more than ``view_depth_margin``
     times it; `gngdt_core.memory`). A moving camera shows one part of the world at a time;
-    without rehearsal the network places its nodes by the parts seen first and the part in view,
-    and once the budget is full nothing moves them to what the camera found later. With it the
-    network learns the world seen so far, and what vanished or moved leaves the memory as soon
-    as the sensor looks there. Rehearsed samples move nodes and add error, but not utility:
+    without rehearsal the nodes in view follow the current batch, and a part that leaves the
+    view keeps its nodes as its last view placed them. With it the network learns the world
+    seen so far, and what vanished or moved leaves the memory as soon as the sensor looks
+    there. Rehearsed samples move nodes and add error, but not utility:
     forgetting judges nodes by what the sensor sees now.
     """
 
