@@ -23,10 +23,11 @@ capture's liveliness token, whichever comes first) has ended its stream (eos) an
 its last frame has arrived, or ``--eos-drain`` seconds after that eos (or after its capture left
 without one).
 
-Crash safety: the ``.rrd`` is flushed every ``FLUSH_EVERY_SECONDS``, so a logger killed outright
-(``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which only makes
-rerun scan it whole). An existing ``--save`` file is never overwritten: a restarted logger writes
-``<name>.1.rrd`` (then ``.2``, ...) beside it and says so.
+Crash safety: the ``.rrd`` is flushed every ``RRD_FLUSH_SECONDS`` (10 s), so a logger killed
+outright (``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which
+only makes rerun scan it whole); SIGINT/SIGTERM lose nothing. An existing ``--save`` file is
+never overwritten: a restarted logger writes ``<name>.1.rrd`` (then ``.2``, ...) beside it and
+says so.
 """
 
 from __future__ import annotations
@@ -77,8 +78,12 @@ LATEST_ONLY_STREAMS = ("color", "depth", "points", "objects")
 NOT_LOGGED_STREAMS = ("scene",)
 RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
-#: how often the .rrd is flushed to disk: what a killed logger can lose at most
+#: how often a stream to a viewer (--stdout, --serve, --connect) is flushed
 FLUSH_EVERY_SECONDS = 1.0
+#: how often the .rrd is flushed to disk, and the longest its chunks span: what a killed logger
+#: can lose at most; longer than a second because the .rrd writer's memory grows per chunk
+#: (`file_batcher`)
+RRD_FLUSH_SECONDS = 10.0
 DEFAULT_MAX_CAMERAS = 16
 #: 25 times the learner's default node budget: a topology of 25,000 nodes (~8 MB on the wire)
 #: costs the .rrd ~20 MB; a learner with a larger --max-nodes needs a larger logger limit
@@ -910,15 +915,18 @@ class Dispatcher:
 
 
 def file_batcher() -> Any:
-    """Rerun's chunk batching for a .rrd: one chunk per entity per ``FLUSH_EVERY_SECONDS``.
+    """Rerun's chunk batching for a .rrd: one chunk per entity per ``RRD_FLUSH_SECONDS`` (or
+    per 2 MiB of it, rerun's default, for images and topologies).
 
-    The .rrd writer keeps an index entry per chunk in memory until it writes the footer, so with
-    rerun's default (a chunk per entity every 200 ms) a 30 fps logger of ~40 entities grew by
-    ~20 MB a minute; the chunks' own overhead also made the file bigger. Streams to a viewer
-    (``--stdout``, ``--serve``, ``--connect``) keep the default (low latency)."""
+    rerun 0.41's .rrd writer keeps a row per chunk in memory for the file's footer (its index for
+    random access) until the file is closed, and each row is as wide as the recording has
+    distinct components: ~100 bytes per component, ~3 kB per chunk for the logger's ~30
+    (measured, README "Performance"). One chunk per entity per second (~25 entities, most of
+    them metrics) grew the logger by ~8 MB a minute; per 10 s, by ~1/10 of that. Streams to a
+    viewer (``--stdout``, ``--serve``, ``--connect``) keep rerun's default (low latency)."""
     import rerun as rr
 
-    return rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=FLUSH_EVERY_SECONDS))
+    return rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=RRD_FLUSH_SECONDS))
 
 
 def open_recording(args: argparse.Namespace, default_name: str = "log"
@@ -983,7 +991,7 @@ def main(args: argparse.Namespace) -> int:
         if recorder is not None:
             print(f"recording to {recorder.path}", flush=True)
     output = None if path is None else RrdFile(
-        rerun_log, path, args.max_rrd_mb * 10**6, args.min_free_mb * 10**6, FLUSH_EVERY_SECONDS)
+        rerun_log, path, args.max_rrd_mb * 10**6, args.min_free_mb * 10**6, RRD_FLUSH_SECONDS)
 
     inbox = Inbox(args.max_queue_mb * 1024 * 1024)
     dispatcher = Dispatcher(
