@@ -91,11 +91,12 @@ DEFAULT_MAX_TOPOLOGY_NODES = 25_000
 
 
 def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
-    """rerun's own viewer options, as ``rr.script_add_args`` adds them (a test checks they match).
+    """rerun's own viewer options, as ``rr.script_add_args`` adds them (a test checks they match),
+    but ``--headless``: the logger never opens a GUI (it saves, streams or serves), so "don't
+    show GUI" would change nothing.
 
     Declared here because importing rerun costs ~0.6 s, too much for ``gngdt --help``.
     """
-    parser.add_argument("--headless", action="store_true", help="Don't show GUI")
     parser.add_argument("--connect", dest="connect", action="store_true",
                         help="Connect to an external viewer")
     parser.add_argument("--serve", dest="serve", action="store_true",
