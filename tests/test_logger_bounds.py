@@ -206,8 +206,8 @@ def test_the_rrd_stops_at_its_cap_complete_and_the_logger_goes_on(
     flood.end()
     assert logger.wait(30) == 0, log_text(logger)
     assert "it reached" in log_text(logger) and "--max-rrd-mb 1" in log_text(logger)
-    # the size is checked at each flush (every second): ~1 s of this flood (4.6 MB) past the
-    # cap at most, of the ~18 MB sent
+    # the size is checked after every message, and rerun writes a chunk per 2 MiB of an
+    # entity's images: ~1 s of this flood (4.6 MB) past the cap at most, of the ~18 MB sent
     assert rrd_path.stat().st_size < 1_000_000 + 7_000_000
     chunks = list(RrdReader(rrd_path).stream().collect().stream())  # complete, with a footer
     assert any(chunk.entity_path == "/world/camera/image/rgb" for chunk in chunks)
