@@ -160,8 +160,8 @@ class DisplayRates:
     """What goes into the .rrd: every ``*_every``-th frame (by sequence) of each stream.
 
     Metrics and objects are logged for every frame. ``jpeg_quality`` 0 logs raw colour images;
-    ``max_cloud_points`` None logs whole clouds. Defaults keep a 30 fps 640x480 camera under
-    ~200 MB of .rrd a minute (README "Performance").
+    ``max_cloud_points`` None logs whole clouds. Defaults keep a 30 fps 640x480 camera at
+    ~120 MB of .rrd a minute (README "Performance").
     """
 
     image_every: int = 3
