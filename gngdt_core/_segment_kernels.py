@@ -151,39 +151,58 @@ def _nearest(pos, n, x0, x1, x2, ghead, gnext, grid_on, cell_size, inv_cell, gue
     return _nearest_brute(pos, n, x0, x1, x2)
 
 
+@inlined
+def _agreed_label(out, valid, r0, r1, c0, c1):
+    """The label that the valid ones of the distinct anchors (r0|r1, c0|c1) share, when at
+    least two are valid and all valid ones agree; -1 otherwise."""
+    label = -1
+    n_valid = 0
+    for corner in range(4):
+        rr = r1 if corner & 2 else r0
+        cc = c1 if corner & 1 else c0
+        if (corner & 2 and r1 == r0) or (corner & 1 and c1 == c0) or not valid[rr, cc]:
+            continue
+        if n_valid and out[rr, cc] != label:
+            return -1
+        label = out[rr, cc]
+        n_valid += 1
+    return label if n_valid >= 2 else -1
+
+
 @njit(cache=True, nogil=True)
-def label_pixels(points, valid, node_labels, anchors, row_start, row_stop, pos, n, ghead, gnext,
-                 grid_on, cell_size, out):
+def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_stop, pos, n, ghead,
+                 gnext, grid_on, cell_size, out):
     """Nearest node's label + 1 (0 where not ``valid``) of the pixels of rows
     ``row_start..row_stop-1``, in two passes over the whole image.
 
-    ``anchors`` True: the anchor pixels (even row, even column), each searched. False: every
-    other pixel; one whose surrounding anchors (2 or 4, at most two pixels away, in the image)
-    are all valid and share one label takes it, any other is searched. points: (H, W, 3)
-    float32/float64 metres; valid: (H, W) bool; node_labels: (n,) int32, -1 = no label; out:
-    (H, W) int32, written at the pass's pixels only.
+    ``anchors`` True: the anchor pixels (row and column multiples of ``stride``), each searched.
+    False: every other pixel; one whose surrounding anchors (2 or 4, at most ``stride`` pixels
+    away, in the image) include at least two valid ones, all of one label, takes it; any other
+    is searched.
+    points: (H, W, 3) float32/float64 metres; valid: (H, W) bool; node_labels: (n,) int32, -1 =
+    no label; out: (H, W) int32, written at the pass's pixels only.
     """
     inv_cell = 1.0 / cell_size if grid_on else 0.0
     guess = -1
     height, width = valid.shape
     for r in range(row_start, row_stop):
-        if anchors and r & 1:
+        row_offset = r % stride
+        if anchors and row_offset:
             continue
-        r0 = r - (r & 1)
-        r1 = r0 + 2 if (r & 1) and r0 + 2 < height else r0
+        r0 = r - row_offset
+        r1 = r0 + stride if row_offset and r0 + stride < height else r0
         for c in range(width):
-            if ((r & 1) == 0 and (c & 1) == 0) != anchors:
+            col_offset = c % stride
+            if (row_offset == 0 and col_offset == 0) != anchors:
                 continue
             if not valid[r, c]:
                 out[r, c] = 0
                 continue
             if not anchors:
-                c0 = c - (c & 1)
-                c1 = c0 + 2 if (c & 1) and c0 + 2 < width else c0
-                label = out[r0, c0]
-                if (valid[r0, c0] and valid[r0, c1] and valid[r1, c0] and valid[r1, c1]
-                        and out[r0, c1] == label and out[r1, c0] == label
-                        and out[r1, c1] == label):
+                c0 = c - col_offset
+                c1 = c0 + stride if col_offset and c0 + stride < width else c0
+                label = _agreed_label(out, valid, r0, r1, c0, c1)
+                if label >= 0:
                     out[r, c] = label
                     continue
             s, _ = _nearest(pos, n, np.float64(points[r, c, 0]), np.float64(points[r, c, 1]),

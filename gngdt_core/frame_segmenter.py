@@ -70,6 +70,8 @@ class FrameSegmenter:
                  segmentation: SegmentationParams | None = None,
                  schedule: FrameSchedule | None = None, random_state: int | None = 0) -> None:
         self.stream = StreamLearner(model_params, segmentation, schedule, random_state)
+        #: (H, W) bool: the last frame's pixels on large flat surfaces (attention's prior)
+        self._surface_pixels: np.ndarray | None = None
 
     @property
     def model_(self) -> GNGDT | None:
@@ -78,6 +80,7 @@ class FrameSegmenter:
     def reset(self) -> None:
         """Forget the network: the next frame is learned from scratch."""
         self.stream.reset()
+        self._surface_pixels = None
 
     def segment_frame(self, points: np.ndarray, colors: np.ndarray,
                       independent: bool = False) -> FrameResult:
@@ -99,10 +102,19 @@ class FrameSegmenter:
             model = self.model_
             return FrameResult(np.zeros((height, width), dtype=np.int32),
                                model.n_nodes_ if model else 0, 0, 0, False, clock.laps)
+        surface = self._surface_pixels
+        prior = (None if surface is None or surface.shape != (height, width)
+                 else np.compress(learnable, surface.reshape(-1)))
         learned = self.stream.learn_frame(
-            positions, np.compress(learnable, colors.reshape(-1, 3), axis=0), independent)
+            positions, np.compress(learnable, colors.reshape(-1, 3), axis=0), independent,
+            on_large_surface=prior)
         clock.lap("learn")
-        labels = self.model_.label_pixels(points, learned.segmentation.labels)
+        # one search labels both: pixel value 2 * (segment + 1) + on a large surface, so a
+        # node of no segment (-1) off the surfaces still maps to 0
+        both = self.model_.label_pixels(
+            points, 2 * learned.segmentation.labels + 1 + learned.on_large_surface)
+        labels = both >> 1
+        self._surface_pixels = (both & 1).astype(bool)
         clock.lap("label")
         return FrameResult(labels, self.model_.n_nodes_,
                            learned.segmentation.n_segments, learned.steps, learned.from_scratch,

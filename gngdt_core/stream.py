@@ -94,6 +94,8 @@ class LearnedFrame:
     #: learned from scratch: independent, the first frame, or a new scene
     from_scratch: bool
     segmentation: Segmentation
+    #: (n_nodes,) bool: nodes on the large flat surfaces that attention thins out next frame
+    on_large_surface: np.ndarray
 
 
 class StreamLearner:
@@ -124,17 +126,24 @@ class StreamLearner:
         self._on_large_surface = None
 
     def learn_frame(self, positions: np.ndarray, colors: np.ndarray | None,
-                    independent: bool = False,
-                    camera_pose: np.ndarray | None = None) -> LearnedFrame:
+                    independent: bool = False, camera_pose: np.ndarray | None = None,
+                    on_large_surface: np.ndarray | None = None) -> LearnedFrame:
         """Learn from one frame and segment the network.
 
         positions: (N, 3) float metres, N >= 2, finite; colors: (N, 3) uint8 RGB or None.
         independent: learn this frame from scratch. camera_pose: (4, 4) camera-to-world of the
         frame (`GNGDT.partial_fit`): the network is then a map in that fixed frame, and the
         scene-change test and attention compare the frame with it there.
+        on_large_surface: (N,) bool, which points lie on a large flat surface as an earlier
+        frame showed it (e.g. the previous frame's labels of the same pixels, from
+        ``LearnedFrame.on_large_surface``); attention then trusts it instead of searching each
+        drawn point's nearest node. Ignored when the frame is learned from scratch.
         """
         if len(positions) < 2:
             raise ValueError(f"a frame needs at least 2 points, got {len(positions)}")
+        if on_large_surface is not None and on_large_surface.shape != (len(positions),):
+            raise ValueError(f"on_large_surface must have shape ({len(positions)},), got "
+                             f"{on_large_surface.shape}")
         self._camera_pose = camera_pose
         placed = self._placed(positions)
         from_scratch = (independent or self.model_ is None or self.model_.n_nodes_ == 0
@@ -145,12 +154,13 @@ class StreamLearner:
             steps = self.schedule.steps_first_frame
         else:
             steps = self.schedule.steps_per_frame
-        self._learn(positions, colors, steps, placed)
+        self._learn(positions, colors, steps, placed,
+                    None if from_scratch else on_large_surface)
         if self.schedule.scene_change_share < 1.0:
             self._resolution = float(np.percentile(self._sample_distances(placed), 90))
         segmentation = self.model_.segmentation(self.segmentation)
         self._on_large_surface = self._large_surfaces(segmentation.patches)
-        return LearnedFrame(steps, from_scratch, segmentation)
+        return LearnedFrame(steps, from_scratch, segmentation, self._on_large_surface)
 
     def refine(self, positions: np.ndarray, colors: np.ndarray | None, steps: int,
                camera_pose: np.ndarray | None = None) -> None:
@@ -187,13 +197,15 @@ class StreamLearner:
 
     def _sample_distances(self, positions: np.ndarray) -> np.ndarray:
         """Distances (metres) from a random sample of the points to their nearest nodes."""
-        sample = self._rng.choice(len(positions), size=min(len(positions), SCENE_SAMPLE),
-                                  replace=False)
+        # in scan order, as `_attend` draws
+        sample = np.sort(self._rng.choice(len(positions), size=min(len(positions), SCENE_SAMPLE),
+                                          replace=False))
         return self.model_.predict(positions[sample], return_distance=True)[1]
 
     def _learn(self, positions: np.ndarray, colors: np.ndarray | None, steps: int,
-               placed: np.ndarray) -> None:
-        """Learn ``positions`` (camera frame); ``placed``: the same points in the model's frame."""
+               placed: np.ndarray, on_large_surface: np.ndarray | None = None) -> None:
+        """Learn ``positions`` (camera frame); ``placed``: the same points in the model's frame;
+        ``on_large_surface``: the points' attention prior (`learn_frame`), or None."""
         model = self.model_
         pose = self._camera_pose
         share = self.schedule.flat_surface_share
@@ -203,7 +215,7 @@ class StreamLearner:
             self._on_large_surface = self._large_surfaces(
                 model.segmentation(self.segmentation).patches)
             steps -= warm_up
-        rows = self._attend(placed, share, steps) if share < 1.0 else None
+        rows = self._attend(placed, share, steps, on_large_surface) if share < 1.0 else None
         if rows is None:
             model.partial_fit(positions, colors, n_steps=steps, camera_pose=pose)
         else:
@@ -215,10 +227,12 @@ class StreamLearner:
         sizes = np.bincount(patches)
         return (sizes >= self.schedule.flat_surface_min_nodes * patches.size)[patches]
 
-    def _attend(self, positions: np.ndarray, share: float, steps: int) -> np.ndarray | None:
+    def _attend(self, positions: np.ndarray, share: float, steps: int,
+                prior: np.ndarray | None) -> np.ndarray | None:
         """Rows to learn from: of a random draw of the frame (enough for ``steps`` after
         thinning), all those off the large flat surfaces and ``share`` of those on them; None
-        for every row (no large surface known)."""
+        for every row (no large surface known). A point is on a surface when its nearest node
+        is, or, given ``prior`` ((N,) bool per point), when the prior says so."""
         on_surface = self._on_large_surface
         if on_surface is None or not on_surface.any() or on_surface.size != self.model_.n_nodes_:
             return None
@@ -227,6 +241,9 @@ class StreamLearner:
         if draw < len(positions):
             # in scan order: each nearest-node search starts from the previous row's node
             rows = np.sort(self._rng.choice(len(positions), size=draw, replace=False))
-        on_large = on_surface[self.model_.predict(positions[rows])]
+        if prior is None:
+            on_large = on_surface[self.model_.predict(positions[rows])]
+        else:
+            on_large = prior[rows]
         keep = ~on_large | (self._rng.random(rows.size) < share)
         return rows[keep]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from gngdt_core import model as model_module
 from gngdt_core.frame_segmenter import FrameSegmenter, veil_pixels
 from gngdt_core.stream import FrameSchedule, StreamLearner
 from services.capture import CloudOptions, FrameToCloud
@@ -64,6 +65,32 @@ def test_attention_moves_nodes_from_the_large_surfaces_to_the_objects() -> None:
     assert node_share_on_objects(0.05) > 1.3 * node_share_on_objects(1.0)
 
 
+def test_attention_follows_the_prior_an_earlier_frame_gives() -> None:
+    frame = next(iter(read_frames(ROOT / "recordings" / "tabletop.mcap")))
+    points = Deprojector().organized(frame.depth, frame.intrinsics).reshape(-1, 3)
+    valid = np.isfinite(points[:, 2])
+    positions, colors = points[valid], frame.color.reshape(-1, 3)[valid]
+    truth = frame.labels.reshape(-1)[valid]
+    on_object = (np.bincount(truth) < 0.05 * truth.size)[truth]
+
+    def node_share_on_objects(prior: np.ndarray) -> float:
+        schedule = FrameSchedule(steps_first_frame=30_000, steps_per_frame=30_000)
+        stream = StreamLearner({"max_nodes": 400, "lambda_": 50}, schedule=schedule,
+                               random_state=1)
+        stream.learn_frame(positions, colors)
+        for _ in range(4):  # the same view again: the carried network, thinned by the prior
+            assert not stream.learn_frame(positions, colors, on_large_surface=prior).from_scratch
+        nearest_point = cKDTree(positions).query(stream.model_.positions_)[1]
+        return float(np.mean(on_object[nearest_point]))
+
+    # a prior that calls the objects the large surfaces takes nodes off them (ignoring the
+    # prior, both runs would be the same)
+    assert node_share_on_objects(on_object) < 0.8 * node_share_on_objects(~on_object)
+    with pytest.raises(ValueError, match="on_large_surface"):
+        StreamLearner(QUICK, schedule=QUICK_SCHEDULE).learn_frame(
+            positions, colors, on_large_surface=on_object[:-1])
+
+
 def test_frame_segmenter_labels_the_valid_pixels_of_an_organized_frame() -> None:
     frame = next(iter(read_frames(ROOT / "recordings" / "tabletop_small.mcap")))
     points = Deprojector().organized(frame.depth, frame.intrinsics)
@@ -85,7 +112,8 @@ def test_pixel_labels_are_the_nearest_nodes_labels_but_where_a_region_is_a_pixel
     stream.learn_frame(points[valid], frame.color[valid])
     model = stream.model_
     anchors = np.zeros_like(valid)
-    anchors[::2, ::2] = True
+    stride = model_module.LABEL_ANCHOR_STRIDE
+    anchors[::stride, ::stride] = True
 
     def labels_and_exact(node_labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         exact = np.zeros(valid.shape, dtype=np.int64)
