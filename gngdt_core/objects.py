@@ -3,7 +3,9 @@
 An object is a cluster's nodes summarised: centroid, oriented bounding box (the principal axes of
 its node positions and the extents along them), mean colour, dominant normal and node count. Its
 id is the cluster's persistent id from a `ClusterTracker`, so it stays the same from frame to frame
-while the cluster keeps most of its nodes.
+while the cluster keeps most of its nodes. A cluster becomes an object once it has at least
+``min_size`` nodes and its track is confirmed (seen in ``confirm_frames`` labellings in a row):
+fragments that split off for a frame or two and merge back are never published.
 
     tracker = ObjectTracker("segments")        # or "pos", "col+nor", ... (any clustering)
     for points, colors in frames:
@@ -60,6 +62,20 @@ def drop_small(labels: np.ndarray, min_size: int) -> np.ndarray:
     member = labels >= 0
     sizes = np.bincount(labels[member], minlength=1)  # every label may be -1 already
     labels[member & (sizes[np.maximum(labels, 0)] < min_size)] = -1
+    return labels
+
+
+def object_labels(labels: np.ndarray, confirmed: np.ndarray, min_size: int) -> np.ndarray:
+    """(N,) labels with every cluster that is no object set to -1 (copies): fewer than
+    ``min_size`` nodes, or not ``confirmed`` ((K,) bool per label, `ClusterTracker.confirmed_`)."""
+    labels = drop_small(labels, min_size)
+    confirmed = np.asarray(confirmed, dtype=bool)
+    member = labels >= 0
+    if member.any() and confirmed.size <= labels.max():
+        raise ValueError(f"confirmed must have an entry for every label 0..{labels.max()}, got "
+                         f"{confirmed.shape}")
+    unconfirmed = np.flatnonzero(member)[~confirmed[labels[member]]]
+    labels[unconfirmed] = -1
     return labels
 
 
@@ -140,13 +156,16 @@ class ObjectTracker:
     """Objects of one clustering of a `GNGDT`, with ids kept from call to call.
 
     clustering: "segments" (the model's segmentation, when it has one) or properties joined by
-    "+" as in ``model.clusters`` ("pos", "col+nor", ...). Other arguments go to `ClusterTracker`.
+    "+" as in ``model.clusters`` ("pos", "col+nor", ...). min_size: fewest nodes of an object;
+    confirm_frames: calls in a row a cluster must be seen in before it is an object (defaults as
+    the learner's). Other arguments go to `ClusterTracker`.
     """
 
-    def __init__(self, clustering: str = "segments", min_size: int = 5, **tracker_args: Any):
+    def __init__(self, clustering: str = "segments", min_size: int = 5, confirm_frames: int = 5,
+                 **tracker_args: Any):
         self.clustering = clustering
         self.min_size = min_size
-        self.tracker = ClusterTracker(**tracker_args)
+        self.tracker = ClusterTracker(confirm_frames=confirm_frames, **tracker_args)
 
     def labels(self, model: Any) -> np.ndarray:
         """(n_nodes,) int32 labels of the clustering (segments fall back to "pos" clusters on a
@@ -158,9 +177,9 @@ class ObjectTracker:
         return model.clusters(*self.clustering.split("+"), min_size=self.min_size)
 
     def update(self, model: Any) -> ObjectSet:
-        """The model's objects now (clusters of at least ``min_size`` nodes); ids carried over
-        from the previous call by node membership."""
+        """The model's objects now (confirmed clusters of at least ``min_size`` nodes); ids
+        carried over from the previous call by node membership."""
         labels = self.labels(model)
         ids = self.tracker.update(model.node_ids_, labels)
         return describe_objects(model.positions_, model.colors_, model.normals_,
-                                drop_small(labels, self.min_size), ids)
+                                object_labels(labels, self.tracker.confirmed_, self.min_size), ids)

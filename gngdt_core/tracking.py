@@ -7,6 +7,12 @@ the most nodes with, greedily by shared-node count, each id at most once. A spli
 the part holding most of the old nodes; a merge keeps the id of the larger contributor. A cluster
 seen no more is remembered for ``memory_frames`` labellings, so a cluster that dips below the
 minimum size for a moment, or splits off again, gets its id back.
+
+A cluster is *confirmed* once it has been seen in ``confirm_frames`` labellings in a row (and
+stays confirmed while it is remembered): segments of a network that is still growing, and thin
+fragments at creases and at the edge of the view, split off and merge back for a frame or two;
+only clusters that persist are objects (``confirmed_``; the tracking-by-detection trackers' "min
+hits", e.g. SORT's).
 """
 
 from __future__ import annotations
@@ -18,11 +24,14 @@ import numpy as np
 
 @dataclass
 class _Track:
-    """One persistent cluster: its id, member node ids (sorted int64) and when it was last seen."""
+    """One persistent cluster: its id, member node ids (sorted int64), when it was last seen, in
+    how many labellings in a row up to then, and whether it is confirmed."""
 
     track_id: int
     nodes: np.ndarray
     last_seen: int
+    streak: int = 1
+    confirmed: bool = False
 
 
 class ClusterTracker:
@@ -32,19 +41,26 @@ class ClusterTracker:
     at least this fraction of its nodes that belonged to any remembered cluster (new nodes do not
     count either way). memory_frames: labellings a vanished cluster is remembered for.
     max_tracks: most clusters remembered (the least recently seen are forgotten first), so memory
-    stays bounded whatever the input.
+    stays bounded whatever the input. confirm_frames: labellings in a row a cluster must be seen
+    in before it is confirmed (1: at once).
+
+    After `update`: ``confirmed_`` (K,) bool, per label of that labelling, whether its cluster is
+    confirmed.
     """
 
     def __init__(self, min_overlap: float = 0.5, memory_frames: int = 30,
-                 max_tracks: int = 10_000) -> None:
+                 max_tracks: int = 10_000, confirm_frames: int = 1) -> None:
         if not 0.0 < min_overlap <= 1.0:
             raise ValueError(f"min_overlap must be in (0, 1], got {min_overlap!r}")
-        for name, value in (("memory_frames", memory_frames), ("max_tracks", max_tracks)):
+        for name, value in (("memory_frames", memory_frames), ("max_tracks", max_tracks),
+                            ("confirm_frames", confirm_frames)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
         self.min_overlap = float(min_overlap)
         self.memory_frames = int(memory_frames)
         self.max_tracks = int(max_tracks)
+        self.confirm_frames = int(confirm_frames)
+        self.confirmed_ = np.zeros(0, dtype=bool)
         self._tracks: list[_Track] = []
         self._next_id = 0
         self._frame = 0
@@ -76,6 +92,7 @@ class ClusterTracker:
         members = node_ids[clustered]
         member_labels = labels[clustered].astype(np.int64)
         assigned = np.full(n_labels, -1, dtype=np.int64)
+        confirmed = np.zeros(n_labels, dtype=bool)
         for label, track in self._matches(members, member_labels, n_labels):
             assigned[label] = track.track_id
         by_id = {track.track_id: track for track in self._tracks}
@@ -88,14 +105,19 @@ class ClusterTracker:
             if assigned[label] < 0:
                 assigned[label] = self._next_id
                 self._next_id += 1
-                by_id[int(assigned[label])] = _Track(int(assigned[label]), nodes, self._frame)
+                track = _Track(int(assigned[label]), nodes, self._frame)
+                by_id[track.track_id] = track
             else:
                 track = by_id[int(assigned[label])]
+                track.streak = track.streak + 1 if track.last_seen == self._frame - 1 else 1
                 track.nodes, track.last_seen = nodes, self._frame
+            track.confirmed = track.confirmed or track.streak >= self.confirm_frames
+            confirmed[label] = track.confirmed
         self._tracks = sorted(
             (track for track in by_id.values()
              if self._frame - track.last_seen < self.memory_frames),
             key=lambda track: (-track.last_seen, track.track_id))[: self.max_tracks]
+        self.confirmed_ = confirmed
         return assigned
 
     def _matches(self, members: np.ndarray, member_labels: np.ndarray,

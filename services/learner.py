@@ -111,6 +111,9 @@ class LearnerOptions:
     ghost_sample: int = 10_000
     #: clustering whose clusters are published as objects ("pos" when it is not published)
     objects_from: str = "segments"
+    #: a cluster is published as an object once seen in this many learned frames in a row
+    #: (gngdt_core.objects.ObjectTracker's default too)
+    object_confirm_frames: int = 5
     #: publish the scene (nodes, edges, clusters) every this many learned frames; 0: never
     scene_every_frames: int = 3
 
@@ -124,7 +127,7 @@ class LearnerOptions:
                                  f"{' or '.join(kind.__name__ for kind in allowed)}, "
                                  f"got {value!r}")
         for name in ("samples_per_frame", "min_cluster_size", "checkpoint_every_frames",
-                     "quantization_sample", "max_points"):
+                     "quantization_sample", "max_points", "object_confirm_frames"):
             value = getattr(self, name)
             if value <= 0:
                 raise ValueError(f"learner option {name} must be positive, got {value}")
@@ -151,6 +154,7 @@ _OPTION_TYPES: dict[str, tuple[type, ...]] = {
     "ghost_distance_m": (int, float),
     "ghost_sample": (int,),
     "objects_from": (str,),
+    "object_confirm_frames": (int,),
     "scene_every_frames": (int,),
 }
 
@@ -260,6 +264,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="clustering published as objects on gngdt/<cam>/objects (default "
                         "segments; pos when segments are not published; any of "
                         f"{', '.join(CLUSTERINGS)})")
+    parser.add_argument("--object-confirm-frames", type=int, metavar="FRAMES",
+                        help="a cluster is published as an object once seen in this many "
+                        "learned frames in a row (default 5; 1: at once)")
     parser.add_argument("--scene-every", type=int, metavar="FRAMES",
                         help="publish the foxglove scene on gngdt/<cam>/scene every this many "
                         "learned frames (default 3; 0: never)")
@@ -277,6 +284,7 @@ def config_from_args(args: argparse.Namespace) -> LearnerConfig:
         "checkpoint_every_frames": args.checkpoint_every,
         "seed": args.seed,
         "objects_from": args.objects_from,
+        "object_confirm_frames": args.object_confirm_frames,
         "scene_every_frames": args.scene_every,
     }
     for name, value in overrides.items():
@@ -374,11 +382,13 @@ class Ghosts:
 @dataclass
 class LearnedFrame:
     """What one learned frame shows: edges (E, 2) int64 per property, cluster labels (N,) int32
-    per clustering, and the persistent id (K,) int64 of each label of each clustering."""
+    per clustering, and per label of each clustering its persistent id (K,) int64 and whether
+    its track is confirmed (K,) bool (`ClusterTracker.confirmed_`)."""
 
     edges: dict[str, np.ndarray]
     labels: dict[str, np.ndarray]
     cluster_ids: dict[str, np.ndarray]
+    confirmed: dict[str, np.ndarray]
 
 
 class Learner:
@@ -505,11 +515,14 @@ class Learner:
                   for name in CLUSTERINGS}
         labels[SEGMENTS] = segmentation.labels
         node_ids = model.node_ids_
-        cluster_ids = {}
+        cluster_ids, confirmed = {}, {}
         for name, values in labels.items():
-            tracker = self._trackers.setdefault(name, ClusterTracker())
+            tracker = self._trackers.setdefault(
+                name, ClusterTracker(confirm_frames=self.options.object_confirm_frames))
             cluster_ids[name] = tracker.update(node_ids, values)
-        return LearnedFrame(edges=edges, labels=labels, cluster_ids=cluster_ids)
+            confirmed[name] = tracker.confirmed_
+        return LearnedFrame(edges=edges, labels=labels, cluster_ids=cluster_ids,
+                            confirmed=confirmed)
 
     def topology(self, stamp: FrameStamp, quantization_error: dict[str, float],
                  learned: LearnedFrame | None = None) -> Any:
@@ -540,13 +553,14 @@ class Learner:
         return wanted if wanted in learned.labels else FALLBACK_OBJECTS_FROM
 
     def objects(self, learned: LearnedFrame) -> ObjectSet:
-        """One object per cluster of at least ``min_cluster_size`` nodes of the objects
+        """One object per confirmed cluster of at least ``min_cluster_size`` nodes of the objects
         clustering, ids persistent."""
-        from gngdt_core.objects import describe_objects, drop_small
+        from gngdt_core.objects import describe_objects, object_labels
 
         name = self.objects_clustering(learned)
         model = self.model
-        labels = drop_small(learned.labels[name], self.options.min_cluster_size)
+        labels = object_labels(learned.labels[name], learned.confirmed[name],
+                               self.options.min_cluster_size)
         return describe_objects(model.positions_, model.colors_, model.normals_, labels,
                                 learned.cluster_ids[name])
 

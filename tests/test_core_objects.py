@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from gngdt_core import GNGDT, make_data2
-from gngdt_core.objects import ObjectTracker, describe_objects, drop_small
+from gngdt_core.objects import ObjectTracker, describe_objects, drop_small, object_labels
 from gngdt_core.tracking import ClusterTracker
 
 
@@ -62,6 +62,36 @@ def test_a_cluster_made_mostly_of_a_taken_cluster_gets_a_new_id():
     assert ids[0] == a  # most of A
     assert ids[1] not in (a, b)  # A is taken and B holds only 3 of its 11 nodes (< 0.5)
     assert ids[2] == b  # the rest of B, 7 of 7
+
+
+def test_a_cluster_is_confirmed_after_confirm_frames_in_a_row_and_stays_confirmed():
+    tracker = ClusterTracker(confirm_frames=3, memory_frames=10)
+    nodes = np.arange(40)
+    both, big_only = np.repeat([0, 1], [30, 10]), np.repeat([0, -1], [30, 10])
+    seen = []
+    # the small cluster flickers (seen, gone, seen, seen, seen); the big one is always there
+    for labels in (both, big_only, both, both, both):
+        tracker.update(nodes, labels)
+        seen.append(tracker.confirmed_.tolist())
+    assert [frame[0] for frame in seen] == [False, False, True, True, True]
+    assert [frame[1] for frame in seen[2:]] == [False, False, True]  # the streak starts again
+    # confirmed for good while remembered: gone for a while, back at once as confirmed
+    for _ in range(4):
+        tracker.update(nodes, big_only)
+    tracker.update(nodes, both)
+    assert tracker.confirmed_.tolist() == [True, True]
+    assert ClusterTracker().update(nodes, both).tolist() == [0, 1]  # default: confirmed at once
+    with pytest.raises(ValueError, match="confirm_frames"):
+        ClusterTracker(confirm_frames=0)
+
+
+def test_object_labels_keep_confirmed_clusters_of_min_size_only():
+    labels = np.array([0, 0, 0, 1, 1, 1, 2, -1])
+    assert object_labels(labels, np.array([True, False, True]), 2).tolist() == [
+        0, 0, 0, -1, -1, -1, -1, -1]  # 1 is not confirmed, 2 is too small
+    assert object_labels(np.full(3, -1), np.zeros(0, bool), 2).tolist() == [-1, -1, -1]
+    with pytest.raises(ValueError, match="confirmed"):
+        object_labels(labels, np.array([True]), 1)
 
 
 def test_many_clusters_stay_within_max_tracks():
@@ -130,9 +160,11 @@ def test_describe_objects_skips_empty_labels_and_validates():
 def test_objects_of_a_static_scene_keep_their_ids_frame_to_frame():
     positions, colors, _ = make_data2(n_points=20_000, random_state=0)
     model = GNGDT(max_nodes=300, random_state=0)
-    tracker = ObjectTracker("col+nor", min_size=5)
+    tracker = ObjectTracker("col+nor", min_size=5, confirm_frames=3)
     model.partial_fit(positions, colors, n_steps=200_000)  # grown: the frames refine it
-    previous = set(tracker.update(model).ids.tolist())
+    assert len(tracker.update(model)) == 0  # no cluster is confirmed yet
+    tracker.update(model)
+    previous = set(tracker.update(model).ids.tolist())  # seen 3 times in a row: objects
     kept = total = 0
     rng = np.random.default_rng(0)
     for _ in range(20):  # a static scene seen frame after frame: new samples of the same points

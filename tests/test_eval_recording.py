@@ -70,6 +70,8 @@ def test_eval_recording_report(tiny_recording, tmp_path) -> None:
         "60",
         "--reference-points",
         "4000",
+        "--object-confirm-frames",  # 3 frames: objects at once, so identity is scored
+        "1",
         "--no-progress",
     ]
     assert gngdt_main(argv) == 0
@@ -100,6 +102,7 @@ def test_eval_recording_report(tiny_recording, tmp_path) -> None:
     assert identity["pos"]["id_comparisons"] > 0  # every labelled segment, frame to frame
     assert 0.0 <= identity["pos"]["id_kept"]["mean"] <= 1.0
     markdown = (out / "recording.md").read_text()
+    assert "seen in 1 frame(s) in a row" in markdown
     for heading in ("## Last frame, per method", "## References on the last frame", "## Per frame",
                     "## Object identity"):
         assert heading in markdown
@@ -209,7 +212,7 @@ def test_eval_recording_reports_metrics_over_time_for_a_changing_scene(tmp_path)
 def test_identity_score_counts_switches_and_kept_tracks() -> None:
     from services.evaluation.identity import MIN_SEGMENT_POINTS, IdentityScore
 
-    score = IdentityScore(min_nodes=1)
+    score = IdentityScore(min_size=1, confirm_frames=1)
     node_ids = np.arange(4)
     truth = np.repeat([7, 8], MIN_SEGMENT_POINTS)  # two segments, each on its own node pair
     winners = np.repeat([0, 2], MIN_SEGMENT_POINTS)
@@ -223,4 +226,28 @@ def test_identity_score_counts_switches_and_kept_tracks() -> None:
     assert result["id_comparisons"] == 4 and result["id_switches"] == 1
     assert result["id_kept"] == 0.75
     assert result["tracks_kept"] == 3 / 4  # 2 of 2 kept, then 1 of 2
-    assert IdentityScore().summary() == {}
+    assert IdentityScore(1, 1).summary() == {}
+
+
+def test_identity_scores_only_the_objects_the_learner_would_publish() -> None:
+    from services.evaluation.identity import MIN_SEGMENT_POINTS, IdentityScore
+
+    node_ids = np.arange(5)
+    truth = np.repeat([7, 8], MIN_SEGMENT_POINTS)  # segment 7 on node 0, segment 8 on node 4
+    winners = np.repeat([0, 4], MIN_SEGMENT_POINTS)
+    whole, split = np.zeros(5, int), np.array([0, 0, 0, 1, 1])
+    # nodes 3-4 split off for one frame and merge back
+    frames = (whole, whole, split, whole, whole)
+    at_once = IdentityScore(min_size=2, confirm_frames=1)
+    for labels in frames:
+        at_once.update("c", node_ids, labels, winners, truth)
+    assert at_once.summary()["c"]["id_switches"] == 2  # segment 8: to the fragment and back
+    score = IdentityScore(min_size=2, confirm_frames=2)
+    published = [score.update("c", node_ids, labels, winners, truth) for labels in frames]
+    assert (published[0] == -1).all()  # seen once: not an object yet
+    assert all(len(set(objects[:3].tolist())) == 1 and objects[0] >= 0 for objects in published[1:])
+    assert (published[2][3:] == -1).all()  # the fragment is no object: seen once
+    result = score.summary()["c"]
+    # the fragment was never an object: no switch, and the object was kept throughout
+    assert result["id_switches"] == 0 and result["id_comparisons"] == 5
+    assert result["tracks_kept"] == 1.0

@@ -226,6 +226,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="clusters with fewer nodes are not counted (default: the learner's)",
     )
     recording.add_argument(
+        "--object-confirm-frames",
+        type=_positive_int,
+        default=None,
+        help="a cluster is an object once seen in this many frames in a row (object identity "
+        "scores; default: the learner's)",
+    )
+    recording.add_argument(
         "--reference-points",
         type=_positive_int,
         default=20_000,
@@ -391,6 +398,7 @@ def _main_recording(args: argparse.Namespace) -> int:
             "samples_per_frame",
             "max_nodes",
             "min_cluster_size",
+            "object_confirm_frames",
             "max_frames",
             "dbscan_eps",
         )

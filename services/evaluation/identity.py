@@ -1,15 +1,16 @@
 """Do objects keep their ids? Persistent cluster ids scored frame by frame.
 
-For each clustering, a `ClusterTracker` gives every cluster a persistent id, as the learner does.
-Two figures per clustering:
+For each clustering, a `ClusterTracker` gives every cluster a persistent id and the objects are
+the clusters the learner would publish (`gngdt_core.objects.object_labels`: at least ``min_size``
+nodes, seen in ``confirm_frames`` frames in a row). Two figures per clustering:
 
-- ``tracks_kept``: of the objects (clusters of at least ``min_nodes`` nodes) present in one frame,
-  the share whose id is still present in the next. Needs no ground truth.
+- ``tracks_kept``: of the objects of one frame, the share whose id is still an object in the
+  next. Needs no ground truth.
 - with ground-truth labels, ``id_kept`` and ``id_switches``: each ground-truth segment is
-  represented in a frame by the id that most of its points fall in (through their winner nodes),
-  when that id covers at least half of its points. An id switch is a segment represented by a
-  different id than the last time it was represented (the MOT "IDSW"); ``id_kept`` is the share
-  of such comparisons without a switch.
+  represented in a frame by the object that most of its points fall in (through their winner
+  nodes), when that object covers at least half of its points. An id switch is a segment
+  represented by a different id than the last time it was represented (the MOT "IDSW");
+  ``id_kept`` is the share of such comparisons without a switch.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gngdt_core.objects import object_labels
 from gngdt_core.tracking import ClusterTracker
 
 #: a ground-truth segment needs this many points in a frame to be scored there
@@ -26,7 +28,7 @@ MIN_SEGMENT_POINTS = 50
 
 @dataclass
 class _ClusteringScore:
-    tracker: ClusterTracker = field(default_factory=ClusterTracker)
+    tracker: ClusterTracker
     previous_objects: set[int] | None = None
     tracks_seen: int = 0
     tracks_kept: int = 0
@@ -36,31 +38,39 @@ class _ClusteringScore:
 
 
 class IdentityScore:
-    """Accumulates id persistence over the frames of one replay, per clustering."""
+    """Accumulates id persistence over the frames of one replay, per clustering.
 
-    def __init__(self, min_nodes: int = 10) -> None:
-        self.min_nodes = min_nodes
+    min_size, confirm_frames: which clusters are objects, as the learner's ``min_cluster_size``
+    and ``object_confirm_frames``.
+    """
+
+    def __init__(self, min_size: int, confirm_frames: int) -> None:
+        self.min_size = min_size
+        self.confirm_frames = confirm_frames
         self._scores: dict[str, _ClusteringScore] = {}
 
     def update(self, name: str, node_ids: np.ndarray, node_labels: np.ndarray,
                point_winners: np.ndarray | None = None,
                point_truth: np.ndarray | None = None) -> np.ndarray:
-        """Score one frame of clustering ``name``; returns (N,) int64 object id per node (-1).
+        """Score one frame of clustering ``name``; returns (N,) int64 object id per node (-1: in
+        no object).
 
         node_ids, node_labels: (N,) per node; point_winners: (M,) winner node of each labelled
         point, point_truth: (M,) its ground-truth segment (both None without ground truth).
         """
-        score = self._scores.setdefault(name, _ClusteringScore())
+        score = self._scores.get(name)
+        if score is None:
+            score = self._scores[name] = _ClusteringScore(
+                ClusterTracker(confirm_frames=self.confirm_frames))
         cluster_ids = score.tracker.update(node_ids, node_labels)
-        labels = np.asarray(node_labels)
+        labels = object_labels(node_labels, score.tracker.confirmed_, self.min_size)
         node_objects = np.where(labels >= 0, cluster_ids[np.maximum(labels, 0)]
                                 if len(cluster_ids) else -1, -1)
-        ids, sizes = np.unique(node_objects[node_objects >= 0], return_counts=True)
-        present = set(ids.tolist())
+        present = set(np.unique(node_objects[node_objects >= 0]).tolist())
         if score.previous_objects is not None:
             score.tracks_seen += len(score.previous_objects)
             score.tracks_kept += len(score.previous_objects & present)
-        score.previous_objects = set(ids[sizes >= self.min_nodes].tolist())
+        score.previous_objects = present
         if point_winners is not None and point_truth is not None:
             self._score_segments(score, node_objects[point_winners], point_truth)
         return node_objects

@@ -62,6 +62,9 @@ class RecordingSettings:
     max_nodes: int = field(default_factory=lambda: _gngdt_default("max_nodes"))
     #: clusters with fewer nodes are not counted (label -1)
     min_cluster_size: int = field(default_factory=lambda: _learner_default("min_cluster_size"))
+    #: a cluster is an object once seen in this many frames in a row (object identity scores)
+    object_confirm_frames: int = field(
+        default_factory=lambda: _learner_default("object_confirm_frames"))
     #: stop after this many frames (None = all)
     max_frames: int | None = None
     min_depth_m: float = 0.1
@@ -84,6 +87,7 @@ class RecordingSettings:
             "samples_per_frame",
             "max_nodes",
             "min_cluster_size",
+            "object_confirm_frames",
             "reference_points",
             "dbscan_min_samples",
         ):
@@ -185,7 +189,7 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
 
     forgetting = {"utility_k": settings.utility_k} if method == "GNG-DT" else {}
     model = make_model(method, settings.max_nodes, random_state=trial, **forgetting)
-    identity = IdentityScore()
+    identity = IdentityScore(settings.min_cluster_size, settings.object_confirm_frames)
     frames: list[dict[str, Any]] = []
     last: FramePoints | None = None
     tracker: DynamicsTracker | None = None
@@ -680,9 +684,11 @@ def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: li
     parts.append("## Object identity (persistent cluster ids, as the learner publishes them)")
     parts.append(
         "Each cluster keeps an id from frame to frame by node membership "
-        "(`gngdt_core.tracking`). *Tracks kept*: share of the objects (≥ 10 nodes) of a frame "
-        "whose id is still there in the next. With ground truth, each segment is represented by "
-        "the id most of its points fall in (when it covers at least half of them); an *id "
+        "(`gngdt_core.tracking`); objects are the clusters of at least "
+        f"{settings.min_cluster_size} nodes seen in {settings.object_confirm_frames} frame(s) in "
+        "a row, as the learner publishes them. *Tracks kept*: share of the objects of a frame "
+        "whose id is still an object in the next. With ground truth, each segment is represented "
+        "by the object most of its points fall in (when it covers at least half of them); an *id "
         "switch* is a segment represented by another id than the last time, *id kept* the share "
         "of frame-to-frame comparisons without one. Mean ± std over trials; switches summed.")
     identity_rows = [
