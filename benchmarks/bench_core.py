@@ -4,11 +4,12 @@ Prints steps/s of the numba kernel at 100, 1,000 and 10,000 nodes, of the readab
 per-step reference on the same saturated networks (fewer steps), their ratio, and the numba
 first-call compile time (cold cache, in a subprocess) and cached load time.
 
-Then forgetting (``utility_k``, the learner's profile) at 1,000 nodes against the same network
-without it, in the same run: on Data2 seen as a depth camera's batch (one long call), and as the
-learner runs it, 10,000 steps a frame with the frame's camera pose, on virtual Kinect frames of
-the walking camera (``tabletop_walk``, 320x240); the per-frame time includes judging which nodes
-the sensor could see.
+Then forgetting (``utility_k``) and the learner's whole profile (forgetting and rehearsal,
+``replay_share``) at 1,000 nodes against the same network without either, in the same run: on
+Data2 seen as a depth camera's batch (one long call), and as the learner runs it, 10,000 steps a
+frame with the frame's camera pose, on virtual Kinect frames of the walking camera
+(``tabletop_walk``, 320x240); the per-frame time includes judging which nodes the sensor could
+see and, with rehearsal, keeping the memory (carving, drawing, offering).
 
     python benchmarks/bench_core.py [--quick]
 """
@@ -63,30 +64,39 @@ def steps_per_second(learner: GNGDT | ReferenceGNGDT, positions: np.ndarray,
 
 def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
                      frames: int) -> None:
-    """Steps/s at 1,000 nodes with and without forgetting, on one batch and frame by frame."""
+    """Steps/s at 1,000 nodes without forgetting, with it, and with the learner's whole profile
+    (forgetting and rehearsal), on one batch and frame by frame."""
     from services.learner import LEARNER_MODEL_DEFAULTS
     from services.pointcloud import Deprojector
     from services.recording.synth import render_scene
 
-    forgetting = {"utility_k": LEARNER_MODEL_DEFAULTS["utility_k"]}
+    profiles = {"off": {}, "forgetting": {"utility_k": LEARNER_MODEL_DEFAULTS["utility_k"]},
+                "profile": LEARNER_MODEL_DEFAULTS}
     # Data2 as a depth camera's batch: in front of the camera, z from 200 to 300 units
     camera_batch = positions + np.array([-150.0, -150.0, 200.0])
-    print(f"forgetting at 1,000 nodes ({forgetting}), against the same network without it:")
-    print(f"{'workload':>34} {'off steps/s':>13} {'on steps/s':>13} {'on/off':>7}")
+    print(f"forgetting at 1,000 nodes, and the learner's profile ({LEARNER_MODEL_DEFAULTS}), "
+          "against the same network without either:")
+    print(f"{'workload':>34} {'off steps/s':>13} {'forgetting':>13} {'profile':>13} "
+          f"{'forg./off':>9} {'prof./off':>9}")
+
+    def report(workload: str, rates: dict[str, float]) -> None:
+        print(f"{workload:>34} {rates['off']:>13,.0f} {rates['forgetting']:>13,.0f} "
+              f"{rates['profile']:>13,.0f} {rates['forgetting'] / rates['off']:>9.2f} "
+              f"{rates['profile'] / rates['off']:>9.2f}")
+
     rates = {}
-    for name, extra in (("off", {}), ("on", forgetting)):
+    for name, extra in profiles.items():
         model = GNGDT(max_nodes=1_000, random_state=0, **extra)
         model.fit(camera_batch, colors, n_steps=700_000)
         rates[name] = steps_per_second(model, camera_batch, colors, fast_steps)
-    print(f"{'Data2 batch, one call':>34} {rates['off']:>13,.0f} {rates['on']:>13,.0f} "
-          f"{rates['on'] / rates['off']:>7.2f}")
+    report("Data2 batch, one call", rates)
 
     deproject = Deprojector()
     views = []
     for frame in render_scene("tabletop_walk", frames, width=320, height=240):
         points, point_colors = deproject(frame.depth, frame.color, frame.intrinsics)
         views.append((points, point_colors, frame.pose.matrix))
-    for name, extra in (("off", {}), ("on", forgetting)):
+    for name, extra in profiles.items():
         model = GNGDT(max_nodes=1_000, random_state=0, **extra)
         for points, point_colors, pose in views[: frames // 2] * 3:  # fill up to 1,000 nodes
             model.partial_fit(points, point_colors, n_steps=10_000, camera_pose=pose)
@@ -95,8 +105,7 @@ def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
         for points, point_colors, pose in views[frames // 2:]:
             model.partial_fit(points, point_colors, n_steps=10_000, camera_pose=pose)
         rates[name] = 10_000 * (frames - frames // 2) / (time.perf_counter() - start)
-    print(f"{'walk frames, 10,000 steps + pose':>34} {rates['off']:>13,.0f} "
-          f"{rates['on']:>13,.0f} {rates['on'] / rates['off']:>7.2f}")
+    report("walk frames, 10,000 steps + pose", rates)
 
 
 def main() -> None:

@@ -4,8 +4,9 @@ Renders the moving scenes (``tabletop_walk``: a camera walking through a static 
 ``tabletop_vanish``: the red box vanishes at frame 60; ``tabletop_move``: the blue sphere slides
 0.3 m from frame 60 to 105), writes them as recordings with poses, and replays each as the learner
 does (``gngdt eval recording``'s replay: 10,000 steps a frame, 1,000 nodes) in the world frame,
-with the learner's forgetting and, as the baseline in the same run, without it (the paper's
-GNG-DT); the walk also in the camera frame. Prints per run: the ghost share in steady state (the
+with the learner's profile (forgetting and rehearsal), with forgetting alone (the profile before
+rehearsal) and, as the baseline in the same run, with neither (the paper's GNG-DT); the walk also
+in the camera frame. Prints per run: the ghost share in steady state (the
 second half of the frames; mean and worst frame), the largest node count, the position error on
 the world seen so far over that of k-means with as many centres (fitted on the other half of the
 same world sample; steady-state mean and last), the out-of-view nodes kept at the end, and for a
@@ -43,10 +44,12 @@ def record(scene: str, frames: int, width: int, height: int, folder: Path) -> Pa
     return path
 
 
-def run(path: Path, forgetting: bool, world: bool, reference_every: int) -> dict:
+def run(path: Path, forgetting: bool, rehearsal: bool, world: bool,
+        reference_every: int) -> dict:
     settings = RecordingSettings(
         methods=("GNG-DT",),
         utility_k=LEARNER_MODEL_DEFAULTS["utility_k"] if forgetting else None,
+        replay_share=LEARNER_MODEL_DEFAULTS["replay_share"] if rehearsal else 0.0,
         world_frame=world,
         dynamics=DynamicsSettings(reference_every=reference_every),
     )
@@ -72,7 +75,7 @@ def line(name: str, result: dict) -> str:
         for name, c in over["changes"].items()) or "-"
     ratio = (f"{np.mean(ratios):.3f} / {ratios[-1]:.3f}" if ratios else "-")
     kept = frames[-1].get("out_of_view_nodes", "-")
-    return (f"{name:>34} {over['ghost_share_steady']['mean']:>7.2%} "
+    return (f"{name:>40} {over['ghost_share_steady']['mean']:>7.2%} "
             f"{over['ghost_share_steady_max']['mean']:>7.2%} "
             f"{over['nodes_max']['mean']:>6.0f} {ratio:>15} {kept!s:>6} "
             f"{over['forgotten']['mean']:>6.0f}  {changes}  ({result['seconds']:.0f} s)")
@@ -92,21 +95,23 @@ def main() -> None:
     scenes = {scene: frames[scene] for scene in args.scenes}
     print(f"virtual Kinect {width}x{height} at 30 fps; learner: 10,000 steps a frame, 1,000 "
           f"nodes; forgetting = {LEARNER_MODEL_DEFAULTS}")
-    print(f"{'run':>34} {'ghost':>7} {'worst':>7} {'nodes':>6} {'err/k-means':>15} "
+    print(f"{'run':>40} {'ghost':>7} {'worst':>7} {'nodes':>6} {'err/k-means':>15} "
           f"{'kept':>6} {'forgot':>6}  frames until the old place is empty")
-    print(f"{'':>34} {'steady':>7} {'frame':>7} {'max':>6} {'steady / last':>15} "
+    print(f"{'':>40} {'steady':>7} {'frame':>7} {'max':>6} {'steady / last':>15} "
           f"{'oov':>6}")
     with tempfile.TemporaryDirectory() as folder:
         for scene, frames in scenes.items():
             started = time.perf_counter()
             path = record(scene, frames, width, height, Path(folder))
             print(f"{scene}: {frames} frames rendered in {time.perf_counter() - started:.0f} s")
-            runs = [("world, forgetting", True, True),
-                    ("world, no forgetting (paper)", False, True)]
+            runs = [("world, forgetting + rehearsal", True, True, True),
+                    ("world, forgetting, no rehearsal", True, False, True),
+                    ("world, neither (paper)", False, False, True)]
             if scene == "tabletop_walk":
-                runs.append(("camera frame, forgetting", True, False))
-            for name, forgetting, world in runs:
-                print(line(name, run(path, forgetting, world, reference_every=30)), flush=True)
+                runs.append(("camera frame, forgetting + rehearsal", True, True, False))
+            for name, forgetting, rehearsal, world in runs:
+                result = run(path, forgetting, rehearsal, world, reference_every=30)
+                print(line(name, result), flush=True)
 
 
 if __name__ == "__main__":

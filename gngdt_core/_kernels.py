@@ -25,7 +25,8 @@ Layout (``cap`` = node capacity = ``max_nodes``, ``K`` = ``MAX_DEGREE``):
   in the view, not behind the measured surface) stores it scaled (true = ``util * util_scale``)
   and so decays; any other node stores it in true units, frozen, for the whole call. Every lambda
   steps the judged node of least utility is removed, with its edges, when ``max error >
-  utility_k * its utility``.
+  utility_k * its utility``. Utility counts only the current batch's samples (rows below
+  ``iparams[Q_FRAME_ROWS]``), not those rehearsed from memory: it is what the sensor sees now.
 - ``ids`` (cap,) int64 persistent node ids: a node keeps its id while its index changes (deletion
   moves the last node into the hole); a new node takes ``istate[I_NEXT_ID]``, which then grows, so
   an id is never reused.
@@ -79,6 +80,8 @@ F_ERROR_SCALE, F_CELL, F_SPACING, F_UTIL_SCALE = 0, 1, 2, 3
 P_ETA1, P_ETA2, P_ALPHA, P_BETA, P_TAU_COL, P_TAU_NOR, P_MU = 0, 1, 2, 3, 4, 5, 6
 P_VX, P_VY, P_VZ, P_W_POS, P_W_COL, P_UTILITY_K, P_UTILITY_DECAY = 7, 8, 9, 10, 11, 12, 13
 Q_LAMBDA, Q_AGE_MAX, Q_MAX_NODES, Q_MODE, Q_HAS_COL, Q_HAS_NOR, Q_ORIENT, Q_FORGET = range(8)
+#: rows of ``samples`` from this index on are rehearsed (earlier batches'): no utility
+Q_FRAME_ROWS = 8
 
 # helpers of the per-step loop: inlined into their callers at the numba IR level
 inlined = njit(cache=True, inline="always")
@@ -791,6 +794,7 @@ def _learn_steps(samples, sample_colors, order,
     has_nor = iparams[Q_HAS_NOR] != 0
     orient = iparams[Q_ORIENT] != 0
     forget = iparams[Q_FORGET] != 0
+    frame_rows = iparams[Q_FRAME_ROWS]
     utility_k = fparams[P_UTILITY_K]
     utility_decay = fparams[P_UTILITY_DECAY]
     # in GNG / GNG-W colour is part of the input vector and follows the single topology
@@ -840,7 +844,8 @@ def _learn_steps(samples, sample_colors, order,
             continue
         # Step 3
         err[s1] += err_add / error_scale
-        if forget and judged[s1] != 0:  # GNG-U: what the network would lose without s1
+        # GNG-U: what the network would lose without s1, by what the sensor sees now
+        if forget and judged[s1] != 0 and idx < frame_rows:
             util[s1] += (second - err_add) / util_scale
         # running node spacing (distance between winners) sizes the grid cells
         d12 = math.sqrt(_node_sq_dist(pos, s1, s2))

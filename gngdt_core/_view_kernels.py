@@ -1,15 +1,20 @@
-"""Numba kernels of the sensor's view: which nodes the sensor could have seen in one batch.
+"""Numba kernels of the sensor's view: which nodes the sensor could have seen in one batch, and
+which remembered points it saw through.
 
 A batch of points in the camera frame (x right, y down, z forward) is binned on the image plane
 by normalised coordinates ``u = x / z``, ``v = y / z`` into square cells ``cell`` wide; a cell
-keeps the farthest depth ``z`` measured in it (0: nothing measured). A node is *seen* when, put
-in the camera frame, the cells around it out to ``reach`` (the node's share of the surface: the
-running node spacing, in the model's units, seen at the node's depth) are all measured and
-inside the grid, and it is not behind the farthest depth of its own cell by more than ``margin``
-times that depth: in free space in front of what the sensor measured, or on it. Nodes behind the
-measured surface (occluded), outside the view, at its edge or next to holes (where only part of
-what they stand for is in view, so they win fewer samples) are not seen. Pure functions over
-arrays.
+keeps the farthest and the nearest depth ``z`` measured in it (0: nothing measured).
+
+A node is *seen* when, put in the camera frame, the cells around it out to ``reach`` (the node's
+share of the surface: the running node spacing, in the model's units, seen at the node's depth)
+are all measured and inside the grid, and it is not behind the farthest depth of its own cell by
+more than ``margin`` times that depth: in free space in front of what the sensor measured, or on
+it. Nodes behind the measured surface (occluded), outside the view, at its edge or next to holes
+(where only part of what they stand for is in view, so they win fewer samples) are not seen.
+
+A remembered point is *seen through* when it lies on a measured cell in front of the nearest
+depth measured there by more than ``margin`` times that depth: every ray of that cell passed it
+and hit something farther. Pure functions over arrays.
 """
 
 from __future__ import annotations
@@ -52,8 +57,9 @@ def view_bounds(points):
 
 
 @njit(cache=True)
-def fill_depth_grid(points, u_min, v_min, inv_cell, zmax):
-    """Farthest depth per cell into ``zmax`` (rows: v, columns: u; zeros beforehand)."""
+def fill_depth_grid(points, u_min, v_min, inv_cell, zmax, zmin):
+    """Farthest and nearest depth per cell into ``zmax`` and ``zmin`` (rows: v, columns: u;
+    zeros beforehand)."""
     rows, columns = zmax.shape
     for i in range(points.shape[0]):
         z = float(points[i, 2])
@@ -67,6 +73,8 @@ def fill_depth_grid(points, u_min, v_min, inv_cell, zmax):
         row = min(int((v - v_min) * inv_cell), rows - 1)
         if z > zmax[row, column]:
             zmax[row, column] = z
+        if zmin[row, column] == 0.0 or z < zmin[row, column]:
+            zmin[row, column] = z
 
 
 @njit(cache=True)
@@ -83,6 +91,23 @@ def measured_counts(zmax):
     return table
 
 
+@njit(cache=True, inline="always")
+def _cell_of(points, i, camera_from_model, u_min, v_min, inv_cell, rows, columns):
+    """(row, column, depth) of ``points[i]`` (model frame) in the camera's grid; row -1 when
+    it is behind the camera or off the grid."""
+    r = camera_from_model
+    x = r[0, 0] * points[i, 0] + r[0, 1] * points[i, 1] + r[0, 2] * points[i, 2] + r[0, 3]
+    y = r[1, 0] * points[i, 0] + r[1, 1] * points[i, 1] + r[1, 2] * points[i, 2] + r[1, 3]
+    z = r[2, 0] * points[i, 0] + r[2, 1] * points[i, 1] + r[2, 2] * points[i, 2] + r[2, 3]
+    if not z > MIN_DEPTH:
+        return -1, -1, z
+    fu = (x / z - u_min) * inv_cell
+    fv = (y / z - v_min) * inv_cell
+    if not (0.0 <= fu < columns and 0.0 <= fv < rows):
+        return -1, -1, z
+    return int(fv), int(fu), z
+
+
 @njit(cache=True)
 def judge_nodes(pos, n, camera_from_model, zmax, measured, u_min, v_min, inv_cell, margin, reach,
                 seen):
@@ -92,20 +117,12 @@ def judge_nodes(pos, n, camera_from_model, zmax, measured, u_min, v_min, inv_cel
     measured: `measured_counts` of ``zmax``; reach: a node's radius, model units.
     """
     rows, columns = zmax.shape
-    r = camera_from_model
     for i in range(n):
-        x = r[0, 0] * pos[i, 0] + r[0, 1] * pos[i, 1] + r[0, 2] * pos[i, 2] + r[0, 3]
-        y = r[1, 0] * pos[i, 0] + r[1, 1] * pos[i, 1] + r[1, 2] * pos[i, 2] + r[1, 3]
-        z = r[2, 0] * pos[i, 0] + r[2, 1] * pos[i, 1] + r[2, 2] * pos[i, 2] + r[2, 3]
         seen[i] = 0
-        if not z > MIN_DEPTH:
+        row, column, z = _cell_of(pos, i, camera_from_model, u_min, v_min, inv_cell, rows,
+                                  columns)
+        if row < 0:
             continue
-        fu = (x / z - u_min) * inv_cell
-        fv = (y / z - v_min) * inv_cell
-        if not (0.0 <= fu < columns and 0.0 <= fv < rows):
-            continue
-        column = int(fu)
-        row = int(fv)
         ring = max(1, min(MAX_REACH_CELLS, math.ceil(reach / z * inv_cell)))
         low_row, high_row = row - ring, row + ring + 1
         low_column, high_column = column - ring, column + ring + 1
@@ -117,3 +134,22 @@ def judge_nodes(pos, n, camera_from_model, zmax, measured, u_min, v_min, inv_cel
             continue
         if z <= zmax[row, column] * (1.0 + margin):
             seen[i] = 1
+
+
+@njit(cache=True)
+def seen_through(points, n, camera_from_model, zmin, u_min, v_min, inv_cell, margin, through):
+    """``through[i]`` = 1 for each point ``i < n`` the sensor saw through, else 0.
+
+    points: (cap, 3) float64 in the model's frame; camera_from_model: (4, 4); zmin: nearest
+    depth per cell (0: none measured); margin: as a fraction of that depth.
+    """
+    rows, columns = zmin.shape
+    for i in range(n):
+        through[i] = 0
+        row, column, z = _cell_of(points, i, camera_from_model, u_min, v_min, inv_cell, rows,
+                                  columns)
+        if row < 0:
+            continue
+        nearest = zmin[row, column]
+        if nearest > 0.0 and z < nearest * (1.0 - margin):
+            through[i] = 1

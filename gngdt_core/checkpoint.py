@@ -118,11 +118,33 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     model._fstate[:] = scalars
     if "camera_pose" in state:  # states saved before camera poses: the camera frame
         model._camera_pose = model._checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
+    if model._memory is not None:  # states saved before rehearsal: an empty memory
+        _restore_memory(model._memory, state)
     if counters[K.I_GRID]:
         a = model._arrays
         K.grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
                        float(scalars[K.F_CELL]))
     return model
+
+
+def _restore_memory(memory: Any, state: dict[str, np.ndarray]) -> None:
+    """The rehearsal memory's samples and counter, when the state has them."""
+    if "memory_positions" not in state:
+        return
+    missing = [key for key in ("memory_colors", "memory_offered") if key not in state]
+    if missing:
+        raise ValueError(f"state has memory_positions but is missing {missing}")
+    positions = np.asarray(state["memory_positions"])
+    count = positions.shape[0] if positions.ndim == 2 else -1
+    if not 0 <= count <= memory.capacity:
+        raise ValueError(f"state['memory_positions'] has shape {positions.shape}, expected "
+                         f"(M, 3) with M <= replay_points={memory.capacity}")
+    positions = _array(state, "memory_positions", (count, 3), "f")
+    colors = _array(state, "memory_colors", (count, 3), "f")
+    offered = _scalar_int(state, "memory_offered")
+    if not (np.isfinite(positions).all() and np.isfinite(colors).all()) or offered < count:
+        raise ValueError("state memory must be finite, with memory_offered >= its samples")
+    memory.restore(positions, colors, offered)
 
 
 def _scalars(state: dict[str, np.ndarray]) -> np.ndarray:

@@ -30,6 +30,7 @@ from scipy.spatial import cKDTree
 from gngdt_core import _kernels as K
 from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels
+from gngdt_core.memory import SampleMemory
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
 from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
@@ -37,8 +38,8 @@ from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_ne
 from gngdt_core.view import SensorView, rigid_inverse
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
-_STATE_VERSION = 3  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
-# a fifth counter: nodes forgotten)
+_STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
+# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
 #: a nearest-node batch is split over the CPUs when each part gets at least this many points
 #: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
 PARALLEL_MIN_POINTS = 15_000
@@ -95,6 +96,8 @@ class _GrowingGas:
         self._camera_pose: np.ndarray | None = None
         #: stored normals are eq. 16 of the current positions (refreshed after the last step)
         self._normals_fresh = False
+        #: earlier batches' samples for rehearsal (``replay_share``; None: off)
+        self._memory = SampleMemory(self._params["replay_points"]) if self._replays else None
 
     def _allocate(self, dim: int, has_col: bool) -> None:
         cap = self._params["max_nodes"]
@@ -125,6 +128,10 @@ class _GrowingGas:
     def _forgets(self) -> bool:
         return self._params.get("utility_k") is not None
 
+    @property
+    def _replays(self) -> bool:
+        return bool(self._params.get("replay_share"))
+
     def _kernel_parameters(self, camera_pose: np.ndarray | None = None
                            ) -> tuple[np.ndarray, np.ndarray]:
         """Kernel parameters; ``camera_pose`` places the viewpoint (default: the last batch's)."""
@@ -147,6 +154,7 @@ class _GrowingGas:
         iparams = np.array([
             p["lambda_"], p["age_max"], p["max_nodes"], self._MODE,
             int(self._has_col), int(has_nor), int(viewpoint is not None), int(self._forgets),
+            np.iinfo(np.int64).max,  # Q_FRAME_ROWS: every sample is the batch's (no rehearsal)
         ], dtype=np.int64)
         return fparams, iparams
 
@@ -174,6 +182,8 @@ class _GrowingGas:
         against this batch seen from this pose.
         """
         batch, batch_colors, finite_rows, n_invalid = check_batch(positions, colors)
+        # rehearsal needs a fixed frame: without a pose, what was seen before is elsewhere now
+        memory = self._memory if camera_pose is not None else None
         camera_pose = self._checked_pose(camera_pose, batch.shape[1])
         if n_steps is not None:
             if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)):
@@ -190,6 +200,8 @@ class _GrowingGas:
         if n_samples == 0:
             return self
         steps = n_samples if n_steps is None else int(n_steps)
+        replay_steps = self._replay_steps(steps, memory)
+        steps -= replay_steps  # the batch's own
         if self.n_nodes_ == 0:
             first_two = initial_indices(self._rng, n_samples)
             initial, initial_colors = gather(batch, batch_colors, _rows(finite_rows, first_two))
@@ -203,17 +215,25 @@ class _GrowingGas:
         self._normals_fresh = False
         if steps >= n_samples:
             camera_samples, sample_colors = gather(batch, batch_colors, finite_rows)
-            self._judge(camera_samples, camera_pose)
+            self._see(camera_samples, camera_pose, memory)
             whole_batch = _to_model(camera_samples, camera_pose), sample_colors
+        learned = replayed = 0
         for chunk, order in enumerate(sample_orders(self._rng, n_samples, steps)):
             if whole_batch is None:
                 samples, sample_colors = gather(batch, batch_colors, _rows(finite_rows, order))
                 if chunk == 0:
-                    self._judge(samples, camera_pose)
+                    self._see(samples, camera_pose, memory)
                 samples = _to_model(samples, camera_pose)
                 order = np.arange(order.size)
             else:
                 samples, sample_colors = whole_batch
+            batch_samples = (samples, sample_colors)
+            learned += order.size
+            if replay_steps:  # this chunk's share of the rehearsal, mixed into its order
+                done, replayed = replayed, round(replay_steps * learned / steps)
+                samples, sample_colors, order = self._with_rehearsal(
+                    samples, sample_colors, order, replayed - done)
+            iparams[K.Q_FRAME_ROWS] = len(batch_samples[0])
             kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
             for part in self._refresh_parts(order):
                 K.learn(samples, kernel_colors, part,
@@ -224,7 +244,28 @@ class _GrowingGas:
                         self._istate, self._fstate, fparams, iparams)
                 if self._params.get("normal_refresh_steps"):
                     self.refresh_normals()
+            if memory is not None and (whole_batch is None or chunk == 0):
+                memory.offer(*batch_samples, self._rng)  # each learned sample once
         return self
+
+    def _replay_steps(self, steps: int, memory: SampleMemory | None) -> int:
+        """Steps of this batch drawn from ``memory`` (none without one, or before it holds
+        anything), leaving at least one for the batch itself."""
+        if memory is None or memory.count == 0 or steps < 2:
+            return 0
+        return min(round(self._params["replay_share"] * steps), steps - 1)
+
+    def _with_rehearsal(self, samples: np.ndarray, sample_colors: np.ndarray | None,
+                        order: np.ndarray, count: int
+                        ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """The batch's samples (model frame) with ``count`` drawn from the memory appended, and
+        ``order`` with their rows, shuffled in."""
+        remembered, remembered_colors = self._memory.draw(self._rng, count)
+        rows = np.arange(len(samples), len(samples) + count)
+        samples = np.concatenate([samples, remembered])
+        if sample_colors is not None:
+            sample_colors = np.concatenate([sample_colors, remembered_colors])
+        return samples, sample_colors, self._rng.permutation(np.concatenate([order, rows]))
 
     def _refresh_parts(self, order: np.ndarray) -> list[np.ndarray]:
         """``order`` cut into runs of ``normal_refresh_steps`` (whole when refresh is off)."""
@@ -267,10 +308,12 @@ class _GrowingGas:
                              "a last row of (0, 0, 0, 1)")
         return None if np.array_equal(pose, np.eye(4)) else pose
 
-    def _judge(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None) -> None:
-        """Mark the nodes this batch judges (forgetting): in 3-D, those the sensor could have
-        seen given these camera-frame samples; in 2-D, all of them (plain GNG-U)."""
-        if not self._forgets:
+    def _see(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None,
+             memory: SampleMemory | None) -> None:
+        """What this batch's sensor saw: mark the nodes it judges (forgetting): in 3-D, those
+        it could have seen given these camera-frame samples; in 2-D, all of them (plain GNG-U);
+        and drop the samples of ``memory`` it saw through (rehearsal)."""
+        if not (self._forgets or memory is not None):
             return
         n, judged = self.n_nodes_, self._arrays["judged"]
         if self._dim != 3:
@@ -278,10 +321,15 @@ class _GrowingGas:
             return
         judged[:n] = 0
         view = SensorView.of(camera_samples)
-        if view is not None:
-            camera_from_model = np.eye(4) if camera_pose is None else rigid_inverse(camera_pose)
-            view.judge(self._arrays["pos"], n, camera_from_model,
-                       self._params["view_depth_margin"], self._fstate[K.F_SPACING], judged)
+        if view is None:
+            return
+        camera_from_model = np.eye(4) if camera_pose is None else rigid_inverse(camera_pose)
+        margin = self._params["view_depth_margin"]
+        if self._forgets:
+            view.judge(self._arrays["pos"], n, camera_from_model, margin,
+                       self._fstate[K.F_SPACING], judged)
+        if memory is not None:
+            memory.carve(view, camera_from_model, margin)
 
     def _check_consistent(self, dim: int, has_col: bool) -> None:
         if dim != self._dim:
@@ -514,6 +562,10 @@ class _GrowingGas:
         }
         if self._camera_pose is not None:  # the last batch's pose places the viewpoint
             state["camera_pose"] = self._camera_pose.copy()
+        if self._memory is not None:
+            state["memory_positions"] = self._memory.positions.copy()
+            state["memory_colors"] = self._memory.colors.copy()
+            state["memory_offered"] = np.array(self._memory.offered, dtype=np.int64)
         for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
                      "util"):
             if a:
@@ -555,13 +607,26 @@ class GNGDT(_GrowingGas):
     its utility, frozen, however long it is out of view. 3-D batches are then taken as a depth
     camera's points (camera frame, z forward; or mapped by ``camera_pose``); in 2-D every node is
     judged.
+
+    Rehearsal (off by default; 3-D batches with a ``camera_pose``, i.e. a map in a fixed frame:
+    without a pose what was seen before is elsewhere now): with ``replay_share`` > 0, that share
+    of each such `partial_fit`'s steps learns samples of earlier batches, not the batch's, drawn
+    from a memory of ``replay_points`` samples (in the model's frame, colours with them): a
+    uniform random sample of every batch sample learned so far, less those a later batch saw
+    through (in front of the nearest depth measured there by more than ``view_depth_margin``
+    times it; `gngdt_core.memory`). A moving camera shows one part of the world at a time;
+    without rehearsal the network places its nodes by the parts seen first and the part in view,
+    and once the budget is full nothing moves them to what the camera found later. With it the
+    network learns the world seen so far, and what vanished or moved leaves the memory as soon
+    as the sensor looks there. Rehearsed samples move nodes and add error, but not utility:
+    forgetting judges nodes by what the sensor sees now.
     """
 
     _MODE = K.MODE_GNGDT
     _PARAM_NAMES = (
         *_GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
         "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
-        "view_depth_margin",
+        "view_depth_margin", "replay_share", "replay_points",
     )
 
     def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
@@ -571,13 +636,15 @@ class GNGDT(_GrowingGas):
                  viewpoint: tuple[float, float, float] | None = (0.0, 0.0, 0.0),
                  normal_angle_deg: float | None = None, normal_refresh_steps: int | None = None,
                  utility_k: float | None = None, utility_decay: float = 1e-4,
-                 view_depth_margin: float = 0.05, random_state: int | None = None) -> None:
+                 view_depth_margin: float = 0.05, replay_share: float = 0.0,
+                 replay_points: int = 40_000, random_state: int | None = None) -> None:
         super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
                          age_max=age_max, alpha=alpha, beta=beta, tau_col=tau_col,
                          tau_nor=tau_nor, normal_mu=normal_mu, viewpoint=viewpoint,
                          normal_angle_deg=normal_angle_deg,
                          normal_refresh_steps=normal_refresh_steps, utility_k=utility_k,
                          utility_decay=utility_decay, view_depth_margin=view_depth_margin,
+                         replay_share=replay_share, replay_points=replay_points,
                          random_state=random_state)
 
     @property

@@ -86,6 +86,13 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
         checked["view_depth_margin"] = check_real(
             "view_depth_margin", params["view_depth_margin"], 0.0, 10.0
         )
+    if "replay_share" in params:
+        checked["replay_share"] = check_real("replay_share", params["replay_share"], 0.0, 1.0)
+        if checked["replay_share"] >= 1.0:
+            raise ValueError(f"replay_share must be < 1, got {checked['replay_share']}")
+    if "replay_points" in params:
+        checked["replay_points"] = check_integer("replay_points", params["replay_points"], 1,
+                                                 MAX_NODES_LIMIT)
     for weight in ("w_pos", "w_col"):
         if weight in params:
             checked[weight] = check_real(weight, params[weight], 0.0)

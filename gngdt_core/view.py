@@ -24,10 +24,12 @@ MAX_CELLS_PER_SIDE = 512
 
 @dataclass(frozen=True)
 class SensorView:
-    """A batch's depth grid: ``zmax`` (rows, columns) float64 farthest depth per cell (0: none),
-    cells ``1 / inv_cell`` wide from ``(u_min, v_min)`` in normalised image coordinates."""
+    """A batch's depth grid: ``zmax`` and ``zmin`` (rows, columns) float64 farthest and nearest
+    depth per cell (0: none), cells ``1 / inv_cell`` wide from ``(u_min, v_min)`` in normalised
+    image coordinates."""
 
     zmax: np.ndarray
+    zmin: np.ndarray
     u_min: float
     v_min: float
     inv_cell: float
@@ -48,8 +50,9 @@ class SensorView:
         columns = int(width / cell) + 1
         rows = int(height / cell) + 1
         zmax = np.zeros((rows, columns))
-        V.fill_depth_grid(points, u_min, v_min, 1.0 / cell, zmax)
-        return cls(zmax, float(u_min), float(v_min), 1.0 / cell, V.measured_counts(zmax))
+        zmin = np.zeros((rows, columns))
+        V.fill_depth_grid(points, u_min, v_min, 1.0 / cell, zmax, zmin)
+        return cls(zmax, zmin, float(u_min), float(v_min), 1.0 / cell, V.measured_counts(zmax))
 
     def judge(self, positions: np.ndarray, n: int, camera_from_model: np.ndarray,
               margin: float, reach: float, seen: np.ndarray) -> None:
@@ -58,6 +61,15 @@ class SensorView:
         how far around a node must be in view, model units (the node spacing)."""
         V.judge_nodes(positions, n, camera_from_model, self.zmax, self.measured, self.u_min,
                       self.v_min, self.inv_cell, float(margin), float(reach), seen)
+
+    def seen_through(self, points: np.ndarray, n: int, camera_from_model: np.ndarray,
+                     margin: float) -> np.ndarray:
+        """(n,) bool: which of ``points[:n]`` (model frame, float64) the sensor saw through: in
+        front of the nearest depth measured in their cell by more than ``margin`` times it."""
+        through = np.zeros(n, dtype=np.uint8)
+        V.seen_through(points, n, camera_from_model, self.zmin, self.u_min, self.v_min,
+                       self.inv_cell, float(margin), through)
+        return through.astype(bool)
 
 
 def node_spacing(node_positions: np.ndarray) -> float:

@@ -70,9 +70,14 @@ EXAMPLES = """examples:
 
 #: GNG-U's removal threshold the learner uses (see `GNGDT`); measured in issue 11's note
 DEFAULT_UTILITY_K = 1000.0
-#: the learner's profile over GNGDT's defaults (the paper's): forgetting on, for a camera that
-#: moves and a scene that changes. A params file's ``utility_k = 0`` turns it off.
-LEARNER_MODEL_DEFAULTS: dict[str, Any] = {"utility_k": DEFAULT_UTILITY_K}
+#: share of each frame's steps rehearsed from the memory of earlier frames (see `GNGDT`);
+#: measured in issue 11's note (issue-11-error.md)
+DEFAULT_REPLAY_SHARE = 0.3
+#: the learner's profile over GNGDT's defaults (the paper's): forgetting and rehearsal on, for a
+#: camera that moves and a scene that changes. A params file's ``utility_k = 0`` turns
+#: forgetting off, ``replay_share = 0`` rehearsal.
+LEARNER_MODEL_DEFAULTS: dict[str, Any] = {"utility_k": DEFAULT_UTILITY_K,
+                                          "replay_share": DEFAULT_REPLAY_SHARE}
 #: settling after the stream ends: steps between checks, and the relative change of the
 #: position error below which the network counts as settled
 SETTLE_CHUNK = 20_000

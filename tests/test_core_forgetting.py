@@ -99,10 +99,12 @@ def old_place_nodes(model: GNGDT, old_place: np.ndarray, frame: cKDTree) -> int:
 def test_a_vanished_object_is_forgotten_within_30_frames_and_only_with_forgetting():
     """tabletop_vanish at 30 fps with the learner's budget and steps: the network is full at
     frame 50, the red box vanishes at frame 60. With forgetting its old place is empty within
-    30 frames for good; without, nodes stay there."""
+    30 frames for good, also while rehearsing earlier frames (the learner's profile: the box's
+    remembered samples go as soon as the sensor sees through them); without, nodes stay there."""
     params = {"max_nodes": 1000, "lambda_": 500, "random_state": 0}
     forgetting, paper = GNGDT(**params, **FORGETTING), GNGDT(**params)
-    counts: dict[str, list[int]] = {"forgetting": [], "paper": []}
+    profile = GNGDT(**params, **FORGETTING, replay_share=0.3)
+    counts: dict[str, list[int]] = {"forgetting": [], "profile": [], "paper": []}
     old_place = None
     deproject = Deprojector()
     for index, frame in enumerate(render_scene("tabletop_vanish", 91, width=WIDTH,
@@ -117,13 +119,15 @@ def test_a_vanished_object_is_forgotten_within_30_frames_and_only_with_forgettin
 
             labels = deproject_labels(deproject, frame.depth, frame.labels, frame.intrinsics)
             old_place = world[np.isin(labels, ids_of(frame.extras["segments"], "red_box"))]
-        for name, model in (("forgetting", forgetting), ("paper", paper)):
+        for name, model in (("forgetting", forgetting), ("profile", profile), ("paper", paper)):
             model.partial_fit(points, colors, n_steps=STEPS, camera_pose=pose)
             if old_place is not None and index >= 60:
                 counts[name].append(old_place_nodes(model, old_place, frame_tree))
     assert counts["forgetting"][0] > 0 and counts["paper"][0] > 0  # the box was learned
-    gone_after = counts["forgetting"].index(0)
-    assert gone_after <= 30 and max(counts["forgetting"][gone_after:]) == 0, counts
+    for name in ("forgetting", "profile"):
+        assert counts[name][0] > 0, counts
+        gone_after = counts[name].index(0)
+        assert gone_after <= 30 and max(counts[name][gone_after:]) == 0, counts
     assert min(counts["paper"]) > 0, counts  # without forgetting some stay for good
     assert forgetting.n_nodes_ <= params["max_nodes"] and forgetting.n_forgotten_ > 0
 

@@ -24,7 +24,7 @@ EXAMPLES = """examples:
   gngdt eval paper --stop steps --steps 150000        # learn on past the node budget
   gngdt eval recording recordings/tabletop_small.mcap --out report/tabletop
   gngdt eval recording recordings/data2.mcap --method gngdt --trials 3
-  gngdt eval recording vanish.mcap --method gngdt --utility-k 0   # the paper's, no forgetting
+  gngdt eval recording vanish.mcap --method gngdt --utility-k 0 --replay-share 0  # the paper's
   gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run
   gngdt eval segmentation ../shared/data/labelled/mosd_learn --out report/mosd
   gngdt eval segmentation ../shared/data/labelled/ycbv_0000 --independent --online
@@ -251,6 +251,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="GNG-DT's forgetting threshold (default: the learner's profile; 0: off, the paper)",
     )
     recording.add_argument(
+        "--replay-share",
+        type=float,
+        default=None,
+        help="GNG-DT's share of each frame's steps rehearsed from earlier frames (default: the "
+        "learner's profile; 0: off, the paper)",
+    )
+    recording.add_argument(
         "--camera-frame",
         action="store_true",
         help="ignore the recording's camera poses: learn in the camera frame",
@@ -410,6 +417,10 @@ def _main_recording(args: argparse.Namespace) -> int:
         if args.utility_k < 0:
             raise ValueError(f"--utility-k must be >= 0, got {args.utility_k}")
         overrides["utility_k"] = args.utility_k or None
+    if args.replay_share is not None:
+        if not 0 <= args.replay_share < 1:
+            raise ValueError(f"--replay-share must be in [0, 1), got {args.replay_share}")
+        overrides["replay_share"] = args.replay_share
     if args.reference_every < 0:
         raise ValueError(f"--reference-every must be >= 0, got {args.reference_every}")
     settings = RecordingSettings(

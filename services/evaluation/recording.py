@@ -76,6 +76,8 @@ class RecordingSettings:
     dbscan_eps: float | None = None
     #: GNG-DT's forgetting (None: off, as the paper); default: the learner's profile
     utility_k: float | None = field(default_factory=lambda: _learner_model_default("utility_k"))
+    #: GNG-DT's rehearsal of earlier frames (0: off, as the paper); default: the learner's
+    replay_share: float = field(default_factory=lambda: _learner_model_default("replay_share"))
     #: learn in the recording's fixed frame when it has camera poses (False: camera frame)
     world_frame: bool = True
     #: the metrics over time (ghost distance, world sample, k-means every N frames)
@@ -187,7 +189,8 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
     from services.evaluation.identity import IdentityScore
     from services.recording.reader import recording_metadata
 
-    forgetting = {"utility_k": settings.utility_k} if method == "GNG-DT" else {}
+    forgetting = ({"utility_k": settings.utility_k, "replay_share": settings.replay_share}
+                  if method == "GNG-DT" else {})
     model = make_model(method, settings.max_nodes, random_state=trial, **forgetting)
     identity = IdentityScore(settings.min_cluster_size, settings.object_confirm_frames)
     frames: list[dict[str, Any]] = []
@@ -580,6 +583,8 @@ def _over_time_markdown(data: dict[str, Any], settings: RecordingSettings) -> li
              else "in the camera frame (the recording has no poses)")
     forgetting = (f"GNG-DT forgets with utility_k = {settings.utility_k:g}"
                   if settings.utility_k is not None else "GNG-DT does not forget")
+    forgetting += (f" and rehearses {settings.replay_share:.0%} of each frame's steps from "
+                   "earlier frames" if settings.replay_share else " and does not rehearse")
     text = (
         f"Learned {frame}; {forgetting}. A node is *seen* when the frame's sensor could have seen "
         "it (in view, not behind the measured surface by more than "
