@@ -44,7 +44,7 @@ from hostile_recordings import (  # noqa: E402  (tests/: the tests make the same
     overlapping_chunks,
     zstd_bomb,
 )
-from procstat import gngdt, status_mb  # noqa: E402  (benchmarks/, beside this script)
+from procstat import gngdt, status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
 from schemas.packing import (  # noqa: E402
     cloud_to_msg,
@@ -80,15 +80,6 @@ class Peaks:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join()
-
-
-def wait_until(condition, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return
-        time.sleep(0.05)
-    raise SystemExit(f"timed out waiting for {what}")
 
 
 def stamp(sequence: int = 1) -> bytes:

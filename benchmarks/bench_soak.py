@@ -30,7 +30,7 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
-from procstat import status_mb  # noqa: E402  (benchmarks/, beside this script)
+from procstat import status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
 from schemas.packing import LearnerStatusInfo, decode_status  # noqa: E402
 from services.run import DEFAULT_MAX_POINTS  # noqa: E402
@@ -119,7 +119,7 @@ def main() -> int:
     devnull = open(os.devnull, "wb")
     try:
         processes["router"] = start(["router", "--listen", endpoint], work / "router.log")
-        time.sleep(1.5)
+        wait_until(lambda: "listening on" in (work / "router.log").read_text(), 60, "the router")
         processes["learn"] = start(["learn", "--samples-per-frame", str(args.samples_per_frame),
                                     *connect], work / "learn.log")
         viewer = ["--save", str(work / "soak.rrd")] if args.save_rrd else ["--stdout"]

@@ -6,6 +6,8 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -17,6 +19,16 @@ def gngdt(*arguments: str, log: Path) -> subprocess.Popen:
         return subprocess.Popen([sys.executable, "-m", "services.cli", *arguments],
                                 cwd=REPO_ROOT, stdout=output, stderr=subprocess.STDOUT,
                                 start_new_session=True)
+
+
+def wait_until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    """Poll ``condition`` until it holds; exit the benchmark naming ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.05)
+    raise SystemExit(f"timed out waiting for {what}")
 
 
 def status_mb(pid: int, field: str) -> float:

@@ -3,9 +3,10 @@ metrics; optionally record every stream as it is into an MCAP file (``--mcap``).
 
 Entities (DESIGN.md "Rerun") for the default camera ``camera``: ``world/camera`` (Pinhole),
 ``world/camera/image/rgb`` (JPEG), ``world/camera/image/depth``, ``world/points``,
-``world/gng/nodes`` (learned colours), ``world/gng/edges/<clustering>`` and
-``world/gng/clusters/<clustering>`` (the clustering's edges and its nodes, coloured by cluster:
-one colour per persistent cluster id, grey for nodes in no cluster), ``world/objects`` (Boxes3D,
+``world/gng/nodes`` (positions once, in their learned colours, with each clustering's node
+colours beside them as ``gngdt.clusters.<clustering>:colors``: one colour per persistent cluster
+id, grey for nodes in no cluster), ``world/gng/edges/<clustering>`` (the clustering's edges,
+coloured by cluster, chained into polylines), ``world/objects`` (Boxes3D,
 one per object, labelled with its persistent id) and ``metrics/<name>``. Any other camera
 ``<cam>`` gets the same tree under ``world/<cam>/`` and ``metrics/<cam>/``. Timelines: ``frame``
 (sequence) and ``capture_time``. The blueprint: the images, a 3D view per clustering plus one of
@@ -22,10 +23,11 @@ capture's liveliness token, whichever comes first) has ended its stream (eos) an
 its last frame has arrived, or ``--eos-drain`` seconds after that eos (or after its capture left
 without one).
 
-Crash safety: the ``.rrd`` is flushed every ``FLUSH_EVERY_SECONDS``, so a logger killed outright
-(``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which only makes
-rerun scan it whole). An existing ``--save`` file is never overwritten: a restarted logger writes
-``<name>.1.rrd`` (then ``.2``, ...) beside it and says so.
+Crash safety: the ``.rrd`` is flushed every ``RRD_FLUSH_SECONDS`` (10 s), so a logger killed
+outright (``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which
+only makes rerun scan it whole); SIGINT/SIGTERM lose nothing. An existing ``--save`` file is
+never overwritten: a restarted logger writes ``<name>.1.rrd`` (then ``.2``, ...) beside it and
+says so.
 """
 
 from __future__ import annotations
@@ -76,8 +78,12 @@ LATEST_ONLY_STREAMS = ("color", "depth", "points", "objects")
 NOT_LOGGED_STREAMS = ("scene",)
 RUNS_DIR = Path("runs")
 LIVELINESS_KEY = "gngdt/logger/alive"
-#: how often the .rrd is flushed to disk: what a killed logger can lose at most
+#: how often a stream to a viewer (--stdout, --serve, --connect) is flushed
 FLUSH_EVERY_SECONDS = 1.0
+#: how often the .rrd is flushed to disk, and the longest its chunks span: what a killed logger
+#: can lose at most; longer than a second because the .rrd writer's memory grows per chunk
+#: (`file_batcher`)
+RRD_FLUSH_SECONDS = 10.0
 DEFAULT_MAX_CAMERAS = 16
 #: 25 times the learner's default node budget: a topology of 25,000 nodes (~8 MB on the wire)
 #: costs the .rrd ~20 MB; a learner with a larger --max-nodes needs a larger logger limit
@@ -85,11 +91,12 @@ DEFAULT_MAX_TOPOLOGY_NODES = 25_000
 
 
 def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
-    """rerun's own viewer options, as ``rr.script_add_args`` adds them (a test checks they match).
+    """rerun's own viewer options, as ``rr.script_add_args`` adds them (a test checks they match),
+    but ``--headless``: the logger never opens a GUI (it saves, streams or serves), so "don't
+    show GUI" would change nothing.
 
     Declared here because importing rerun costs ~0.6 s, too much for ``gngdt --help``.
     """
-    parser.add_argument("--headless", action="store_true", help="Don't show GUI")
     parser.add_argument("--connect", dest="connect", action="store_true",
                         help="Connect to an external viewer")
     parser.add_argument("--serve", dest="serve", action="store_true",
@@ -153,8 +160,8 @@ class DisplayRates:
     """What goes into the .rrd: every ``*_every``-th frame (by sequence) of each stream.
 
     Metrics and objects are logged for every frame. ``jpeg_quality`` 0 logs raw colour images;
-    ``max_cloud_points`` None logs whole clouds. Defaults keep a 30 fps 640x480 camera under
-    ~200 MB of .rrd a minute (README "Performance").
+    ``max_cloud_points`` None logs whole clouds. Defaults keep a 30 fps 640x480 camera at
+    ~120 MB of .rrd a minute (README "Performance").
     """
 
     image_every: int = 3
@@ -288,9 +295,6 @@ class EntityPaths:
     def edges(self, clustering: str) -> str:
         return f"{self.world}/gng/edges/{clustering}"
 
-    def clusters(self, clustering: str) -> str:
-        return f"{self.world}/gng/clusters/{clustering}"
-
     def metric(self, name: str) -> str:
         if self.camera == DEFAULT_CAMERA:
             return f"metrics/{name}"
@@ -364,15 +368,28 @@ class Framing:
 
 
 def _spatial_view(name: str, origin: str, contents: list[str], framing: Framing,
-                  eye: tuple[float, float, float]) -> Any:
+                  eye: tuple[float, float, float], overrides: dict[str, Any] | None = None
+                  ) -> Any:
     """A 3D view starting at ``eye``, looking at the scene, on a dark background."""
     import rerun.blueprint as rrb
 
     return rrb.Spatial3DView(
-        name=name, origin=origin, contents=contents,
+        name=name, origin=origin, contents=contents, overrides=overrides,
         eye_controls=rrb.EyeControls3D(position=eye, look_target=framing.target,
                                        eye_up=framing.up),
         background=rrb.Background(color=[22, 24, 28]))
+
+
+def _cluster_colored_nodes(paths: EntityPaths, clustering: str) -> dict[str, Any]:
+    """A view's override: its nodes take their colours from ``clustering``'s colours
+    (`cluster_archetype`), logged beside the positions on the one nodes entity."""
+    import rerun as rr
+    from rerun.blueprint.encodings import ComponentSourceKind, VisualizerComponentMapping
+
+    mapping = VisualizerComponentMapping(
+        target="Points3D:colors", source_kind=ComponentSourceKind.SourceComponent,
+        source_component=f"{cluster_archetype(clustering)}:colors")
+    return {paths.nodes: [rr.Points3D.from_fields().visualizer(mappings=[mapping])]}
 
 
 def _camera_row(camera: str, framing: Framing) -> Any:
@@ -384,9 +401,11 @@ def _camera_row(camera: str, framing: Framing) -> Any:
     suffix = "" if camera == DEFAULT_CAMERA else f" ({camera})"
     eye = framing.camera_eye
     views = [_spatial_view(f"objects and segments{suffix}", paths.world, [
-        paths.objects, paths.clusters("segments"), paths.edges("segments")], framing, eye)]
+        paths.objects, paths.nodes, paths.edges("segments")], framing, eye,
+        _cluster_colored_nodes(paths, "segments"))]
     views += [_spatial_view(f"{name} clusters{suffix}", paths.world,
-                            [paths.clusters(name), paths.edges(name)], framing, eye)
+                            [paths.nodes, paths.edges(name)], framing, eye,
+                            _cluster_colored_nodes(paths, name))
               for name in CLUSTERING_VIEWS if name != "segments"]
     views.append(_spatial_view(f"cloud, learned colours and the camera{suffix}", paths.world,
                                [paths.points, paths.nodes, paths.pinhole, paths.rgb], framing,
@@ -416,6 +435,30 @@ def blueprint(cameras: list[str], framings: dict[str, Framing] | None = None) ->
                      row_shares=[3] * len(rows) + [1.4]),
         rrb.TimePanel(timeline="frame", play_state="following", state="collapsed"),
         collapse_panels=True)
+
+
+def cluster_archetype(clustering: str) -> str:
+    """Name of the node colours of ``clustering`` on the nodes entity (its component is
+    ``<name>:colors``); each clustering's view draws the nodes with them."""
+    return f"gngdt.clusters.{clustering}"
+
+
+def edge_lines(positions: np.ndarray, pairs: np.ndarray, ids: np.ndarray) -> Any:
+    """LineStrips3D of the edges ``pairs`` (E, 2) between ``positions`` (N, 3) metres, coloured
+    by the cluster both ends share (``ids`` (N,) persistent ids, -1 none: grey), the edges
+    chained into polylines (`edge_strips`): about half the bytes of a two-point strip per edge."""
+    import pyarrow as pa
+    import rerun as rr
+
+    from services.display import edge_classes, edge_strips, id_colors
+
+    nodes, starts, classes = edge_strips(pairs, edge_classes(pairs, ids))
+    strip_type = rr.components.LineStrip3DBatch._ARROW_DATATYPE
+    points = pa.FixedSizeListArray.from_arrays(
+        pa.array(np.ascontiguousarray(positions[nodes], dtype=np.float32).ravel()),
+        type=strip_type.value_type)
+    strips = pa.ListArray.from_arrays(pa.array(starts, pa.int32()), points, type=strip_type)
+    return rr.LineStrips3D(strips, colors=id_colors(classes), radii=rr.Radius.ui_points(1.5))
 
 
 class RerunLog:
@@ -520,9 +563,11 @@ class RerunLog:
             self._draw_topology(paths, snapshot)
 
     def _draw_topology(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
+        """The nodes once (positions, learned colours, and each clustering's colours beside
+        them for its view to pick), and each clustering's edges as polylines by cluster."""
         import rerun as rr
 
-        from services.display import clustering_edges, edge_colors, id_colors, node_cluster_ids
+        from services.display import UNCLUSTERED_RGB, clustering_edges, id_colors, node_cluster_ids
 
         positions = snapshot.positions
         if paths.camera not in self.framings and snapshot.node_count >= 50:
@@ -532,18 +577,24 @@ class RerunLog:
             # overview instead of covering the scene
             self.rec.log(paths.pinhole, rr.Pinhole.from_fields(
                 image_plane_distance=0.1 * framing.depth))
+        cluster_colors = []
+        for clustering in CLUSTERING_VIEWS:
+            labels = snapshot.clusterings.get(clustering)
+            if labels is None:  # not published: grey nodes, no edges (nothing stale is shown)
+                colors: np.ndarray = np.array([UNCLUSTERED_RGB], dtype=np.uint8)
+                strips = rr.LineStrips3D(np.zeros((0, 2, 3), dtype=np.float32))
+            else:
+                ids = node_cluster_ids(labels, snapshot.cluster_ids.get(clustering),
+                                       DISPLAY_MIN_NODES)
+                colors = id_colors(ids)
+                strips = edge_lines(positions, clustering_edges(clustering, snapshot.edges,
+                                                                labels), ids)
+            self.rec.log(paths.edges(clustering), strips)
+            cluster_colors.append(rr.DynamicArchetype(
+                cluster_archetype(clustering),
+                components={"colors": rr.components.ColorBatch(colors)}))
         self.rec.log(paths.nodes, rr.Points3D(positions, colors=snapshot.colors,
-                                              radii=rr.Radius.ui_points(4.0)))
-        for clustering, labels in snapshot.clusterings.items():
-            ids = node_cluster_ids(labels, snapshot.cluster_ids.get(clustering),
-                                   DISPLAY_MIN_NODES)
-            colors = id_colors(ids)
-            self.rec.log(paths.clusters(clustering), rr.Points3D(
-                positions, colors=colors, radii=rr.Radius.ui_points(4.0)))
-            pairs = clustering_edges(clustering, snapshot.edges, labels)
-            self.rec.log(paths.edges(clustering), rr.LineStrips3D(
-                positions[pairs] if len(pairs) else np.zeros((0, 2, 3)),
-                colors=edge_colors(pairs, colors, ids), radii=rr.Radius.ui_points(1.5)))
+                                              radii=rr.Radius.ui_points(4.0)), *cluster_colors)
 
     def objects(self, paths: EntityPaths, boxes: ObjectBoxes) -> None:
         """Boxes3D, one per object: colour and label by its persistent id (``object_id``)."""
@@ -865,15 +916,18 @@ class Dispatcher:
 
 
 def file_batcher() -> Any:
-    """Rerun's chunk batching for a .rrd: one chunk per entity per ``FLUSH_EVERY_SECONDS``.
+    """Rerun's chunk batching for a .rrd: one chunk per entity per ``RRD_FLUSH_SECONDS`` (or
+    per 2 MiB of it, rerun's default, for images and topologies).
 
-    The .rrd writer keeps an index entry per chunk in memory until it writes the footer, so with
-    rerun's default (a chunk per entity every 200 ms) a 30 fps logger of ~40 entities grew by
-    ~20 MB a minute; the chunks' own overhead also made the file bigger. Streams to a viewer
-    (``--stdout``, ``--serve``, ``--connect``) keep the default (low latency)."""
+    rerun 0.41's .rrd writer keeps a row per chunk in memory for the file's footer (its index for
+    random access) until the file is closed, and each row is as wide as the recording has
+    distinct components: ~100 bytes per component, ~3 kB per chunk for the logger's ~30
+    (measured, README "Performance"). One chunk per entity per second (~25 entities, most of
+    them metrics) grew the logger by ~8 MB a minute; per 10 s, by ~1/10 of that. Streams to a
+    viewer (``--stdout``, ``--serve``, ``--connect``) keep rerun's default (low latency)."""
     import rerun as rr
 
-    return rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=FLUSH_EVERY_SECONDS))
+    return rr.ChunkBatcherConfig(flush_tick=timedelta(seconds=RRD_FLUSH_SECONDS))
 
 
 def open_recording(args: argparse.Namespace, default_name: str = "log"
@@ -938,7 +992,7 @@ def main(args: argparse.Namespace) -> int:
         if recorder is not None:
             print(f"recording to {recorder.path}", flush=True)
     output = None if path is None else RrdFile(
-        rerun_log, path, args.max_rrd_mb * 10**6, args.min_free_mb * 10**6, FLUSH_EVERY_SECONDS)
+        rerun_log, path, args.max_rrd_mb * 10**6, args.min_free_mb * 10**6, RRD_FLUSH_SECONDS)
 
     inbox = Inbox(args.max_queue_mb * 1024 * 1024)
     dispatcher = Dispatcher(

@@ -16,6 +16,7 @@ import pytest
 from processes import log_text, wait_for
 
 from schemas.packing import decode_topology
+from services.logger import RRD_FLUSH_SECONDS
 from services.zenoh_session import ZenohSetupError, client_config, open_config
 
 
@@ -32,6 +33,15 @@ def _rrd_entities(path: Path) -> dict[str, int]:
     for chunk in store.stream():
         rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
     return rows
+
+
+def _rgb_on_disk(path: Path) -> bool:
+    """Whether the .rrd being written already holds a colour image (False while rerun is
+    half-way through writing a message: a partial file does not read)."""
+    try:
+        return path.exists() and _rrd_entities(path).get("/world/camera/image/rgb", 0) >= 1
+    except RuntimeError:
+        return False
 
 
 # ------------------------------------------------------------------------------ checkpoints
@@ -115,8 +125,8 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
     logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
     wait_for(lambda: "logging to" in log_text(logger), 60, "the logger")
     spawn("capture", str(tabletop_recording), "--rate", "0.5", "--loop", *connect)
-    wait_for(lambda: rrd_path.exists() and rrd_path.stat().st_size > 200_000, 60, "logged frames")
-    time.sleep(1.5)  # at least one periodic flush after those frames
+    # frames on disk: the logger flushes every RRD_FLUSH_SECONDS (its blueprint alone is ~200 kB)
+    wait_for(lambda: _rgb_on_disk(rrd_path), RRD_FLUSH_SECONDS + 60, "logged frames on disk")
     logger.send_signal(signal.SIGKILL)
     logger.wait(10)
     size_at_kill = rrd_path.stat().st_size
@@ -125,8 +135,8 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
 
     restarted = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
     second = tmp_path / "run.1.rrd"
-    wait_for(lambda: second.exists() and second.stat().st_size > 100_000, 60,
-          "the restarted logger's frames")
+    wait_for(lambda: _rgb_on_disk(second), RRD_FLUSH_SECONDS + 60,
+             "the restarted logger's frames on disk")
     restarted.send_signal(signal.SIGINT)
     assert restarted.wait(30) == 0, log_text(restarted)
     assert f"writing {second} instead" in log_text(restarted)

@@ -164,7 +164,10 @@ def test_rerun_opens_the_mcap_and_the_rrd_shows_objects_with_ids(recorded_run, t
     assert any("object_id" in name for name in logged["/world/objects"])
     for clustering in ("pos", "col", "nor", "col\\+nor"):
         assert "LineStrips3D:colors" in logged[f"/world/gng/edges/{clustering}"]
-        assert "Points3D:colors" in logged[f"/world/gng/clusters/{clustering}"]
+    # the nodes once, with every clustering's colours beside their learned ones
+    assert {"Points3D:positions", "Points3D:colors"} <= logged["/world/gng/nodes"]
+    for clustering in ("segments", "pos", "col", "nor", "col+nor"):
+        assert f"gngdt.clusters.{clustering}:colors" in logged["/world/gng/nodes"]
 
 
 @pytest.mark.timeout(200)
@@ -178,7 +181,7 @@ def test_the_rrd_draws_the_final_settled_network(recorded_run) -> None:
     for chunk in RrdReader(str(recorded_run["rrd"])).stream().collect().stream():
         batch = chunk.to_record_batch()
         frames = batch.column("frame").to_pylist() if "frame" in batch.schema.names else []
-        if str(chunk.entity_path) == "/world/gng/clusters/segments":
+        if str(chunk.entity_path) == "/world/gng/nodes":
             drawn += zip(frames, map(len, batch.column("Points3D:positions").to_pylist()),
                          strict=True)
         elif str(chunk.entity_path) == "/metrics/nodes":

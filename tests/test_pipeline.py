@@ -30,10 +30,7 @@ DESIGN_ENTITIES = {
     "/world/gng/edges/pos",
     "/world/gng/edges/col",
     "/world/gng/edges/nor",
-    "/world/gng/clusters/pos",
-    "/world/gng/clusters/col",
-    "/world/gng/clusters/nor",
-    "/world/gng/clusters/col\\+nor",  # rerun escapes "+" in entity paths
+    "/world/gng/edges/col\\+nor",  # rerun escapes "+" in entity paths
     "/metrics/nodes",
     "/metrics/steps_per_second",
     "/metrics/latency_ms",
