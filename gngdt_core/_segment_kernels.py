@@ -1,4 +1,5 @@
-"""Numba kernels over a learned network: fresh normals, property bits, nearest-node labelling.
+"""Numba kernels over a learned network: fresh normals, property bits, nearest-node labelling;
+and over a depth image: veil pixels.
 
 They read the estimator's arrays (layout in `_kernels`) and write only their outputs; the
 learning loop never calls them.
@@ -210,6 +211,30 @@ def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_sto
                             inv_cell, guess)
             out[r, c] = node_labels[s] + 1
             guess = s
+
+
+@njit(cache=True, nogil=True)
+def veil_pixels(depth, ratio, out):
+    """out (H, W) bool: True where the pixel's depth differs from a 4-neighbour's by more than
+    ``ratio`` of the nearer of the two; depth (H, W) float, NaN or <= 0 = no measurement (never
+    a veil pixel, and no neighbour)."""
+    height, width = depth.shape
+    out[:] = False
+    for r in range(height):
+        for c in range(width):
+            z = depth[r, c]
+            if not z > 0.0:
+                continue
+            if c + 1 < width:  # each pair once: the right and the lower neighbour
+                other = depth[r, c + 1]
+                if other > 0.0 and abs(other - z) > ratio * min(z, other):
+                    out[r, c] = True
+                    out[r, c + 1] = True
+            if r + 1 < height:
+                other = depth[r + 1, c]
+                if other > 0.0 and abs(other - z) > ratio * min(z, other):
+                    out[r, c] = True
+                    out[r + 1, c] = True
 
 
 @njit(cache=True)

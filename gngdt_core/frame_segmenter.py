@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from gngdt_core import _segment_kernels as SK
 from gngdt_core.model import GNGDT
 from gngdt_core.segmentation import SegmentationParams
 from gngdt_core.stream import FrameSchedule, StreamLearner
@@ -43,19 +44,10 @@ def veil_pixels(depth: np.ndarray, ratio: float) -> np.ndarray:
 
     depth: (H, W) float or integer depth, any unit; 0 or NaN = no measurement (never a veil).
     """
-    depth = np.where(depth > 0, depth, np.nan).astype(np.float32, copy=False)
-    veil = np.zeros(depth.shape, dtype=bool)
-    with np.errstate(invalid="ignore"):
-        for axis in (0, 1):
-            first = np.take(depth, range(depth.shape[axis] - 1), axis=axis)
-            second = np.take(depth, range(1, depth.shape[axis]), axis=axis)
-            jump = np.abs(second - first) > ratio * np.fmin(first, second)
-            if axis == 0:
-                veil[:-1] |= jump
-                veil[1:] |= jump
-            else:
-                veil[:, :-1] |= jump
-                veil[:, 1:] |= jump
+    veil = np.empty(depth.shape, dtype=bool)
+    if depth.dtype not in (np.float32, np.float64):
+        depth = depth.astype(np.float32)
+    SK.veil_pixels(depth, float(ratio), veil)
     return veil
 
 
