@@ -192,25 +192,25 @@ def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_sto
             continue
         r0 = r - row_offset
         r1 = r0 + stride if row_offset and r0 + stride < height else r0
-        for c in range(width):
-            col_offset = c % stride
-            if (row_offset == 0 and col_offset == 0) != anchors:
-                continue
-            if not valid[r, c]:
-                out[r, c] = 0
-                continue
-            if not anchors:
-                c0 = c - col_offset
-                c1 = c0 + stride if col_offset and c0 + stride < width else c0
+        for c0 in range(0, width, stride):
+            if anchors:
+                first, stop, label = c0, c0 + 1, -1
+            else:  # the anchors' label is judged once per row of a block, not per pixel
+                first = c0 + 1 if row_offset == 0 else c0
+                stop = min(c0 + stride, width)
+                c1 = c0 + stride if c0 + stride < width else c0
                 label = _agreed_label(out, valid, r0, r1, c0, c1)
-                if label >= 0:
+            for c in range(first, stop):
+                if not valid[r, c]:
+                    out[r, c] = 0
+                elif label >= 0:
                     out[r, c] = label
-                    continue
-            s, _ = _nearest(pos, n, np.float64(points[r, c, 0]), np.float64(points[r, c, 1]),
-                            np.float64(points[r, c, 2]), ghead, gnext, grid_on, cell_size,
-                            inv_cell, guess)
-            out[r, c] = node_labels[s] + 1
-            guess = s
+                else:
+                    s, _ = _nearest(pos, n, np.float64(points[r, c, 0]),
+                                    np.float64(points[r, c, 1]), np.float64(points[r, c, 2]),
+                                    ghead, gnext, grid_on, cell_size, inv_cell, guess)
+                    out[r, c] = node_labels[s] + 1
+                    guess = s
 
 
 @njit(cache=True, nogil=True)
