@@ -476,8 +476,8 @@ class _GrowingGas:
         ``LABEL_ANCHOR_STRIDE``-th pixel of every such row (every 4th); a pixel between such
         pixels that all agree takes their label without a search (a label region narrower than
         the stride can be missed there), every other pixel is searched exactly. On the real
-        640x480 Kinect frames of ../shared/data/labelled 0.03-0.05 % of the pixels (at most
-        0.08 %) differ from ``node_labels[predict(...)]``, at under a third of its CPU time.
+        640x480 Kinect frames of ../shared/data/labelled 0.03-0.06 % of the pixels (at most
+        0.09 %) differ from ``node_labels[predict(...)]``, at under a third of its CPU time.
         """
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
