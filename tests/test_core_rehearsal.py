@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
+from test_core_forgetting import FORGETTING, PARAMS, STEPS, frames_of, to_world
 
 from gngdt_core import GNGDT
 from gngdt_core.memory import SampleMemory
 from gngdt_core.view import SensorView
-from tests.test_core_forgetting import FORGETTING, PARAMS, STEPS, frames_of, to_world
 
 #: the learner's rehearsal (services.learner.LEARNER_MODEL_DEFAULTS)
 REHEARSAL = {"replay_share": 0.3}
