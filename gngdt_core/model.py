@@ -495,7 +495,9 @@ class _GrowingGas:
         valid = np.isfinite(points[..., 2])
         out = np.empty(valid.shape, dtype=np.int32)
         grid = self._grid_arrays()
-        min_rows = PARALLEL_MIN_POINTS // max(points.shape[1], 1)
+        # the work is mostly the searches, about one pixel in stride^2 (the anchors): a
+        # 640x480 frame is one thread's work, which two threads did no faster on 2 cores
+        min_rows = PARALLEL_MIN_POINTS * LABEL_ANCHOR_STRIDE**2 // max(points.shape[1], 1)
         for anchors in (True, False):  # every anchor first: the second pass reads them
             self._in_parallel(points.shape[0], min_rows,
                               lambda start, stop, anchors=anchors: SK.label_pixels(
