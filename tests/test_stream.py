@@ -43,14 +43,20 @@ def test_a_stream_carries_its_network_and_starts_over_on_a_new_scene() -> None:
     assert learned[-1].segmentation.labels.size == stream.model_.n_nodes_
 
 
-def test_attention_moves_nodes_from_the_large_surfaces_to_the_objects() -> None:
+def tabletop_points_on_objects() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The first tabletop frame's valid points (N, 3), colours (N, 3) and (N,) bool: on an
+    object (the floor, the wall and the table top each cover > 5 % of the image; the rest is
+    objects)."""
     frame = next(iter(read_frames(ROOT / "recordings" / "tabletop.mcap")))
     points = Deprojector().organized(frame.depth, frame.intrinsics).reshape(-1, 3)
     valid = np.isfinite(points[:, 2])
-    positions, colors = points[valid], frame.color.reshape(-1, 3)[valid]
     truth = frame.labels.reshape(-1)[valid]
-    # the floor, the wall and the table top each cover > 5 % of the image; the rest is objects
     on_object = (np.bincount(truth) < 0.05 * truth.size)[truth]
+    return points[valid], frame.color.reshape(-1, 3)[valid], on_object
+
+
+def test_attention_moves_nodes_from_the_large_surfaces_to_the_objects() -> None:
+    positions, colors, on_object = tabletop_points_on_objects()
 
     def node_share_on_objects(share: float) -> float:
         # attention acts on the nodes still to grow: most of the budget is left after warm-up
@@ -66,12 +72,7 @@ def test_attention_moves_nodes_from_the_large_surfaces_to_the_objects() -> None:
 
 
 def test_attention_follows_the_prior_an_earlier_frame_gives() -> None:
-    frame = next(iter(read_frames(ROOT / "recordings" / "tabletop.mcap")))
-    points = Deprojector().organized(frame.depth, frame.intrinsics).reshape(-1, 3)
-    valid = np.isfinite(points[:, 2])
-    positions, colors = points[valid], frame.color.reshape(-1, 3)[valid]
-    truth = frame.labels.reshape(-1)[valid]
-    on_object = (np.bincount(truth) < 0.05 * truth.size)[truth]
+    positions, colors, on_object = tabletop_points_on_objects()
 
     def node_share_on_objects(prior: np.ndarray) -> float:
         schedule = FrameSchedule(steps_first_frame=30_000, steps_per_frame=30_000)
