@@ -1,5 +1,5 @@
-"""Numba kernels of the sensor's view: which nodes the sensor could have seen in one batch, and
-which remembered points it saw through.
+"""Numba kernels of the sensor's view: which nodes the sensor could have seen in one batch,
+which remembered points it saw through, and what lies between two nodes (gaps of missing depth).
 
 A batch of points in the camera frame (x right, y down, z forward) is binned on the image plane
 by normalised coordinates ``u = x / z``, ``v = y / z`` into square cells ``cell`` wide; a cell
@@ -153,3 +153,54 @@ def seen_through(points, n, camera_from_model, zmin, u_min, v_min, inv_cell, mar
         nearest = zmin[row, column]
         if nearest > 0.0 and z < nearest * (1.0 - margin):
             through[i] = 1
+
+
+@njit(cache=True)
+def near_unmeasured(pos, n, camera_from_model, measured, u_min, v_min, inv_cell, reach, near):
+    """``near[i]`` = 1 for each node ``i < n`` with an unmeasured cell (or the grid's edge)
+    within ``reach`` (model units, seen at the node's depth) of its own cell, else 0. Nodes
+    behind the camera or off the grid count as near."""
+    rows, columns = measured.shape[0] - 1, measured.shape[1] - 1
+    for i in range(n):
+        near[i] = 1
+        row, column, z = _cell_of(pos, i, camera_from_model, u_min, v_min, inv_cell, rows,
+                                  columns)
+        if row < 0:
+            continue
+        ring = max(1, math.ceil(reach / z * inv_cell))
+        low_row, high_row = row - ring, row + ring + 1
+        low_column, high_column = column - ring, column + ring + 1
+        if low_row < 0 or low_column < 0 or high_row > rows or high_column > columns:
+            continue
+        count = (measured[high_row, high_column] - measured[low_row, high_column]
+                 - measured[high_row, low_column] + measured[low_row, low_column])
+        if count == (2 * ring + 1) * (2 * ring + 1):
+            near[i] = 0
+
+
+@njit(cache=True)
+def gap_samples(pos, pairs, camera_from_model, zmin, zmax, u_min, v_min, inv_cell, margin,
+                samples, missing, blocked):
+    """For each pair (i, j) of ``pairs`` (P, 2), of ``samples`` points evenly inside the segment
+    from node i to node j: ``missing[p]`` how many fall on unmeasured cells, ``blocked[p]`` how
+    many the sensor saw through (in front of the nearest depth of their cell by more than
+    ``margin`` times it), saw behind a nearer surface (behind the farthest by as much) or could
+    not see (behind the camera, off the grid)."""
+    rows, columns = zmax.shape
+    point = np.empty((1, 3))
+    for p in range(pairs.shape[0]):
+        i, j = pairs[p, 0], pairs[p, 1]
+        missing[p] = 0
+        blocked[p] = 0
+        for s in range(1, samples + 1):
+            t = s / (samples + 1.0)
+            for axis in range(3):
+                point[0, axis] = pos[i, axis] * (1.0 - t) + pos[j, axis] * t
+            row, column, z = _cell_of(point, 0, camera_from_model, u_min, v_min, inv_cell,
+                                      rows, columns)
+            if row < 0:
+                blocked[p] += 1
+            elif zmax[row, column] == 0.0:
+                missing[p] += 1
+            elif z < zmin[row, column] * (1.0 - margin) or z > zmax[row, column] * (1.0 + margin):
+                blocked[p] += 1

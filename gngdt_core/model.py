@@ -695,11 +695,16 @@ class GNGDT(_GrowingGas):
                            fparams[K.P_VY], fparams[K.P_VZ])
         return normals[: self.n_nodes_]
 
-    def segmentation(self, params: SegmentationParams | None = None) -> Segmentation:
+    def segmentation(self, params: SegmentationParams | None = None,
+                     view: SensorView | None = None,
+                     camera_pose: np.ndarray | None = None) -> Segmentation:
         """Segments of the current network by local convexity (`gngdt_core.segmentation`),
         from fresh normals and the position topology; details (patches, convex edges) included.
-        """
-        return segment_network(self.positions_, self.fresh_normals(), self.edges("pos"), params)
+        view: what the sensor measured in the frame just learned (`SensorView.of` its points in
+        the camera frame), to bridge gaps of missing depth; camera_pose: (4, 4) camera-to-model
+        of that frame (None: the model is in the camera frame)."""
+        return segment_network(self.positions_, self.fresh_normals(), self.edges("pos"), params,
+                               view, None if camera_pose is None else rigid_inverse(camera_pose))
 
     def segment(self, params: SegmentationParams | None = None) -> np.ndarray:
         """(n_nodes,) int32 segment of each node, 0..k-1 by decreasing size, -1 for lone

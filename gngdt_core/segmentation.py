@@ -28,6 +28,16 @@ position topology is here):
    never bridge two larger segments. Those with no larger neighbour (chains of single nodes
    along cables, thin edges, noise) are no segment (-1).
 
+6. Gaps (with the frame's view only, ``bridge_gap_m`` > 0). Where the sensor measured no depth
+   (a glossy rim, a dark or shiny patch) the network has no edges, so one object can come out as
+   two segments (a mug's inside and outside). Node pairs of two segments closer than
+   ``bridge_gap_m`` are judged as edges would be, when the straight line between them crosses
+   a gap: at least half of it lies where the sensor measured nothing and at most a third where
+   it measured something else (saw through the line, or a nearer surface in front of it). The
+   segments join when at least ``min_boundary_edges`` such pairs cross between them and
+   ``convex_share`` of those are convex. Segments that already share ``min_boundary_edges``
+   position edges were judged in step 4 and are left as they are.
+
 Support surfaces come out as their own segments because everything standing on them meets them
 concavely. Labels are ordered by decreasing segment size; -1 is no segment.
 """
@@ -42,6 +52,14 @@ import numpy as np
 from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels, rank_by_size
 from gngdt_core.parameters import check_integer, check_real
+from gngdt_core.view import SensorView
+
+#: points judged along a node pair that may cross a gap of missing depth (step 6)
+GAP_SAMPLES = 6
+#: metres: a node borders a gap when the sensor measured no depth this close to it
+GAP_BORDER_M = 0.005
+#: a sample lies on something the sensor measured when within this share of its depth
+GAP_DEPTH_MARGIN = 0.02
 
 
 @dataclass(frozen=True)
@@ -61,6 +79,9 @@ class SegmentationParams:
     min_boundary_edges: int = 3
     #: segments smaller than this many nodes join a larger neighbour, or are no segment (-1)
     min_segment_nodes: int = 4
+    #: metres: segments apart by a gap of missing depth at most this wide join where the two
+    #: sides meet convexly (step 6; needs the frame's view); 0: no bridging
+    bridge_gap_m: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("smooth_angle_deg", "patch_angle_deg", "concavity_angle_deg"):
@@ -68,6 +89,7 @@ class SegmentationParams:
         check_real("convex_share", self.convex_share, 0.0, 1.0)
         check_integer("min_boundary_edges", self.min_boundary_edges, 1)
         check_integer("min_segment_nodes", self.min_segment_nodes, 1)
+        check_real("bridge_gap_m", self.bridge_gap_m, 0.0, 1.0)
 
     @classmethod
     def from_dict(cls, values: dict) -> SegmentationParams:
@@ -114,11 +136,15 @@ def edge_elevations(positions: np.ndarray, normals: np.ndarray,
 
 
 def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarray,
-                    params: SegmentationParams | None = None) -> Segmentation:
+                    params: SegmentationParams | None = None, view: SensorView | None = None,
+                    camera_from_model: np.ndarray | None = None) -> Segmentation:
     """Segments of a network (see the module docstring for the procedure).
 
     positions: (n, 3) float, metres; normals: (n, 3) float unit normals facing the sensor (zero
-    where undefined); edges: (E, 2) int position-topology node pairs.
+    where undefined); edges: (E, 2) int position-topology node pairs. view: what the sensor
+    measured in the frame just learned (`SensorView.of` its points in the camera frame), for
+    step 6; camera_from_model: (4, 4) from the network's frame to that camera's (None: the
+    same frame).
     """
     params = params or SegmentationParams()
     positions = np.asarray(positions, dtype=np.float64)
@@ -138,8 +164,12 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     patches = _smooth_patches(n, edges, smooth, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
     objects = _merge_convex_patches(patches, edges, concavity, params)
-    labels = _absorb_fragments(objects, edges, convex, params.min_segment_nodes)
-    return Segmentation(rank_by_size(labels, params.min_segment_nodes), patches, convex)
+    labels = rank_by_size(_absorb_fragments(objects, edges, convex, params.min_segment_nodes),
+                          params.min_segment_nodes)
+    if view is not None and params.bridge_gap_m > 0 and labels.max() > 0:
+        labels = _bridge_gaps(labels, positions, normals, edges, params, view,
+                              np.eye(4) if camera_from_model is None else camera_from_model)
+    return Segmentation(labels, patches, convex)
 
 
 def _sine(degrees: float) -> float:
@@ -221,3 +251,50 @@ def _absorb_fragments(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
     destination = np.arange(n_labels)
     destination[fragment[best_first][first]] = host[best_first][first]
     return destination[labels]
+
+
+def _bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
+                 edges: np.ndarray, params: SegmentationParams, view: SensorView,
+                 camera_from_model: np.ndarray) -> np.ndarray:
+    """(n,) int32 segments after step 6: segments joined across gaps of missing depth."""
+    from scipy.spatial import cKDTree
+
+    gap = params.bridge_gap_m
+    candidates = np.flatnonzero(
+        (labels >= 0) & view.near_unmeasured(positions, camera_from_model, GAP_BORDER_M))
+    if candidates.size < 2:
+        return labels
+    pairs = candidates[cKDTree(positions[candidates]).query_pairs(gap, output_type="ndarray")]
+    n_labels = int(labels.max()) + 1
+    pair_key = _segment_pair_keys(labels, pairs, n_labels)
+    # segment pairs with enough shared edges were judged on those edges (step 4)
+    edge_keys, shared = np.unique(_segment_pair_keys(labels, edges, n_labels),
+                                  return_counts=True)
+    judged = edge_keys[(edge_keys >= 0) & (shared >= params.min_boundary_edges)]
+    pairs = pairs[(pair_key >= 0) & ~np.isin(pair_key, judged)]
+    missing, blocked = view.gap_samples(positions, pairs, camera_from_model, GAP_DEPTH_MARGIN,
+                                        GAP_SAMPLES)
+    pairs = pairs[(2 * missing >= GAP_SAMPLES) & (3 * blocked <= GAP_SAMPLES)]
+    if len(pairs) == 0:
+        return labels
+    rise_of_j, rise_of_i = edge_elevations(positions, normals, pairs)
+    convex = np.maximum(rise_of_j, rise_of_i) < _sine(params.concavity_angle_deg)
+    keys, pair_of_key = np.unique(_segment_pair_keys(labels, pairs, n_labels),
+                                  return_inverse=True)
+    crossing = np.bincount(pair_of_key)
+    join = (crossing >= params.min_boundary_edges) & (
+        np.bincount(pair_of_key, weights=convex) >= params.convex_share * crossing)
+    joined = np.stack([keys[join] // n_labels, keys[join] % n_labels], axis=1)
+    merged = labels.copy()
+    on = labels >= 0
+    merged[on] = rank_by_size(connected_component_labels(n_labels, joined)[labels[on]])
+    return merged
+
+
+def _segment_pair_keys(labels: np.ndarray, pairs: np.ndarray, n_labels: int) -> np.ndarray:
+    """(P,) int64 key ``low * n_labels + high`` of the segments at the ends of each node pair;
+    -1 where both ends are in one segment (or either in none)."""
+    a = labels[pairs[:, 0]].astype(np.int64)
+    b = labels[pairs[:, 1]].astype(np.int64)
+    key = np.minimum(a, b) * n_labels + np.maximum(a, b)
+    return np.where((a != b) & (a >= 0) & (b >= 0), key, -1)

@@ -26,6 +26,7 @@ import numpy as np
 from gngdt_core.model import GNGDT
 from gngdt_core.parameters import check_integer, check_real
 from gngdt_core.segmentation import Segmentation, SegmentationParams
+from gngdt_core.view import SensorView
 
 #: points of a frame checked for a scene change
 SCENE_SAMPLE = 2_000
@@ -35,6 +36,9 @@ ATTENTION_DRAW = 3
 #: the last frame's points lay from the nodes (and than ``scene_change_distance_m``): a coarse
 #: network is far from many points of the very scene it learned
 SCENE_CHANGE_RESOLUTION = 3.0
+#: every this many of a frame's points make the view that judges gaps of missing depth: half
+#: the points cost half the time (3 -> 1.5 ms at 640x480) and bridged ycbv's mug as often
+GAP_VIEW_STRIDE = 2
 
 
 @dataclass(frozen=True)
@@ -158,7 +162,9 @@ class StreamLearner:
                     None if from_scratch else on_large_surface)
         if self.schedule.scene_change_share < 1.0:
             self._resolution = float(np.percentile(self._sample_distances(placed), 90))
-        segmentation = self.model_.segmentation(self.segmentation)
+        view = (SensorView.of(positions[::GAP_VIEW_STRIDE]) if self.segmentation.bridge_gap_m > 0
+                else None)
+        segmentation = self.model_.segmentation(self.segmentation, view, camera_pose)
         self._on_large_surface = self._large_surfaces(segmentation.patches)
         return LearnedFrame(steps, from_scratch, segmentation, self._on_large_surface)
 

@@ -71,6 +71,28 @@ class SensorView:
                        self.inv_cell, float(margin), through)
         return through.astype(bool)
 
+    def near_unmeasured(self, positions: np.ndarray, camera_from_model: np.ndarray,
+                        reach: float) -> np.ndarray:
+        """(n,) bool: which of ``positions`` (n, 3) (model frame, float64) have a cell without
+        depth, or the view's edge, within ``reach`` (model units) on the image."""
+        near = np.zeros(len(positions), dtype=np.uint8)
+        V.near_unmeasured(positions, len(positions), camera_from_model, self.measured,
+                          self.u_min, self.v_min, self.inv_cell, float(reach), near)
+        return near.astype(bool)
+
+    def gap_samples(self, positions: np.ndarray, pairs: np.ndarray,
+                    camera_from_model: np.ndarray, margin: float,
+                    samples: int) -> tuple[np.ndarray, np.ndarray]:
+        """Of ``samples`` points evenly inside each segment ``pairs`` (P, 2) of ``positions``
+        (model frame, float64): (P,) how many fall where the sensor measured no depth, and (P,)
+        how many where it measured something else (saw through them, or a nearer surface hid
+        them; ``margin`` as a fraction of the depth) or could not see."""
+        missing = np.zeros(len(pairs), dtype=np.int64)
+        blocked = np.zeros(len(pairs), dtype=np.int64)
+        V.gap_samples(positions, pairs, camera_from_model, self.zmin, self.zmax, self.u_min,
+                      self.v_min, self.inv_cell, float(margin), int(samples), missing, blocked)
+        return missing, blocked
+
 
 def node_spacing(node_positions: np.ndarray) -> float:
     """Median distance from a node to its nearest other node (0 with fewer than two)."""

@@ -8,6 +8,7 @@ from scipy.spatial import cKDTree
 
 from gngdt_core import GNGDT
 from gngdt_core.segmentation import SegmentationParams, edge_elevations, segment_network
+from gngdt_core.view import SensorView
 
 
 def box_faces(rng: np.random.Generator, x: tuple[float, float], y: tuple[float, float],
@@ -157,11 +158,64 @@ def test_lone_fragments_are_no_segment_and_fragments_by_a_surface_join_it() -> N
     assert (labels[n_plane + 1:] == -1).all()  # the chain has no larger neighbour
 
 
+def _two_sides_of_a_gap(tilt_deg: float, seen_through_the_gap: bool) -> tuple:
+    """Two 5 x 6 cm grids of nodes at 0.6 m, the sides x < -1 cm and x > 1 cm of a fold along
+    x = 0 (tilt > 0: a ridge toward the sensor, convex; < 0: a valley, concave), with no edge
+    across; and the sensor's view: the fold's surface measured every millimetre except the band
+    |x| < 1 cm (no depth there), where it measured a wall 40 cm behind if ``seen_through_the_gap``.
+    Returns positions, normals, edges, view."""
+    slope = np.tan(np.radians(tilt_deg))
+
+    def surface(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return np.column_stack([x, y, 0.6 + slope * np.abs(x)])
+
+    columns = np.arange(0.0125, 0.061, 0.005)
+    rows = np.arange(-0.03, 0.031, 0.005)
+    x, y = np.meshgrid(np.concatenate([-columns[::-1], columns]), rows, indexing="ij")
+    positions = surface(x.ravel(), y.ravel())
+    gradient = np.column_stack([slope * np.sign(positions[:, 0]), np.zeros(len(positions)),
+                                -np.ones(len(positions))])
+    normals = gradient / np.linalg.norm(gradient, axis=1, keepdims=True)
+    index = np.arange(len(positions)).reshape(x.shape)
+    half = len(columns)
+    edges = np.vstack([np.column_stack([side[:-1].ravel(), side[1:].ravel()])
+                       for side in (index[:half], index[half:])]
+                      + [np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    dense_x, dense_y = np.meshgrid(np.arange(-0.07, 0.07, 0.001), np.arange(-0.04, 0.04, 0.001))
+    dense = surface(dense_x.ravel(), dense_y.ravel())
+    in_gap = np.abs(dense[:, 0]) < 0.01
+    if seen_through_the_gap:  # the same rays, hitting the wall
+        dense[in_gap] *= 1.0 / dense[in_gap, 2:]
+    else:
+        dense = dense[~in_gap]
+    return positions, normals, edges, SensorView.of(dense)
+
+
+@pytest.mark.parametrize("tilt_deg, seen_through, joined", [
+    (30.0, False, True),   # a ridge whose crest the sensor missed (a mug's glossy rim)
+    (-30.0, False, False),  # a valley: concave, like an object standing on a table
+    (30.0, True, False),   # the sensor saw a wall through the gap: free space, two things
+])
+def test_segments_join_across_a_gap_of_missing_depth_only_where_convex(
+        tilt_deg: float, seen_through: bool, joined: bool) -> None:
+    positions, normals, edges, view = _two_sides_of_a_gap(tilt_deg, seen_through)
+    assert segment_network(positions, normals, edges).n_segments == 2  # no edge across
+    params = SegmentationParams(bridge_gap_m=0.045)
+    assert segment_network(positions, normals, edges, params).n_segments == 2  # no view
+    result = segment_network(positions, normals, edges, params, view)
+    assert result.n_segments == (1 if joined else 2)
+    # too narrow a bridge for the 2.5 cm between the nearest nodes
+    narrow = SegmentationParams(bridge_gap_m=0.02)
+    assert segment_network(positions, normals, edges, narrow, view).n_segments == 2
+
+
 def test_segmentation_parameters_are_validated() -> None:
     with pytest.raises(ValueError, match="concavity_angle_deg"):
         SegmentationParams(concavity_angle_deg=0.0)
     with pytest.raises(ValueError, match="convex_share"):
         SegmentationParams(convex_share=1.5)
+    with pytest.raises(ValueError, match="bridge_gap_m"):
+        SegmentationParams(bridge_gap_m=-0.01)
     with pytest.raises(ValueError, match="unknown segmentation parameter"):
         SegmentationParams.from_dict({"concavity": 10})
 
