@@ -108,6 +108,20 @@ def _cell_of(points, i, camera_from_model, u_min, v_min, inv_cell, rows, columns
     return int(fv), int(fu), z
 
 
+@njit(cache=True, inline="always")
+def _all_measured(measured, row, column, ring):
+    """Whether the cells within ``ring`` of (row, column) lie inside the grid and are all
+    measured; measured: `measured_counts` of the grid."""
+    low_row, high_row = row - ring, row + ring + 1
+    low_column, high_column = column - ring, column + ring + 1
+    if (low_row < 0 or low_column < 0 or high_row >= measured.shape[0]
+            or high_column >= measured.shape[1]):
+        return False
+    count = (measured[high_row, high_column] - measured[low_row, high_column]
+             - measured[high_row, low_column] + measured[low_row, low_column])
+    return count == (2 * ring + 1) * (2 * ring + 1)
+
+
 @njit(cache=True)
 def judge_nodes(pos, n, camera_from_model, zmax, measured, u_min, v_min, inv_cell, margin, reach,
                 seen):
@@ -124,13 +138,7 @@ def judge_nodes(pos, n, camera_from_model, zmax, measured, u_min, v_min, inv_cel
         if row < 0:
             continue
         ring = max(1, min(MAX_REACH_CELLS, math.ceil(reach / z * inv_cell)))
-        low_row, high_row = row - ring, row + ring + 1
-        low_column, high_column = column - ring, column + ring + 1
-        if low_row < 0 or low_column < 0 or high_row > rows or high_column > columns:
-            continue
-        count = (measured[high_row, high_column] - measured[low_row, high_column]
-                 - measured[high_row, low_column] + measured[low_row, low_column])
-        if count < (2 * ring + 1) * (2 * ring + 1):
+        if not _all_measured(measured, row, column, ring):
             continue
         if z <= zmax[row, column] * (1.0 + margin):
             seen[i] = 1
@@ -167,14 +175,7 @@ def near_unmeasured(pos, n, camera_from_model, measured, u_min, v_min, inv_cell,
                                   columns)
         if row < 0:
             continue
-        ring = max(1, math.ceil(reach / z * inv_cell))
-        low_row, high_row = row - ring, row + ring + 1
-        low_column, high_column = column - ring, column + ring + 1
-        if low_row < 0 or low_column < 0 or high_row > rows or high_column > columns:
-            continue
-        count = (measured[high_row, high_column] - measured[low_row, high_column]
-                 - measured[high_row, low_column] + measured[low_row, low_column])
-        if count == (2 * ring + 1) * (2 * ring + 1):
+        if _all_measured(measured, row, column, max(1, math.ceil(reach / z * inv_cell))):
             near[i] = 0
 
 

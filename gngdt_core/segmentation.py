@@ -209,9 +209,9 @@ def _merge_convex_patches(patches: np.ndarray, edges: np.ndarray, concavity: np.
     concavity angle.
     """
     n_patches = int(patches.max()) + 1
-    a, b = patches[edges[:, 0]], patches[edges[:, 1]]
-    between = a != b
-    pair = np.minimum(a, b)[between].astype(np.int64) * n_patches + np.maximum(a, b)[between]
+    pair = _segment_pair_keys(patches, edges, n_patches)
+    between = pair >= 0
+    pair = pair[between]
     values = concavity[between]
     order = np.lexsort((values, pair))
     pair, values = pair[order], values[order]
@@ -271,16 +271,17 @@ def _bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
     edge_keys, shared = np.unique(_segment_pair_keys(labels, edges, n_labels),
                                   return_counts=True)
     judged = edge_keys[(edge_keys >= 0) & (shared >= params.min_boundary_edges)]
-    pairs = pairs[(pair_key >= 0) & ~np.isin(pair_key, judged)]
+    unjudged = (pair_key >= 0) & ~np.isin(pair_key, judged)
+    pairs, pair_key = pairs[unjudged], pair_key[unjudged]
     missing, blocked = view.gap_samples(positions, pairs, camera_from_model, GAP_DEPTH_MARGIN,
                                         GAP_SAMPLES)
-    pairs = pairs[(2 * missing >= GAP_SAMPLES) & (3 * blocked <= GAP_SAMPLES)]
+    crossing_gap = (2 * missing >= GAP_SAMPLES) & (3 * blocked <= GAP_SAMPLES)
+    pairs, pair_key = pairs[crossing_gap], pair_key[crossing_gap]
     if len(pairs) == 0:
         return labels
     rise_of_j, rise_of_i = edge_elevations(positions, normals, pairs)
     convex = np.maximum(rise_of_j, rise_of_i) < _sine(params.concavity_angle_deg)
-    keys, pair_of_key = np.unique(_segment_pair_keys(labels, pairs, n_labels),
-                                  return_inverse=True)
+    keys, pair_of_key = np.unique(pair_key, return_inverse=True)
     crossing = np.bincount(pair_of_key)
     join = (crossing >= params.min_boundary_edges) & (
         np.bincount(pair_of_key, weights=convex) >= params.convex_share * crossing)
