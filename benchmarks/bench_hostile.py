@@ -53,7 +53,7 @@ from schemas.packing import (  # noqa: E402
     image_to_raw,
 )
 from schemas.wire import FrameStamp  # noqa: E402
-from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
+from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 
 MB = 1024 * 1024
 
@@ -154,8 +154,8 @@ def feed(session, rng: np.random.Generator) -> dict[str, int]:
 def hostile_recordings(folder: Path) -> dict[str, Path]:
     from mcap_protobuf.writer import Writer as ProtobufWriter
 
+    from gngdt_io.frame import CameraIntrinsics
     from schemas.packing import intrinsics_to_calibration
-    from services.recording.frame import CameraIntrinsics
 
     def images(path: Path, shape: tuple[int, int], frames: int, calibrated: bool) -> Path:
         with open(path, "wb") as file, ProtobufWriter(file) as writer:
@@ -195,8 +195,8 @@ def transform_flood(path: Path) -> Path:
     from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
     from mcap.writer import CompressionType, IndexType, Writer
 
+    from gngdt_io.frame import CameraIntrinsics
     from schemas.packing import intrinsics_to_calibration
-    from services.recording.frame import CameraIntrinsics
 
     ns = 1_000_000_000
     transform = FrameTransform(parent_frame_id="world", child_frame_id="camera")

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from gngdt_core import GNGDT
-from services.recording.images import iter_image_frames
+from gngdt_io.images import iter_image_frames
 
 LABELLED = Path(__file__).resolve().parents[2] / "shared" / "data" / "labelled"
 PROFILE = {"max_nodes": 4000, "lambda_": 50}

@@ -29,13 +29,13 @@ from procstat import cpu_seconds, status_mb
 
 from schemas.wire import FrameStamp, topic
 from services.logger import LIVELINESS_KEY
+from services.plumbing.session import free_tcp_port, open_config, router_config
 from services.run import Observed, Pipeline, wait_until
-from services.zenoh_session import free_tcp_port, open_config, router_config
 
 
 def render_recording(path: Path, frames: int) -> None:
-    from services.recording.synth import render_scene
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
 
     with RecordingWriter(path, compression="lz4") as writer:
         for frame in render_scene("tabletop", frames, width=640, height=480):
@@ -44,7 +44,7 @@ def render_recording(path: Path, frames: int) -> None:
 
 def deprojection_baseline(frame) -> tuple[float, float]:
     """(vectorised ms, Python-loop ms scaled to the full frame) for one frame."""
-    from services.pointcloud import Deprojector
+    from gngdt_io.deproject import Deprojector
 
     deproject = Deprojector()
     deproject(frame.depth, frame.color, frame.intrinsics)
@@ -71,8 +71,8 @@ def deprojection_baseline(frame) -> tuple[float, float]:
 def queueing_baseline(recording: Path, samples_per_frame: int, fps: float) -> dict[str, float]:
     """Latency of FIFO vs latest-frame-wins, replaying measured learning times at ``fps``."""
     from gngdt_core import GNGDT
+    from gngdt_io.mcap_reader import read_frames
     from services.capture import CloudOptions, FrameToCloud
-    from services.recording.reader import read_frames
 
     to_cloud = FrameToCloud(CloudOptions())
     model = GNGDT(random_state=0)
@@ -192,7 +192,7 @@ def main() -> int:
             render_recording(recording, args.frames)
             print(f"rendered {args.frames} frames 640x480 in {time.perf_counter() - started:.1f} s")
 
-        from services.recording.reader import read_frames
+        from gngdt_io.mcap_reader import read_frames
 
         first = next(iter(read_frames(recording)))
         vectorised_ms, loop_ms = deprojection_baseline(first)

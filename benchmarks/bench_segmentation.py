@@ -31,8 +31,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from procstat import status_mb
 
-from services.evaluation.report import markdown_table
-from services.evaluation.segmentation import PEER, SegmentationEvalSettings, evaluate_segmentation
+from gngdt_eval.report import markdown_table
+from gngdt_eval.segmentation import PEER, SegmentationEvalSettings, evaluate_segmentation
 
 LABELLED = Path(__file__).resolve().parents[2] / "shared" / "data" / "labelled"
 DEFAULT_SETS = [LABELLED / "mosd_learn", LABELLED / "ycbv_0000"]

@@ -33,14 +33,14 @@ sys.path.insert(0, str(REPO_ROOT))
 from procstat import gngdt  # noqa: E402  (benchmarks/, beside this script)
 
 from schemas.packing import decode_status, decode_topology  # noqa: E402
+from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 from services.run import DEFAULT_MAX_POINTS  # noqa: E402
-from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
 
 #: a client of the router subscribed to everything, whose callback never returns
 NEVER_READS = """
 import sys, time
 sys.path.insert(0, {root!r})
-from services.zenoh_session import client_config, open_config
+from services.plumbing.session import client_config, open_config
 session = open_config(client_config([{endpoint!r}]), wait_s=30)
 session.declare_subscriber("gngdt/**", lambda sample: time.sleep(3600))
 print("subscribed", flush=True)
@@ -93,8 +93,8 @@ class Observer:
 
 
 def make_recording(directory: Path) -> Path:
-    from services.recording.synth import render_scene
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
 
     path = directory / "loop.mcap"
     with RecordingWriter(path) as writer:

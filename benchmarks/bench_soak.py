@@ -33,8 +33,8 @@ sys.path.insert(0, str(REPO_ROOT))
 from procstat import status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
 from schemas.packing import LearnerStatusInfo, decode_status  # noqa: E402
+from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 from services.run import DEFAULT_MAX_POINTS  # noqa: E402
-from services.zenoh_session import client_config, free_tcp_port, open_config  # noqa: E402
 
 
 @dataclass
@@ -56,8 +56,8 @@ class StatusLog:
 
 
 def make_recording(directory: Path, width: int, height: int, frames: int) -> Path:
-    from services.recording.synth import render_scene
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
 
     path = directory / "soak.mcap"
     with RecordingWriter(path) as writer:

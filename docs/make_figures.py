@@ -20,7 +20,7 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))  # runnable from a plain checkout, without `pip install -e`
 
-from services.recording.frame import CameraIntrinsics  # noqa: E402
+from gngdt_io.frame import CameraIntrinsics  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -60,9 +60,9 @@ def learn_scene(recording: Path, params: Path | None, samples_per_frame: int,
                 seed: int) -> LearnedScene:
     """Learn every frame of ``recording`` as the live learner would (``--params`` file)."""
     from gngdt_core import GNGDT
+    from gngdt_io.deproject import Deprojector
+    from gngdt_io.mcap_reader import read_frames
     from services.learner import load_params
-    from services.pointcloud import Deprojector
-    from services.recording.reader import read_frames
 
     config = load_params(params)
     model = GNGDT(**{**config.model, "random_state": seed})
@@ -129,7 +129,7 @@ def make_topology_figure(scene: LearnedScene, out: Path, source: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from services.evaluation.plots import cluster_colours
+    from gngdt_eval.plots import cluster_colours
 
     model = scene.model
     aspect = scene.intrinsics.height / scene.intrinsics.width

@@ -39,9 +39,9 @@ CLOSE_UP = ((-1.45, -0.85), (2.05, 2.75))
 def posed_frames(folder: Path) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """(camera-frame points (N, 3) m, colours (N, 3) u8, camera-to-world pose (4, 4)) per frame,
     through the importer `gngdt record images --format redwood --poses DIR/poses` uses."""
-    from services.pointcloud import Deprojector
-    from services.recording.images import count_image_frames, iter_image_frames
-    from services.recording.poses import attach_poses, load_poses
+    from gngdt_io.deproject import Deprojector
+    from gngdt_io.images import count_image_frames, iter_image_frames
+    from gngdt_io.pose_files import attach_poses, load_poses
 
     frames = attach_poses(iter_image_frames(folder, "redwood"), load_poses(folder / "poses"),
                           count_image_frames(folder, "redwood"))

@@ -31,7 +31,7 @@ HERE = Path(__file__).resolve().parent
 REPO_ROOT = HERE.parent
 sys.path.insert(0, str(REPO_ROOT))
 
-from services.zenoh_session import free_tcp_port  # noqa: E402
+from services.plumbing.session import free_tcp_port  # noqa: E402
 
 log = logging.getLogger("screenshot_viewer")
 

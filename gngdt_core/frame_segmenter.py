@@ -1,5 +1,5 @@
 """Per-pixel segments of RGB-D frames: a GNG-DT network learned from the frames
-(`gngdt_core.stream`), segmented by local convexity (`gngdt_core.segmentation`), each pixel
+(`gngdt_core.schedule`), segmented by local convexity (`gngdt_core.segmentation`), each pixel
 labelled by its nearest node.
 
 Online (the default) one network is carried from frame to frame; independent mode learns every
@@ -17,8 +17,8 @@ import numpy as np
 
 from gngdt_core import _segment_kernels as SK
 from gngdt_core.model import GNGDT
+from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_core.segmentation import SegmentationParams
-from gngdt_core.stream import FrameSchedule, StreamLearner
 
 __all__ = ["FrameResult", "FrameSchedule", "FrameSegmenter", "veil_pixels"]
 

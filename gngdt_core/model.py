@@ -577,7 +577,7 @@ class _GrowingGas:
     @classmethod
     def from_state(cls, state: dict[str, np.ndarray]) -> Self:
         """Rebuild a model saved by `get_state`; ValueError on anything inconsistent."""
-        from gngdt_core.checkpoint import restore
+        from gngdt_core.state import restore
 
         return restore(cls, state)
 

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from gngdt_core.tracking import ClusterTracker
+from gngdt_core.cluster_tracking import ClusterTracker
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ independent Gaussian noise of standard deviation ``color_noise`` on each of R, G
 0-255 (a camera's within-region variation: shading, texture, sensor noise). ``color_noise=0``
 gives flat colours. The noise is drawn after everything else, so positions and labels do not
 depend on the level. The default level is the one that best reproduces the paper's Tables 2-3 for
-GNG and GNG-W (``gngdt eval paper``; see services/evaluation/README.md).
+GNG and GNG-W (``gngdt eval paper``; see gngdt_eval/README.md).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ OBJECT_HEIGHT = 100.0
 
 #: default standard deviation of the per-channel colour noise (0-255 units), both data sets: the
 #: level whose GNG and GNG-W best reproduce the paper's Tables 2-3 (a grid of 0-30, see
-#: services/evaluation/README.md)
+#: gngdt_eval/README.md)
 COLOR_NOISE = 3.0
 
 

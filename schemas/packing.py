@@ -30,8 +30,8 @@ from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.message import Message
 from google.protobuf.timestamp_pb2 import Timestamp
 
+from gngdt_io.frame import CameraIntrinsics
 from schemas import gngdt_pb2
-from services.recording.frame import CameraIntrinsics
 
 __all__ = [
     "CLOUD_POINT_STRIDE",
@@ -76,7 +76,7 @@ CLOUD_POINT_STRIDE = 15
 MAX_IMAGE_PIXELS = 64 * 1024 * 1024
 
 #: Largest cloud a learner accepts by default and a capture publishes: 30 MB on the wire,
-#: within zenoh's message limit (services.zenoh_session.MAX_MESSAGE_BYTES).
+#: within zenoh's message limit (services.plumbing.MAX_MESSAGE_BYTES).
 MAX_CLOUD_POINTS = 2_000_000
 
 #: What a GNG-DT learner can send, enforced before anything is allocated: a node keeps at most
@@ -429,7 +429,7 @@ def cloud_to_msg(
 
 def _set_rigid(translation: Vector3, rotation: Quaternion, matrix: np.ndarray) -> None:
     """Fill a foxglove translation/position and quaternion from a (4, 4) rigid transform."""
-    from services.recording.transforms import matrix_to_pose
+    from gngdt_io.tf_tree import matrix_to_pose
 
     offset, quaternion = matrix_to_pose(matrix)
     translation.x, translation.y, translation.z = offset.tolist()
@@ -441,9 +441,9 @@ def cloud_pose(message: PointCloud | bytes) -> np.ndarray:
 
     An unset orientation (all zero, as a publisher that never set the pose leaves it) is the
     identity. Raises :class:`MessageError` naming the frame for non-finite numbers or a quaternion
-    that is not of unit length (see ``services.recording.transforms.QUATERNION_TOLERANCE``).
+    that is not of unit length (see ``gngdt_io.tf_tree.QUATERNION_TOLERANCE``).
     """
-    from services.recording.transforms import TransformError, pose_to_matrix
+    from gngdt_io.tf_tree import TransformError, pose_to_matrix
 
     message = parse_message(PointCloud, message)
     position, rotation = message.pose.position, message.pose.orientation

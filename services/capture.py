@@ -5,7 +5,7 @@ at which it is replayed (its "capture time" as a live camera would give it), so 
 is measured against the moment the frame entered the pipeline. After the last frame an
 end-of-stream message (``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
 
-When the recording has camera poses (``/tf``, see ``services.recording.reader``), each cloud is
+When the recording has camera poses (``/tf``, see ``gngdt_io.mcap_reader``), each cloud is
 published with its pose: points in the camera frame, ``frame_id`` the fixed frame
 (``--fixed-frame``, default the first of world/map/odom found), ``pose`` the camera's pose in
 it. A frame the transforms do not cover (the recording has poses, only not at that time)
@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gngdt_io.deproject import Deprojector, cap_points, voxel_downsample
+from gngdt_io.mcap_reader import ReadLimits
 from schemas.packing import MAX_CLOUD_POINTS
 from schemas.wire import (
     DEFAULT_CAMERA,
@@ -35,10 +37,8 @@ from schemas.wire import (
     FrameStamp,
     topic,
 )
-from services import lifecycle
-from services.pointcloud import Deprojector, cap_points, voxel_downsample
-from services.recording.reader import ReadLimits
-from services.zenoh_session import (
+from services.plumbing import lifecycle
+from services.plumbing.session import (
     ZenohSetupError,
     add_zenoh_arguments,
     declare_publisher,
@@ -49,7 +49,7 @@ from services.zenoh_session import (
 if TYPE_CHECKING:
     import zenoh
 
-    from services.recording.frame import CameraIntrinsics, Frame
+    from gngdt_io.frame import CameraIntrinsics, Frame
 
 log = logging.getLogger(__name__)
 
@@ -292,7 +292,7 @@ class Replay:
         self.frames_read = 0
 
     def __iter__(self) -> Iterator[Frame]:
-        from services.recording.reader import RecordingError, read_frames
+        from gngdt_io.mcap_reader import RecordingError, read_frames
 
         while not self.stop.is_set():
             yielded = 0
@@ -352,7 +352,7 @@ class ReplayClock:
 
 def describe_recording(path: Path, rate: float | None, loop: bool) -> str:
     """One line saying what is replayed, from the recording's index when it has one."""
-    from services.recording.reader import RecordingError, recording_info
+    from gngdt_io.mcap_reader import RecordingError, recording_info
 
     speed = "as fast as possible" if rate is None else f"at {rate:g}x the recorded rate"
     how = f"{speed}{', looping' if loop else ''}"
@@ -365,7 +365,7 @@ def describe_recording(path: Path, rate: float | None, loop: bool) -> str:
 
 
 def main(args: argparse.Namespace) -> int:
-    from services.recording.reader import RecordingError, check_recording
+    from gngdt_io.mcap_reader import RecordingError, check_recording
 
     try:
         check_recording(args.recording)

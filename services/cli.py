@@ -20,9 +20,9 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "learn": ("services.learner", "learn GNG-DT topologies from a camera's point clouds"),
     "log": ("services.logger", "log every gngdt stream to rerun"),
     "router": ("services.router", "run a zenoh router for standalone services"),
-    "record": ("services.recording.cli", "make recordings: synthetic scenes or real RGB-D frames"),
+    "record": ("services.record", "make recordings: synthetic scenes or real RGB-D frames"),
     "segment": ("services.segment", "segment RGB-D frames: a label image per frame"),
-    "eval": ("services.evaluation.cli", "evaluate: the paper's tables, recordings, logged runs"),
+    "eval": ("gngdt_eval.cli", "evaluate: the paper's tables, recordings, logged runs"),
 }
 
 EPILOG = """examples:
@@ -78,7 +78,7 @@ def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParse
 
 
 def main(argv: list[str] | None = None) -> int:
-    from services import lifecycle
+    from services.plumbing import lifecycle
 
     # One try from the handlers' installation on: a stop signal raises KeyboardInterrupt
     # wherever start-up stands (inside install() once its first handler is set, or while logging

@@ -46,8 +46,8 @@ from schemas.wire import (
     FrameStamp,
     topic,
 )
-from services import lifecycle
-from services.zenoh_session import (
+from services.plumbing import lifecycle
+from services.plumbing.session import (
     ZenohSetupError,
     add_zenoh_arguments,
     declare_publisher,
@@ -57,8 +57,8 @@ from services.zenoh_session import (
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt_core.cluster_tracking import ClusterTracker
     from gngdt_core.objects import ObjectSet
-    from gngdt_core.tracking import ClusterTracker
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +173,7 @@ class LearnerConfig:
     #: `SegmentationParams` keys (validated when loaded)
     segmentation: dict[str, Any] = field(default_factory=dict)
     #: `FrameSchedule` keys of a sensor profile's [frames] table (validated when loaded); with
-    #: one, frames are learned through `gngdt_core.stream.StreamLearner` (attention, scene cuts,
+    #: one, frames are learned through `gngdt_core.schedule.StreamLearner` (attention, scene cuts,
     #: ``steps_first_frame``), ``samples_per_frame`` steps per later frame
     frames: dict[str, Any] | None = None
 
@@ -216,8 +216,8 @@ def load_params(path: Path | None) -> LearnerConfig:
         if isinstance(value, dict) and key in ("gngdt", "learner"):
             flat.update(value)
         elif isinstance(value, dict) and key in ("segmentation", "frames"):
+            from gngdt_core.schedule import FrameSchedule
             from gngdt_core.segmentation import SegmentationParams
-            from gngdt_core.stream import FrameSchedule
 
             schema = SegmentationParams if key == "segmentation" else FrameSchedule
             try:
@@ -350,7 +350,7 @@ class Counters:
 
 def counters_from_metadata(path: Path, saved: Any) -> Counters:
     """The counters kept in a checkpoint's metadata, type-checked (``CheckpointError``)."""
-    from services.checkpoint import CheckpointError
+    from gngdt_io.checkpoints import CheckpointError
 
     if not isinstance(saved, dict):
         raise CheckpointError(f"checkpoint {path}: counters are not a mapping")
@@ -405,8 +405,8 @@ class Learner:
     def __init__(self, camera: str, config: LearnerConfig, model: Any | None = None,
                  counters: Counters | None = None, frame_id: str | None = None) -> None:
         from gngdt_core import GNGDT
+        from gngdt_core.schedule import FrameSchedule, StreamLearner
         from gngdt_core.segmentation import SegmentationParams
-        from gngdt_core.stream import FrameSchedule, StreamLearner
 
         self.camera = camera
         self.options = config.options
@@ -509,7 +509,7 @@ class Learner:
     def learned_frame(self) -> LearnedFrame:
         """Edges and clusterings of the model now, each cluster with its persistent id (kept from
         the previous call by node membership)."""
-        from gngdt_core.tracking import ClusterTracker
+        from gngdt_core.cluster_tracking import ClusterTracker
 
         model = self.model
         min_size = self.options.min_cluster_size
@@ -571,8 +571,8 @@ class Learner:
 
     def objects_update(self, stamp: FrameStamp, objects: ObjectSet) -> Any:
         """The objects as a ``foxglove.SceneUpdate``, coloured as the logger colours clusters."""
+        from schemas.cluster_colors import id_colors
         from schemas.scene import objects_to_scene_update
-        from services.display import id_colors
 
         return objects_to_scene_update(
             ids=objects.ids, centers=objects.centers, quaternions_xyzw=objects.quaternions_xyzw,
@@ -583,8 +583,8 @@ class Learner:
     def scene_update(self, stamp: FrameStamp, learned: LearnedFrame) -> Any:
         """Nodes in their learned colours and every clustering's edges coloured by cluster, as a
         ``foxglove.SceneUpdate``."""
+        from schemas.cluster_colors import clustering_edges, node_colors
         from schemas.scene import topology_to_scene_update
-        from services.display import clustering_edges, node_colors
 
         positions = self.model.positions_
         layers = {}
@@ -673,7 +673,7 @@ class Learner:
     def save(self, path: Path) -> bool:
         """Checkpoint to ``path``; a failed write (disk full, permissions) is logged, not fatal:
         the learner goes on and the previous checkpoint, replaced atomically, stays intact."""
-        from services.checkpoint import save_checkpoint
+        from gngdt_io.checkpoints import save_checkpoint
 
         counters = {item.name: getattr(self.counters, item.name) for item in fields(Counters)}
         try:
@@ -691,7 +691,7 @@ class Learner:
     def resume(cls, path: Path, camera: str, config: LearnerConfig) -> Learner:
         """A learner restored from ``path`` (raises ``CheckpointError`` when it is corrupt)."""
         from gngdt_core import GNGDT
-        from services.checkpoint import CheckpointError, load_checkpoint
+        from gngdt_io.checkpoints import CheckpointError, load_checkpoint
 
         state, metadata = load_checkpoint(path)
         saved_camera = metadata.get("camera", camera)
@@ -846,7 +846,7 @@ class LatestTopology:
 
 
 def main(args: argparse.Namespace) -> int:
-    from services.checkpoint import CheckpointError, CheckpointLock
+    from gngdt_io.checkpoints import CheckpointError, CheckpointLock
 
     lock = None
     try:
@@ -875,7 +875,7 @@ def main(args: argparse.Namespace) -> int:
 
 def clean_checkpoint_directory(path: Path) -> None:
     """Remove the temporaries a killed learner left beside ``path`` (under its lock)."""
-    from services.checkpoint import remove_stale_temporaries
+    from gngdt_io.checkpoints import remove_stale_temporaries
 
     removed = remove_stale_temporaries(path)
     if removed:

@@ -45,8 +45,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from schemas.wire import DEFAULT_CAMERA, FrameStamp
-from services import lifecycle
-from services.zenoh_session import (
+from services.plumbing import lifecycle
+from services.plumbing.session import (
     MAX_MESSAGE_BYTES,
     ZenohSetupError,
     add_zenoh_arguments,
@@ -57,9 +57,9 @@ if TYPE_CHECKING:
     import rerun as rr
     import zenoh
 
+    from gngdt_io.frame import CameraIntrinsics
     from schemas.packing import LearnerStatusInfo, TopologySnapshot
     from schemas.scene import ObjectBoxes
-    from services.recording.frame import CameraIntrinsics
 
 log = logging.getLogger(__name__)
 
@@ -110,7 +110,7 @@ def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
     """Where ``--serve`` listens (shared with `gngdt run`)."""
-    from services.rerun_output import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT
+    from gngdt_io.outputs.rerun_sinks import DEFAULT_BIND, DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT
 
     group = parser.add_argument_group("serving (--serve)")
     group.add_argument("--bind", default=DEFAULT_BIND, metavar="ADDRESS",
@@ -123,7 +123,7 @@ def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from services.rerun_output import DEFAULT_MAX_RRD_MB, DEFAULT_MIN_FREE_MB
+    from gngdt_io.outputs.rerun_sinks import DEFAULT_MAX_RRD_MB, DEFAULT_MIN_FREE_MB
 
     add_viewer_arguments(parser)
     add_rate_arguments(parser)
@@ -450,7 +450,7 @@ def edge_lines(positions: np.ndarray, pairs: np.ndarray, ids: np.ndarray) -> Any
     import pyarrow as pa
     import rerun as rr
 
-    from services.display import edge_classes, edge_strips, id_colors
+    from schemas.cluster_colors import edge_classes, edge_strips, id_colors
 
     nodes, starts, classes = edge_strips(pairs, edge_classes(pairs, ids))
     strip_type = rr.components.LineStrip3DBatch._ARROW_DATATYPE
@@ -567,7 +567,12 @@ class RerunLog:
         them for its view to pick), and each clustering's edges as polylines by cluster."""
         import rerun as rr
 
-        from services.display import UNCLUSTERED_RGB, clustering_edges, id_colors, node_cluster_ids
+        from schemas.cluster_colors import (
+            UNCLUSTERED_RGB,
+            clustering_edges,
+            id_colors,
+            node_cluster_ids,
+        )
 
         positions = snapshot.positions
         if paths.camera not in self.framings and snapshot.node_count >= 50:
@@ -936,7 +941,7 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
     and, for a file, its path) and the viewer server ``--serve`` started (or None)."""
     import rerun as rr
 
-    from services.rerun_output import ViewerServer
+    from gngdt_io.outputs.rerun_sinks import ViewerServer
 
     to_file = not (args.stdout or args.serve or args.connect)
     rec = rr.RecordingStream("gngdt", batcher_config=file_batcher() if to_file else None)
@@ -968,8 +973,8 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
 
 
 def main(args: argparse.Namespace) -> int:
-    from services.mcap_recorder import McapRecorder
-    from services.rerun_output import RrdFile, exit_now_if_stuck
+    from gngdt_io.outputs.mcap import McapRecorder
+    from gngdt_io.outputs.rerun_sinks import RrdFile, exit_now_if_stuck
 
     for name in ("max_rrd_mb", "min_free_mb", "max_queue_mb"):
         if getattr(args, name) < 0:

@@ -29,7 +29,6 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
 from schemas.wire import DEFAULT_CAMERA, topic
-from services import lifecycle
 from services.logger import (
     LIVELINESS_KEY,
     add_rate_arguments,
@@ -39,7 +38,8 @@ from services.logger import (
     rates_from_args,
     unused_rrd_path,
 )
-from services.zenoh_session import (
+from services.plumbing import lifecycle
+from services.plumbing.session import (
     ZenohSetupError,
     client_settings,
     free_tcp_port,
@@ -363,7 +363,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
 
 def recorded_frames(path: Path) -> int | None:
     """Frames in the recording by its index (None without one)."""
-    from services.recording.reader import RecordingError, recording_info
+    from gngdt_io.mcap_reader import RecordingError, recording_info
 
     try:
         return int(recording_info(path)["frames"])
@@ -372,7 +372,7 @@ def recorded_frames(path: Path) -> int | None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from services.recording.reader import RecordingError, check_recording
+    from gngdt_io.mcap_reader import RecordingError, check_recording
 
     try:
         check_recording(args.recording)

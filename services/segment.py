@@ -32,8 +32,8 @@ import numpy as np
 
 if TYPE_CHECKING:
     from gngdt_core.frame_segmenter import FrameResult, FrameSegmenter
-    from services.recording.frame import Frame
-    from services.recording.sources import FrameSource
+    from gngdt_io.frame import Frame
+    from gngdt_io.sources import FrameSource
     from services.segment_profile import SegmenterProfile
 
 log = logging.getLogger(__name__)
@@ -71,7 +71,7 @@ def organized_frames(source: FrameSource) -> Iterator[tuple[str, Frame, np.ndarr
     """(name, frame, points, milliseconds) of every frame of ``source``: points (H, W, 3)
     float32 metres in the camera frame, NaN where the depth is 0; milliseconds of deprojection.
     Raises RecordingError naming the file for a frame that cannot be read."""
-    from services.pointcloud import Deprojector
+    from gngdt_io.deproject import Deprojector
 
     deproject = Deprojector(min_depth_m=0.0, max_depth_m=math.inf)  # only "no depth" is dropped
     for name, frame in source.frames():
@@ -118,9 +118,9 @@ def segment_source(source: FrameSource, profile: SegmenterProfile, out: Path, *,
                    ) -> dict[str, Any]:
     """Segment every frame of ``source`` into ``out`` (label PNGs + summary.json, written as a
     whole or not at all); returns the summary."""
-    from services.evaluation.report import to_jsonable
-    from services.recording.errors import RecordingError
-    from services.staged_output import StagedDirectory
+    from gngdt_eval.report import to_jsonable
+    from gngdt_io.errors import RecordingError
+    from gngdt_io.staged_directory import StagedDirectory
 
     staged = StagedDirectory(out, overwrite=overwrite)  # refuses a non-empty DIR before work
     log.info("checking %s (%s) ...", source.path, source.format)
@@ -162,7 +162,7 @@ def segment_source(source: FrameSource, profile: SegmenterProfile, out: Path, *,
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from services.recording.sources import SOURCE_FORMATS
+    from gngdt_io.sources import SOURCE_FORMATS
 
     parser.add_argument("source", type=Path, metavar="SOURCE",
                         help="MCAP recording, or a folder of colour/depth frames")
@@ -185,8 +185,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``gngdt segment``; bad input: one error line naming the file, exit code 2."""
-    from services.recording.errors import RecordingError
-    from services.recording.sources import open_source
+    from gngdt_io.errors import RecordingError
+    from gngdt_io.sources import open_source
     from services.segment_profile import load_profile
 
     try:

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, settings
 
-from services.zenoh_session import client_config, free_tcp_port, open_config, router_config
+from services.plumbing.session import client_config, free_tcp_port, open_config, router_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -60,8 +60,8 @@ def router_endpoint(free_port: int) -> Iterator[str]:
 
 
 def _render_recording(directory: Path, scene: str, frames: int) -> Path:
-    from services.recording.synth import render_scene
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
 
     path = directory / f"{scene}_small.mcap"
     with RecordingWriter(path) as writer:

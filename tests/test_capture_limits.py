@@ -17,7 +17,7 @@ def _log(process) -> str:
 
 
 def _frames(count: int, width: int = 64, height: int = 48):
-    from services.recording.synth import render_scene
+    from gngdt_io.synth.render import render_scene
 
     return list(render_scene("data2", count, width=width, height=height))
 
@@ -26,7 +26,7 @@ def _frames(count: int, width: int = 64, height: int = 48):
 def test_a_jump_in_the_stamps_is_shortened_and_said(
     router_endpoint: str, spawn: Callable, tmp_path: Path
 ) -> None:
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
 
     path = tmp_path / "jump.mcap"
     first, second = _frames(2)
@@ -76,8 +76,8 @@ def _write_images(path: Path, images: list[tuple[str, object]], calibrated: bool
     """An MCAP of raw images (role, array), stamped 33 ms apart, with or without calibration."""
     from mcap_protobuf.writer import Writer
 
+    from gngdt_io.frame import CameraIntrinsics
     from schemas.packing import image_to_raw, intrinsics_to_calibration
-    from services.recording.frame import CameraIntrinsics
 
     with open(path, "wb") as file, Writer(file) as writer:
         for index, (role, image) in enumerate(images):
@@ -171,10 +171,10 @@ def test_chunks_that_overlap_in_time_are_inflated_one_at_a_time(
 def test_a_cloud_never_exceeds_what_a_learner_accepts_and_a_message_holds() -> None:
     import numpy as np
 
+    from gngdt_io.frame import CameraIntrinsics, Frame
     from schemas.packing import CLOUD_POINT_STRIDE, MAX_CLOUD_POINTS
     from services.capture import CloudOptions, FrameToCloud
-    from services.recording.frame import CameraIntrinsics, Frame
-    from services.zenoh_session import MAX_MESSAGE_BYTES
+    from services.plumbing.session import MAX_MESSAGE_BYTES
 
     assert MAX_CLOUD_POINTS * CLOUD_POINT_STRIDE < MAX_MESSAGE_BYTES
     height, width = 1500, 2000  # 3 million valid pixels

@@ -52,7 +52,7 @@ def test_help_has_a_description_examples_and_explains_every_option(
 
 
 def test_record_synth_help_lists_the_scenes() -> None:
-    from services.recording.synth import SCENES
+    from gngdt_io.synth.render import SCENES
 
     text = dict(COMMANDS)["gngdt record synth"].format_help()
     for scene in SCENES:

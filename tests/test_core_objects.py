@@ -7,8 +7,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from gngdt_core import GNGDT, make_data2
+from gngdt_core.cluster_tracking import ClusterTracker
 from gngdt_core.objects import ObjectTracker, describe_objects, drop_small, object_labels
-from gngdt_core.tracking import ClusterTracker
 
 
 def _ids_of(tracker: ClusterTracker, node_ids, labels) -> dict[int, int]:

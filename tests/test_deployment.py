@@ -18,7 +18,7 @@ import pytest
 from test_pipeline import DESIGN_ENTITIES, log_text, rrd_entities_and_scalars, wait_exit
 
 from schemas.packing import TopologySnapshot, decode_topology
-from services.zenoh_session import client_config, open_config
+from services.plumbing.session import client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 CLIENT_CONFIG = REPO_ROOT / "config" / "zenoh-client.json5"

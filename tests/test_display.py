@@ -10,7 +10,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from services.display import edge_classes, edge_strips, id_colors, node_cluster_ids
+from schemas.cluster_colors import edge_classes, edge_strips, id_colors, node_cluster_ids
 
 
 def _segments(polylines: list, classes: list) -> list[tuple]:
@@ -65,9 +65,9 @@ def test_the_rrd_holds_nodes_once_with_each_clusterings_colours_and_views_pick_t
     import rerun as rr
     from rerun.chunk import RrdReader
 
+    from schemas.cluster_colors import UNCLUSTERED_RGB, clustering_edges
     from schemas.packing import TopologySnapshot
     from schemas.wire import FrameStamp
-    from services.display import UNCLUSTERED_RGB, clustering_edges
     from services.logger import CLUSTERING_VIEWS, EntityPaths, RerunLog, blueprint
 
     rng = np.random.default_rng(1)

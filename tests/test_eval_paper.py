@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from gngdt_core import GNGDT, make_data1
-from services.cli import main as gngdt_main
-from services.evaluation.paper import (
+from gngdt_eval.paper import (
     PAPER_TABLE2,
     PAPER_TABLE3,
     PaperSettings,
@@ -19,7 +18,8 @@ from services.evaluation.paper import (
     learn,
     separates_regions,
 )
-from services.evaluation.paper_rgbd import PAPER_TABLE5, PAPER_TABLE6, PAPER_WINNERS
+from gngdt_eval.paper_rgbd import PAPER_TABLE5, PAPER_TABLE6, PAPER_WINNERS
+from services.cli import main as gngdt_main
 
 PAPER_TEXT = Path(__file__).resolve().parents[2] / "shared" / "paper" / "gng-dt-paper.md"
 SCALES = ("1.0", "10.0", "0.1", "0.01")

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gngdt_eval.recording_eval import RecordingSettings, deproject_labels, frame_points
+from gngdt_io.deproject import Deprojector
+from gngdt_io.frame import CameraIntrinsics
+from gngdt_io.mcap_reader import read_frames
 from services.cli import main as gngdt_main
-from services.evaluation.recording import RecordingSettings, deproject_labels, frame_points
-from services.pointcloud import Deprojector
-from services.recording.frame import CameraIntrinsics
-from services.recording.reader import read_frames
 
 FRAMES = 3
 
@@ -20,8 +20,8 @@ FRAMES = 3
 @pytest.fixture(scope="module")
 def tiny_recording(tmp_path_factory) -> Path:
     """3 frames of the tabletop scene at 160x120 with ground-truth labels."""
-    from services.recording.synth import render_scene
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
 
     path = tmp_path_factory.mktemp("recordings") / "tabletop_tiny.mcap"
     with RecordingWriter(path) as writer:
@@ -129,8 +129,8 @@ def test_eval_recording_without_labels(tmp_path) -> None:
     """Real-frame recordings have no ground truth: no ARI, everything else reported."""
     from dataclasses import replace
 
-    from services.recording.synth import render_scene
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
 
     path = tmp_path / "unlabelled.mcap"
     with RecordingWriter(path) as writer:
@@ -167,9 +167,9 @@ def test_eval_recording_without_labels(tmp_path) -> None:
 @pytest.mark.timeout(300)
 def test_eval_recording_reports_metrics_over_time_for_a_changing_scene(tmp_path) -> None:
     """tabletop_vanish at 10 fps: the red box vanishes at frame 20; world frame from the poses."""
-    from services.recording.scenes import build_scene
-    from services.recording.synth import SCENE_METADATA, render_scene, scene_metadata
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import SCENE_METADATA, render_scene, scene_metadata
+    from gngdt_io.synth.scenes import build_scene
 
     path = tmp_path / "vanish.mcap"
     with RecordingWriter(path) as writer:
@@ -210,7 +210,7 @@ def test_eval_recording_reports_metrics_over_time_for_a_changing_scene(tmp_path)
 
 
 def test_identity_score_counts_switches_and_kept_tracks() -> None:
-    from services.evaluation.identity import MIN_SEGMENT_POINTS, IdentityScore
+    from gngdt_eval.identity import MIN_SEGMENT_POINTS, IdentityScore
 
     score = IdentityScore(min_size=1, confirm_frames=1)
     node_ids = np.arange(4)
@@ -230,7 +230,7 @@ def test_identity_score_counts_switches_and_kept_tracks() -> None:
 
 
 def test_identity_scores_only_the_objects_the_learner_would_publish() -> None:
-    from services.evaluation.identity import MIN_SEGMENT_POINTS, IdentityScore
+    from gngdt_eval.identity import MIN_SEGMENT_POINTS, IdentityScore
 
     node_ids = np.arange(5)
     truth = np.repeat([7, 8], MIN_SEGMENT_POINTS)  # segment 7 on node 0, segment 8 on node 4

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gngdt_eval.rrd import RrdError, read_metrics
 from services.cli import main as gngdt_main
-from services.evaluation.rrd import RrdError, read_metrics
 
 
 @pytest.fixture(autouse=True)
@@ -98,8 +98,8 @@ def test_eval_rrd_on_a_real_logged_run(tmp_path) -> None:
     import subprocess
     import sys
 
-    from services.recording.synth import render_scene
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
 
     recording = tmp_path / "tiny.mcap"
     with RecordingWriter(recording) as writer:

@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 import pytest
 
+from gngdt_eval.segment_scores import score_frame, summarize_scores
+from gngdt_io.mcap_reader import read_frames
 from services.cli import main as gngdt
-from services.evaluation.segment_scores import score_frame, summarize_scores
-from services.recording.reader import read_frames
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SMALL_RECORDING = REPO_ROOT / "recordings" / "tabletop_small.mcap"
@@ -168,8 +168,8 @@ def test_report_on_a_labelled_recording_with_both_modes(
 def test_the_peer_segments_a_plane_and_clusters(synthetic_set: Path, tmp_path: Path) -> None:
     import open3d
 
-    from services.evaluation.open3d_peer import Open3DPeer, PeerParams
-    from services.recording.sources import open_source
+    from gngdt_eval.open3d_peer import Open3DPeer, PeerParams
+    from gngdt_io.sources import open_source
     from services.segment import organized_frames
 
     _, frame, points, _ = next(organized_frames(open_source(synthetic_set)))

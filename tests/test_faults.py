@@ -17,7 +17,7 @@ from processes import log_text, wait_for
 
 from schemas.packing import decode_topology
 from services.logger import RRD_FLUSH_SECONDS
-from services.zenoh_session import ZenohSetupError, client_config, open_config
+from services.plumbing.session import ZenohSetupError, client_config, open_config
 
 
 def _rrd_entities(path: Path) -> dict[str, int]:
@@ -47,7 +47,7 @@ def _rgb_on_disk(path: Path) -> bool:
 # ------------------------------------------------------------------------------ checkpoints
 def _trained_checkpoint(path: Path) -> None:
     from gngdt_core import GNGDT
-    from services.checkpoint import save_checkpoint
+    from gngdt_io.checkpoints import save_checkpoint
 
     rng = np.random.default_rng(0)
     model = GNGDT(random_state=0).partial_fit(

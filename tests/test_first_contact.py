@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from processes import alive, bound_sockets, children, log_text, wait_for
 
-from services.zenoh_session import ZenohSetupError, client_config, open_config
+from services.plumbing.session import ZenohSetupError, client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 GNGDT = [sys.executable, "-m", "services.cli"]

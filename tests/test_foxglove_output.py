@@ -221,7 +221,7 @@ def test_logger_survives_an_objects_topic_flooded_with_ids(
     from rerun.chunk import RrdReader
 
     from schemas.scene import MAX_OBJECTS
-    from services.zenoh_session import client_config, open_config
+    from services.plumbing.session import client_config, open_config
 
     rrd_path = tmp_path / "flood.rrd"
     queue_mb = 64
@@ -280,7 +280,7 @@ def test_logger_survives_an_objects_topic_flooded_with_ids(
 _STUCK_CONSUMER = """
 import sys, time
 import zenoh
-from services.zenoh_session import client_config, open_config
+from services.plumbing.session import client_config, open_config
 session = open_config(client_config([sys.argv[1]]))
 # a consumer that never reads: once its one-slot FIFO is full, zenoh's receiving thread for this
 # session blocks (FifoChannel semantics), so the router cannot hand it anything more
@@ -300,7 +300,7 @@ def test_a_scene_consumer_that_never_reads_stalls_nothing(
     free_port: int, spawn: Callable, tabletop_recording: Path, tmp_path: Path
 ) -> None:
     from schemas.packing import decode_status
-    from services.zenoh_session import client_config, open_config
+    from services.plumbing.session import client_config, open_config
 
     endpoint = f"tcp/127.0.0.1:{free_port}"
     connect = ("--zenoh-connect", endpoint)

@@ -291,7 +291,7 @@ def test_flooded_learner_and_logger_count_garbage_and_keep_working(
     from rerun.chunk import RrdReader
 
     from schemas.packing import decode_status
-    from services.zenoh_session import client_config, open_config
+    from services.plumbing.session import client_config, open_config
 
     rrd_path = tmp_path / "flood.rrd"
     connect = ("--zenoh-connect", router_endpoint)

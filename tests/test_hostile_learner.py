@@ -16,12 +16,12 @@ import pytest
 from processes import log_text, wait_for
 
 from schemas.packing import cloud_to_msg, decode_status
-from services.zenoh_session import client_config, open_config
+from services.plumbing.session import client_config, open_config
 
 
 def _checkpoint(path: Path, camera: str = "camera") -> None:
     from gngdt_core import GNGDT
-    from services.checkpoint import save_checkpoint
+    from gngdt_io.checkpoints import save_checkpoint
 
     rng = np.random.default_rng(0)
     model = GNGDT(random_state=0).partial_fit(
@@ -145,7 +145,7 @@ def test_a_second_learner_on_a_camera_or_a_checkpoint_is_refused(
 
 
 def test_stale_temporaries_of_one_checkpoint_only_are_removed(tmp_path: Path) -> None:
-    from services.checkpoint import remove_stale_temporaries
+    from gngdt_io.checkpoints import remove_stale_temporaries
 
     (tmp_path / ".a.npz.123.tmp").touch()
     (tmp_path / ".b.npz.123.tmp").touch()
@@ -156,7 +156,7 @@ def test_stale_temporaries_of_one_checkpoint_only_are_removed(tmp_path: Path) ->
 
 
 def test_a_camera_mismatch_is_a_checkpoint_error(tmp_path: Path) -> None:
-    from services.checkpoint import CheckpointError
+    from gngdt_io.checkpoints import CheckpointError
     from services.learner import Learner, LearnerConfig
 
     path = tmp_path / "left.npz"
@@ -168,7 +168,7 @@ def test_a_camera_mismatch_is_a_checkpoint_error(tmp_path: Path) -> None:
 
 def test_counters_beyond_64_bits_in_a_checkpoint_are_refused(tmp_path: Path) -> None:
     from gngdt_core import GNGDT
-    from services.checkpoint import CheckpointError, save_checkpoint
+    from gngdt_io.checkpoints import CheckpointError, save_checkpoint
     from services.learner import Learner, LearnerConfig
 
     path = tmp_path / "overflowed.npz"

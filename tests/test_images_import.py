@@ -11,10 +11,10 @@ import cv2
 import numpy as np
 import pytest
 
-from services.recording import cli
-from services.recording.errors import RecordingError
-from services.recording.images import iter_image_frames
-from services.recording.reader import read_frames
+from gngdt_io.errors import RecordingError
+from gngdt_io.images import iter_image_frames
+from gngdt_io.mcap_reader import read_frames
+from services import record as cli
 
 RGBD = Path(__file__).resolve().parents[2] / "shared" / "data" / "rgbd"
 TUM = RGBD / "tum_fr1_xyz_dvo_examples"

@@ -117,7 +117,7 @@ def test_the_inbox_of_a_busy_logger_is_bounded_in_bytes(router_endpoint: str) ->
     import zenoh
 
     from services.logger import Inbox
-    from services.zenoh_session import client_config, open_config
+    from services.plumbing.session import client_config, open_config
 
     inbox = Inbox(max_bytes=5_000_000)  # nothing takes from it: a logger busy elsewhere
     session = open_config(client_config([router_endpoint]))
@@ -147,7 +147,7 @@ class ImageFlood:
     """A camera publishing 320x240 colour images at ~20 Hz, then an end of stream."""
 
     def __init__(self, endpoint: str) -> None:
-        from services.zenoh_session import client_config, open_config
+        from services.plumbing.session import client_config, open_config
 
         self.session = open_config(client_config([endpoint]))
         self.sent = 0
@@ -261,6 +261,7 @@ def _metric_chunks_at_30_fps(tmp_path, extra: list[str], seconds: float) -> list
 
     from rerun.chunk import RrdReader
 
+    from gngdt_io.outputs.rerun_sinks import RrdFile
     from services.logger import (
         RRD_FLUSH_SECONDS,
         EntityPaths,
@@ -268,7 +269,6 @@ def _metric_chunks_at_30_fps(tmp_path, extra: list[str], seconds: float) -> list
         add_arguments,
         open_recording,
     )
-    from services.rerun_output import RrdFile
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
+from gngdt_io.deproject import Deprojector
+from gngdt_io.mcap_reader import read_frames
 from services.learner import Learner, LearnerConfig
-from services.pointcloud import Deprojector
-from services.recording.reader import read_frames
 
 STATIC_RECORDING = Path(__file__).resolve().parents[1] / "recordings" / "tabletop.mcap"
 

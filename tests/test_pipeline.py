@@ -16,7 +16,7 @@ import pytest
 
 from schemas.packing import cloud_to_msg, decode_status, decode_topology
 from schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
-from services.zenoh_session import client_config, open_config
+from services.plumbing.session import client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -119,7 +119,7 @@ def wait_exit(process: subprocess.Popen, timeout_s: float) -> int:
 
 @pytest.mark.timeout(240)
 def test_run_learns_the_scene_and_writes_the_rrd(data2_recording: Path, tmp_path: Path) -> None:
-    from services.recording.synth import SCENE_GROUND_TRUTH
+    from gngdt_io.synth.render import SCENE_GROUND_TRUTH
 
     rrd_path = tmp_path / "run.rrd"
     completed = subprocess.run(
@@ -200,7 +200,7 @@ def test_late_joiner_gets_the_current_topology(
 def test_killed_learner_resumes_from_its_checkpoint(
     router_endpoint: str, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    from services.checkpoint import load_checkpoint
+    from gngdt_io.checkpoints import load_checkpoint
 
     checkpoint = tmp_path / "learner.npz"
     connect = ["--zenoh-connect", router_endpoint]
@@ -377,8 +377,8 @@ def test_logger_skips_malformed_messages_and_stops_after_eos(
 ) -> None:
     import zenoh
 
+    from gngdt_io.frame import CameraIntrinsics
     from schemas.packing import encode_stream_end, intrinsics_to_calibration
-    from services.recording.frame import CameraIntrinsics
 
     rrd_path = tmp_path / "logger.rrd"
     logger = spawn("log", "--save", str(rrd_path), "--eos-drain", "1",

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from gngdt_io.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
 from services.learner import LEARNER_MODEL_DEFAULTS, load_params
 
 REPO_ROOT = Path(__file__).resolve().parents[1]

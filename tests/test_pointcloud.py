@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from services.pointcloud import Deprojector, cap_points, ray_map, voxel_downsample
-from services.recording.frame import CameraIntrinsics
+from gngdt_io.deproject import Deprojector, cap_points, ray_map, voxel_downsample
+from gngdt_io.frame import CameraIntrinsics
 
 INTRINSICS = CameraIntrinsics(width=4, height=3, fx=2.0, fy=4.0, cx=1.5, cy=1.0)
 

@@ -22,14 +22,14 @@ from test_recording_io import (
     make_frames,
 )
 
-from services.recording.reader import read_frames
-from services.recording.transforms import (
+from gngdt_io.mcap_reader import read_frames
+from gngdt_io.mcap_writer import RecordingWriter
+from gngdt_io.tf_tree import (
     TransformError,
     TransformTree,
     matrix_to_pose,
     pose_to_matrix,
 )
-from services.recording.writer import RecordingWriter
 
 SECOND = 1_000_000_000
 

@@ -10,10 +10,10 @@ from foxglove_schemas_protobuf.Log_pb2 import Log
 from mcap_protobuf.writer import Writer as ProtobufWriter
 from mcap_ros2.writer import Writer as Ros2Writer
 
+from gngdt_io.frame import CameraIntrinsics, Frame
+from gngdt_io.mcap_reader import RecordingError, read_frames, recording_info
+from gngdt_io.mcap_writer import RecordingWriter
 from schemas.packing import image_to_raw, intrinsics_to_calibration
-from services.recording.frame import CameraIntrinsics, Frame
-from services.recording.reader import RecordingError, read_frames, recording_info
-from services.recording.writer import RecordingWriter
 
 WIDTH, HEIGHT = 64, 48
 START_NS = 1_700_000_000_000_000_000

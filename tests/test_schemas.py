@@ -18,6 +18,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from gngdt_io.frame import CameraIntrinsics
 from schemas import (
     MessageError,
     calibration_to_intrinsics,
@@ -37,7 +38,6 @@ from schemas import (
     unpack_array,
 )
 from schemas.generate import SCHEMA_DIR, generate
-from services.recording.frame import CameraIntrinsics
 
 STAMP_NS = 1_700_000_000_123_456_789
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from processes import bound_sockets, children, wait_for
 
-from services.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
-from services.zenoh_session import (
+from gngdt_io.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
+from services.plumbing.session import (
     DEFAULT_ENDPOINT,
     ZenohSetupError,
     client_config,
@@ -252,7 +252,7 @@ def test_checkpoint_metadata_is_covered_by_the_digest(tmp_path: Path) -> None:
 def test_checkpoint_zip_bomb_is_refused_before_reading(tmp_path: Path, monkeypatch) -> None:
     import zipfile
 
-    from services import checkpoint
+    from gngdt_io import checkpoints as checkpoint
 
     path = tmp_path / "bomb.npz"
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:

@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
+from gngdt_io.mcap_reader import read_frames
+from gngdt_io.staged_directory import StagedDirectory
 from services.cli import main as gngdt
-from services.recording.reader import read_frames
-from services.staged_output import StagedDirectory
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SMALL_RECORDING = REPO_ROOT / "recordings" / "tabletop_small.mcap"

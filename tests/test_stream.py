@@ -1,4 +1,4 @@
-"""Learning a stream of frames (gngdt_core.stream), the sensor profile, veil points."""
+"""Learning a stream of frames (gngdt_core.schedule), the sensor profile, veil points."""
 
 from __future__ import annotations
 
@@ -10,11 +10,11 @@ from scipy.spatial import cKDTree
 
 from gngdt_core import model as model_module
 from gngdt_core.frame_segmenter import FrameSegmenter, veil_pixels
-from gngdt_core.stream import FrameSchedule, StreamLearner
+from gngdt_core.schedule import FrameSchedule, StreamLearner
+from gngdt_io.deproject import Deprojector
+from gngdt_io.mcap_reader import read_frames
 from services.capture import CloudOptions, FrameToCloud
 from services.learner import Learner, load_params
-from services.pointcloud import Deprojector
-from services.recording.reader import read_frames
 
 ROOT = Path(__file__).resolve().parents[1]
 PROFILE = ROOT / "config" / "kinect.toml"

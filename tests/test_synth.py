@@ -10,18 +10,8 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from services.recording.frame import Frame
-from services.recording.scenes import (
-    Cylinder,
-    Orbit,
-    Rectangle,
-    Scene,
-    Sphere,
-    box,
-    build_scene,
-    triangular_prism,
-)
-from services.recording.synth import (
+from gngdt_io.frame import Frame
+from gngdt_io.synth.render import (
     SCENE_GROUND_TRUTH,
     SCENES,
     RayHits,
@@ -30,6 +20,16 @@ from services.recording.synth import (
     kinect_intrinsics,
     render_frame,
     render_scene,
+)
+from gngdt_io.synth.scenes import (
+    Cylinder,
+    Orbit,
+    Rectangle,
+    Scene,
+    Sphere,
+    box,
+    build_scene,
+    triangular_prism,
 )
 
 WIDTH, HEIGHT = 160, 120
@@ -392,7 +392,7 @@ RECORDINGS = Path(__file__).resolve().parents[1] / "recordings"
 
 def test_bundled_small_recording_is_what_the_renderer_makes_today():
     """recordings/README.md's command remakes tabletop_small.mcap; if not, regenerate them."""
-    from services.recording.reader import read_frames
+    from gngdt_io.mcap_reader import read_frames
 
     path = RECORDINGS / "tabletop_small.mcap"
     recorded = list(read_frames(path))

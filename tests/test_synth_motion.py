@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from test_synth import segment_mask, world_points
 
-from services.recording.reader import read_frames, recording_metadata
-from services.recording.scenes import build_scene
-from services.recording.synth import SCENE_METADATA, SCENES, render_scene, scene_metadata
-from services.recording.writer import RecordingWriter
+from gngdt_io.mcap_reader import read_frames, recording_metadata
+from gngdt_io.mcap_writer import RecordingWriter
+from gngdt_io.synth.render import SCENE_METADATA, SCENES, render_scene, scene_metadata
+from gngdt_io.synth.scenes import build_scene
 
 WIDTH, HEIGHT = 160, 120
 

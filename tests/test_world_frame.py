@@ -12,12 +12,12 @@ import numpy as np
 import pytest
 from test_pipeline import Watcher, log_text, points_publisher, wait_exit
 
+from gngdt_io.mcap_writer import RecordingWriter
+from gngdt_io.synth.render import render_scene
 from schemas.packing import MessageError, cloud_to_msg, decode_topology
 from schemas.wire import FrameStamp
 from services.learner import Ghosts, Learner, LearnerConfig, OtherFrameError, decode_points
-from services.recording.synth import render_scene
-from services.recording.writer import RecordingWriter
-from services.zenoh_session import client_config, open_config
+from services.plumbing.session import client_config, open_config
 
 FRAMES = 4
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from services.zenoh_session import (
+from services.plumbing.session import (
     DEFAULT_ENDPOINT,
     ZenohSetupError,
     client_config,
@@ -114,7 +114,7 @@ def test_every_shipped_config_keeps_gngdt_bounds(path: Path) -> None:
 
     import zenoh
 
-    from services.zenoh_session import BLOCKED_CLIENT_CUTOFF_US, MAX_MESSAGE_BYTES
+    from services.plumbing.session import BLOCKED_CLIENT_CUTOFF_US, MAX_MESSAGE_BYTES
 
     config = zenoh.Config.from_file(str(path))
     rx = json.loads(config.get_json("transport/link/rx"))

@@ -2,7 +2,7 @@
 
 World frame: x right, y forward (away from the default camera), z up, metres. Every primitive
 answers one question for a batch of rays, "where do you first hit each ray, and on which face?",
-which is all the renderer in :mod:`services.recording.synth` needs.
+which is all the renderer in :mod:`gngdt_io.synth.render` needs.
 
 Rays are ``origin + t * directions`` with ``origin (3,) float64`` and ``directions (N, 3)
 float64`` (not necessarily unit length); hit distances ``t`` are in units of the direction

@@ -15,7 +15,7 @@ Camera poses come from transform channels, whatever their topic: ``foxglove.Fram
 (gngdt's ``/tf``), ``foxglove.FrameTransforms`` and ROS 2 ``tf2_msgs/msg/TFMessage`` (``/tf``;
 ``/tf_static`` holds static transforms). They are read in a first pass, then each frame's pose is
 the transform from the fixed frame to the colour image's ``frame_id`` at the frame's stamp,
-through any chain of frames, interpolated (:mod:`services.recording.transforms`). The fixed frame
+through any chain of frames, interpolated (:mod:`gngdt_io.tf_tree`). The fixed frame
 is ``fixed_frame``, or with ``"auto"`` the first of ``world``, ``map``, ``odom`` connected to the
 camera, else the root of the camera's tree. A recording whose transforms never connect the
 fixed frame and the camera gives frames without a pose, with one warning naming the frames; a
@@ -49,9 +49,9 @@ from typing import IO, Any
 
 import numpy as np
 
-from services.recording.errors import RecordingError
-from services.recording.frame import CameraIntrinsics, CameraPose, Frame
-from services.recording.transforms import TransformError, TransformTree
+from gngdt_io.errors import RecordingError
+from gngdt_io.frame import CameraIntrinsics, CameraPose, Frame
+from gngdt_io.tf_tree import TransformError, TransformTree
 
 __all__ = ["RecordingError", "check_recording", "read_frames", "recording_info",
            "recording_metadata"]

@@ -29,8 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from services.recording.errors import RecordingError
-from services.recording.frame import CameraIntrinsics, Frame
+from gngdt_io.errors import RecordingError
+from gngdt_io.frame import CameraIntrinsics, Frame
 
 __all__ = ["FORMATS", "CameraParameters", "count_image_frames", "iter_image_frames", "load_camera"]
 

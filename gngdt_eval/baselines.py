@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.pointcloud import voxel_downsample, voxel_keys
+from gngdt_io.deproject import voxel_downsample, voxel_keys
 
 
 @dataclass(frozen=True)

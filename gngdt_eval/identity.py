@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gngdt_core.cluster_tracking import ClusterTracker
 from gngdt_core.objects import object_labels
-from gngdt_core.tracking import ClusterTracker
 
 #: a ground-truth segment needs this many points in a frame to be scored there
 MIN_SEGMENT_POINTS = 50

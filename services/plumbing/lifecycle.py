@@ -76,24 +76,6 @@ def child_environment() -> dict[str, str]:
     return {**os.environ, PARENT_ENV: str(os.getpid())}
 
 
-#: runs a non-Python command so that it dies with the process that started it (self-contained:
-#: imports nothing from the current folder)
-_TRAMPOLINE = """
-import ctypes, os, signal, sys
-if sys.platform.startswith("linux"):
-    ctypes.CDLL(None).prctl(1, signal.SIGTERM, 0, 0, 0)
-if os.getppid() != int(sys.argv[1]):
-    sys.exit(1)
-os.execvp(sys.argv[2], sys.argv[2:])
-"""
-
-
-def orphan_proof(command: list[str]) -> list[str]:
-    """``command`` wrapped so that it gets SIGTERM when this process exits, however it exits
-    (the death signal survives ``exec``)."""
-    return [sys.executable, "-P", "-c", _TRAMPOLINE, str(os.getpid()), *command]
-
-
 @contextlib.contextmanager
 def graceful() -> Iterator[threading.Event]:
     """Inside, a stop signal only sets :data:`STOP` (yielded) for the service loop to see."""

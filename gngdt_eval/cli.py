@@ -56,7 +56,7 @@ def _non_negative_float(text: str) -> float:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Register ``paper``, ``recording``, ``rrd`` and ``segmentation`` sub-subcommands."""
-    from services.evaluation.paper import STOP_RULES, PaperSettings
+    from gngdt_eval.paper import STOP_RULES, PaperSettings
 
     paper_defaults = PaperSettings(workers=1)
     sub = parser.add_subparsers(dest="eval_command", required=True, metavar="WHAT")
@@ -340,7 +340,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Dispatch to the chosen evaluation; bad input is reported as one line, exit code 2."""
-    from services.recording.errors import RecordingError
+    from gngdt_io.errors import RecordingError
 
     missing = [name for name in ("matplotlib", "sklearn") if importlib.util.find_spec(name) is None]
     if missing:  # checked first: the plots and references come after minutes of learning
@@ -357,7 +357,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _main_paper(args: argparse.Namespace) -> int:
-    from services.evaluation.paper import PaperSettings, run_paper
+    from gngdt_eval.paper import PaperSettings, run_paper
 
     options = {"workers": args.workers} if args.workers else {}
     settings = PaperSettings(
@@ -390,14 +390,14 @@ def _main_paper(args: argparse.Namespace) -> int:
 
 def _in_paper_order(methods: list[str]) -> tuple[str, ...]:
     """Chosen methods named as in the paper, in its column order (GNG, GNG-W, GNG-DT)."""
-    from services.evaluation.paper import METHOD_NAMES, METHODS
+    from gngdt_eval.paper import METHOD_NAMES, METHODS
 
     chosen = {METHOD_NAMES[m] for m in methods}
     return tuple(m for m in METHODS if m in chosen)
 
 
 def _main_recording(args: argparse.Namespace) -> int:
-    from services.evaluation.recording import RecordingSettings, evaluate_recording
+    from gngdt_eval.recording_eval import RecordingSettings, evaluate_recording
 
     overrides = {
         name: getattr(args, name)
@@ -411,7 +411,7 @@ def _main_recording(args: argparse.Namespace) -> int:
         )
         if getattr(args, name) is not None
     }
-    from services.evaluation.dynamics import DynamicsSettings
+    from gngdt_eval.dynamics import DynamicsSettings
 
     if args.utility_k is not None:
         if args.utility_k < 0:
@@ -446,7 +446,7 @@ def _main_recording(args: argparse.Namespace) -> int:
 
 
 def _main_rrd(args: argparse.Namespace) -> int:
-    from services.evaluation.rrd import evaluate_rrd
+    from gngdt_eval.rrd import evaluate_rrd
 
     out = args.out or Path("report") / args.path.stem
     data = evaluate_rrd(args.path, out)
@@ -455,7 +455,7 @@ def _main_rrd(args: argparse.Namespace) -> int:
 
 
 def _main_segmentation(args: argparse.Namespace) -> int:
-    from services.evaluation.segmentation import (
+    from gngdt_eval.segmentation import (
         SegmentationEvalSettings,
         evaluate_segmentation,
     )

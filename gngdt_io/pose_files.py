@@ -5,7 +5,7 @@ Every pose is camera-to-world (the camera's pose in the fixed frame ``world``), 
 
 - a **TUM trajectory** file: ``timestamp tx ty tz qx qy qz qw`` per line (``#`` comments, commas
   also separate numbers); each frame's pose is interpolated at the frame's stamp
-  (:class:`~services.recording.transforms.TransformTree`), and a frame outside the trajectory's
+  (:class:`~gngdt_io.tf_tree.TransformTree`), and a frame outside the trajectory's
   span is an error;
 - a file with ``tx ty tz qx qy qz qw`` per line, no timestamp: one pose per frame, in order;
 - a **folder** of per-frame files (``pose/NNNNNN.txt``, taken in name order), each holding a 4x4
@@ -27,9 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from services.recording.errors import RecordingError
-from services.recording.frame import DEFAULT_FIXED_FRAME, CameraPose, Frame
-from services.recording.transforms import (
+from gngdt_io.errors import RecordingError
+from gngdt_io.frame import DEFAULT_FIXED_FRAME, CameraPose, Frame
+from gngdt_io.tf_tree import (
     TransformError,
     TransformTree,
     matrix_to_pose,

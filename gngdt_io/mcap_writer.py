@@ -19,7 +19,7 @@ from typing import IO
 
 import numpy as np
 
-from services.recording.frame import Frame
+from gngdt_io.frame import Frame
 
 logger = logging.getLogger(__name__)
 

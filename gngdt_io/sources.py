@@ -1,7 +1,7 @@
 """Frames of an MCAP recording or an RGB-D image folder, each with the name its outputs take.
 
-A source is an MCAP file (gngdt's layout or a ROS 2 bag, :mod:`services.recording.reader`) or a
-folder in a layout ``gngdt record images`` reads (:mod:`services.recording.images`: ``tum``,
+A source is an MCAP file (gngdt's layout or a ROS 2 bag, :mod:`gngdt_io.mcap_reader`) or a
+folder in a layout ``gngdt record images`` reads (:mod:`gngdt_io.images`: ``tum``,
 ``pcl-tiff``, ``redwood``; other files and folders in it, such as a labelled set's ``label/``,
 are ignored). The layout is detected unless given. Frame names: the colour image's file stem for
 a folder, the 0-based frame index as 6 digits for a recording.
@@ -18,9 +18,9 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from services.recording.errors import RecordingError
-from services.recording.frame import Frame
-from services.recording.images import DEFAULT_CAMERAS, FORMATS, iter_image_frames, load_camera
+from gngdt_io.errors import RecordingError
+from gngdt_io.frame import Frame
+from gngdt_io.images import DEFAULT_CAMERAS, FORMATS, iter_image_frames, load_camera
 
 __all__ = ["SOURCE_FORMATS", "FrameSource", "detect_format", "open_source"]
 
@@ -78,7 +78,7 @@ class FrameSource:
         """(name, frame) in order; RecordingError naming the file for a frame that cannot be
         read (after yielding the frames before it)."""
         if self.format == "mcap":
-            from services.recording.reader import read_frames
+            from gngdt_io.mcap_reader import read_frames
 
             for frame in read_frames(self.path, fixed_frame=None):
                 yield f"{frame.index:06d}", frame

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from services.evaluation.paper import (
+from gngdt_eval.paper import (
     METHODS,
     Cell,
     PaperSettings,
@@ -30,7 +30,7 @@ from services.evaluation.paper import (
     make_model,
     trial_seed,
 )
-from services.evaluation.report import mean_std
+from gngdt_eval.report import mean_std
 
 MILLIMETRES_PER_METRE = 1000.0
 
@@ -85,8 +85,8 @@ def extract_frames(folders: Sequence[str | Path], all_frames: bool, cache_dir: P
         RealFrame]:
     """Deproject the first frame of each folder (every frame with ``all_frames``) into
     ``cache_dir``. Folders in any layout `gngdt record images` reads; RecordingError if not."""
-    from services.pointcloud import Deprojector
-    from services.recording.images import detect_format, iter_image_frames
+    from gngdt_io.deproject import Deprojector
+    from gngdt_io.images import detect_format, iter_image_frames
 
     deproject = Deprojector()
     frames = []

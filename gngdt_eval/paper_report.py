@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from services.evaluation.paper import (
+from gngdt_eval.paper import (
     GNGDT_THRESHOLDS,
     GNGW_WEIGHTS,
     PAPER_FIGURE11_CLUSTERS,
@@ -16,7 +16,7 @@ from services.evaluation.paper import (
     RECTANGLES,
     PaperSettings,
 )
-from services.evaluation.report import format_mean_std, format_number, markdown_table
+from gngdt_eval.report import format_mean_std, format_number, markdown_table
 
 
 def noise_label(level: float) -> str:
@@ -30,7 +30,7 @@ def write_plots(
     out_dir: Path,
 ) -> list[Path]:
     """Figure 10 per data set and the Figures 8/9 topology grids, for the main noise level."""
-    from services.evaluation.plots import TopologyPanel, plot_scale_curves, plot_topology_grid
+    from gngdt_eval.plots import TopologyPanel, plot_scale_curves, plot_topology_grid
 
     paths = []
     main = noise_label(settings.color_noise[0])
@@ -200,7 +200,7 @@ def _fit_section(levels: dict[float, Any], settings: PaperSettings) -> str:
         "colours' exact values — and keeps what the colour model changes: how far the "
         "baselines fall behind GNG-DT. Each column is the RMS of those logs (0 = the paper's "
         "ratios exactly; 0.1 ≈ 10 % off); the default level minimises \"all\" over a grid "
-        "(services/evaluation/README.md gives the run).",
+        "(gngdt_eval/README.md gives the run).",
         markdown_table(["colour", "Table 2 (position)", "Table 3 (colour)", "Data1", "Data2",
                         "all"], rows),
         f"Lowest \"all\" in this run: {noise_label(best)}.",
@@ -342,7 +342,7 @@ def _claims_section(levels: dict[float, Any], settings: PaperSettings) -> str:
 
 
 def _real_frames_section(real: dict[str, Any], settings: PaperSettings) -> str:
-    from services.evaluation.paper_rgbd import PAPER_TABLE5, PAPER_TABLE6, PAPER_WINNERS
+    from gngdt_eval.paper_rgbd import PAPER_TABLE5, PAPER_TABLE6, PAPER_WINNERS
 
     tables = real["tables"]
     parts = [

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from services.evaluation.report import (
+from gngdt_eval.report import (
     mean_std,
     write_report,
 )
@@ -781,14 +781,14 @@ def run_paper(
 
     RecordingError when a folder of ``settings.frames`` cannot be read (before any learning).
     """
-    from services.evaluation.paper_report import render_markdown, write_plots
-    from services.evaluation.paper_rgbd import (
+    from gngdt_eval.paper_report import render_markdown, write_plots
+    from gngdt_eval.paper_rgbd import (
         build_frame_tasks,
         extract_frames,
         frame_findings,
         summarise_frames,
     )
-    from services.evaluation.progress import ProgressBar
+    from gngdt_eval.progress import ProgressBar
 
     out_dir = Path(out_dir)
     started = time.perf_counter()

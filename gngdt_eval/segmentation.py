@@ -4,7 +4,7 @@ frame and overall beside the classic peer (Open3D plane RANSAC + DBSCAN) in the 
 A labelled set is a folder of frames (the ``redwood`` layout: ``color/``, ``depth/``,
 ``camera.json``) plus ``label/<name>.png`` per frame, uint16: 0 = no label (no depth), 1 =
 background, k >= 2 = a ground-truth segment (``../shared/data/labelled/README.md``). Scores:
-`services.evaluation.segment_scores`. gngdt runs through the same code as ``gngdt segment``
+`gngdt_eval.segment_scores`. gngdt runs through the same code as ``gngdt segment``
 (`services.segment.segment_frames`), in each mode asked for.
 """
 
@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from services.evaluation.open3d_peer import PeerParams
-from services.evaluation.report import format_number, markdown_table, write_report
-from services.evaluation.segment_scores import RECALL_THRESHOLDS, recall_key
+from gngdt_eval.open3d_peer import PeerParams
+from gngdt_eval.report import format_number, markdown_table, write_report
+from gngdt_eval.segment_scores import RECALL_THRESHOLDS, recall_key
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +64,7 @@ def read_truth(set_dir: Path, name: str, shape: tuple[int, int], index: int) -> 
     missing, unreadable or not of the frame's size."""
     import cv2
 
-    from services.recording.errors import RecordingError
+    from gngdt_io.errors import RecordingError
 
     path = set_dir / LABEL_FOLDER / f"{name}.png"
     if not path.is_file():
@@ -100,10 +100,10 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     """Run every method on the labelled set, score it and write the report into ``out``
     (``segmentation.md``, ``segmentation.json``, ``segmentation_<frame>.png``); returns the
     report's data."""
-    from services.evaluation.open3d_peer import Open3DPeer, load_open3d
-    from services.evaluation.progress import ProgressBar
-    from services.evaluation.segment_scores import score_frame
-    from services.recording.sources import open_source
+    from gngdt_eval.open3d_peer import Open3DPeer, load_open3d
+    from gngdt_eval.progress import ProgressBar
+    from gngdt_eval.segment_scores import score_frame
+    from gngdt_io.sources import open_source
     from services.segment import organized_frames, segment_frames
     from services.segment_profile import load_profile
 
@@ -200,7 +200,7 @@ def _spread(count: int, wanted: int) -> list[int]:
 
 
 def _method_summary(scores: list, records: list[dict[str, Any]]) -> dict[str, Any]:
-    from services.evaluation.segment_scores import summarize_scores
+    from gngdt_eval.segment_scores import summarize_scores
     from services.segment import timing_summary
 
     return {"summary": summarize_scores(scores),
@@ -210,7 +210,7 @@ def _method_summary(scores: list, records: list[dict[str, Any]]) -> dict[str, An
 
 def _figures(out: Path, frames: list[_Frame], predictions: dict[str, dict[int, np.ndarray]],
              drawn: list[int], set_name: str) -> list[str]:
-    from services.evaluation.plots import label_image_colours, plot_image_rows
+    from gngdt_eval.plots import label_image_colours, plot_image_rows
 
     paths = []
     for index in drawn:

@@ -125,7 +125,7 @@ class Change:
 
 def scene_changes(metadata: dict[str, dict[str, str]]) -> list[Change]:
     """The changes a synthetic recording's ``gngdt.scene`` metadata describes (none if absent)."""
-    from services.recording.synth import SCENE_METADATA
+    from gngdt_io.synth.render import SCENE_METADATA
 
     scene = metadata.get(SCENE_METADATA)
     if not scene:
@@ -219,7 +219,7 @@ class DynamicsTracker:
     def world_reference(self, model: Any) -> dict[str, float]:
         """Position error (eq. 17) of the nodes and of k-means with as many centres on the
         world sample, k-means fitted on the other half of it; empty without poses."""
-        from services.evaluation.references import kmeans_reference, quantization_error
+        from gngdt_eval.baselines import kmeans_reference, quantization_error
 
         nodes = np.asarray(model.positions_)
         sample = self.world.points if self.world is not None else np.zeros((0, 3))

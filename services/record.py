@@ -8,8 +8,8 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from services.recording.errors import RecordingError
-from services.recording.frame import Frame
+from gngdt_io.errors import RecordingError
+from gngdt_io.frame import Frame
 
 logger = logging.getLogger(__name__)
 
@@ -45,9 +45,9 @@ IMAGES_EXAMPLES = """examples:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``synth`` and ``images`` sub-subcommands."""
-    from services.recording.images import FORMATS
-    from services.recording.synth import SCENES
-    from services.recording.writer import COLOR_FORMATS, COMPRESSIONS
+    from gngdt_io.images import FORMATS
+    from gngdt_io.mcap_writer import COLOR_FORMATS, COMPRESSIONS
+    from gngdt_io.synth.render import SCENES
 
     kinds = parser.add_subparsers(dest="record_kind", required=True, metavar="KIND")
 
@@ -126,7 +126,7 @@ def write_recording(
 ) -> int:
     """Write ``frames`` to ``args.out`` with a progress line every ``PROGRESS_EVERY`` frames;
     ``metadata``: named MCAP metadata records."""
-    from services.recording.writer import RecordingWriter
+    from gngdt_io.mcap_writer import RecordingWriter
 
     started = time.perf_counter()
     with RecordingWriter(
@@ -146,7 +146,7 @@ def write_recording(
 
 def _synth_frames(args: argparse.Namespace) -> Iterable[Frame]:
     try:
-        from services.recording.synth import SCENES, render_scene
+        from gngdt_io.synth.render import SCENES, render_scene
     except ImportError as error:
         raise ValueError(f"the synthetic renderer is not available ({error})") from error
     if args.scene not in SCENES:
@@ -166,7 +166,7 @@ def _synth_frames(args: argparse.Namespace) -> Iterable[Frame]:
 def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     from dataclasses import replace
 
-    from services.recording.images import iter_image_frames, load_camera
+    from gngdt_io.images import iter_image_frames, load_camera
 
     camera = load_camera(args.directory, args.image_format, args.camera_json)
     overrides = {
@@ -182,8 +182,8 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     )
     if args.poses is None:
         return frames
-    from services.recording.images import count_image_frames
-    from services.recording.poses import attach_poses, load_poses
+    from gngdt_io.images import count_image_frames
+    from gngdt_io.pose_files import attach_poses, load_poses
 
     poses = load_poses(args.poses)  # every pose error before the first frame is written
     count = count_image_frames(args.directory, args.image_format, fps=args.fps)
@@ -191,8 +191,8 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
 
 
 def _synth_metadata(args: argparse.Namespace) -> dict[str, dict[str, str]]:
-    from services.recording.scenes import build_scene
-    from services.recording.synth import SCENE_METADATA, scene_metadata
+    from gngdt_io.synth.render import SCENE_METADATA, scene_metadata
+    from gngdt_io.synth.scenes import build_scene
 
     return {SCENE_METADATA: scene_metadata(build_scene(args.scene), args.fps)}
 

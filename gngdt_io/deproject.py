@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from services.recording.frame import CameraIntrinsics
+from gngdt_io.frame import CameraIntrinsics
 
 
 def ray_map(intrinsics: CameraIntrinsics) -> np.ndarray:

@@ -7,7 +7,7 @@ learner's per-frame call: with the recording's camera poses the network is learn
 frame (``world_frame``), without them in the camera frame. After every frame we measure the
 quantization errors on that frame's points, the node count, the clusters per topology and, where
 the recording has ground-truth labels, the adjusted Rand index of each clustering (each point
-takes its winner node's cluster), plus the metrics over time of :mod:`services.evaluation.dynamics`
+takes its winner node's cluster), plus the metrics over time of :mod:`gngdt_eval.dynamics`
 (ghost share, old-place nodes of changed objects, and with poses the error against k-means on
 the world seen so far). On the last frame the references are computed on the same points: k-means
 with as many centres as nodes, a voxel grid downsampled to as many points, and DBSCAN of the raw
@@ -25,19 +25,19 @@ from typing import Any
 
 import numpy as np
 
-from services.evaluation.dynamics import (
+from gngdt_eval.dynamics import (
     CameraView,
     DynamicsSettings,
     DynamicsTracker,
     scene_changes,
 )
-from services.evaluation.paper import (
+from gngdt_eval.paper import (
     METHOD_NAMES,
     PAPER_PARAMETERS,
     clusterings_of,
     make_model,
 )
-from services.evaluation.report import (
+from gngdt_eval.report import (
     format_mean_std,
     format_number,
     markdown_table,
@@ -144,9 +144,9 @@ class FramePoints:
 
 def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
     """Frames of the recording deprojected like the capture service does (labels with them)."""
+    from gngdt_io.deproject import Deprojector
+    from gngdt_io.mcap_reader import read_frames
     from services.capture import DEFAULT_MAX_SKEW_MS
-    from services.pointcloud import Deprojector
-    from services.recording.reader import read_frames
 
     deproject = Deprojector(settings.min_depth_m, settings.max_depth_m)
     # colour and depth paired as capture pairs them, so a ROS 2 bag replays here as it does live
@@ -186,8 +186,8 @@ def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intr
 def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> dict[str, Any]:
     """One method, one seed, every frame: per-frame metrics and the final model's topology."""
     from gngdt_core import adjusted_rand_index, cluster_count
-    from services.evaluation.identity import IdentityScore
-    from services.recording.reader import recording_metadata
+    from gngdt_eval.identity import IdentityScore
+    from gngdt_io.mcap_reader import recording_metadata
 
     forgetting = ({"utility_k": settings.utility_k, "replay_share": settings.replay_share}
                   if method == "GNG-DT" else {})
@@ -262,7 +262,7 @@ def references(
 ) -> dict[str, Any]:
     """k-means and voxel grid at each node count, DBSCAN ARI beside GNG-DT's, on the last frame."""
     from gngdt_core import adjusted_rand_index, cluster_count
-    from services.evaluation.references import dbscan_labels, kmeans_reference, voxel_grid_reference
+    from gngdt_eval.baselines import dbscan_labels, kmeans_reference, voxel_grid_reference
 
     positions = last.positions.astype(np.float64)
     colors = last.colors.astype(np.float64)
@@ -317,7 +317,7 @@ def evaluate_recording(
     path: str | Path, settings: RecordingSettings, out_dir: str | Path, progress: bool = True
 ) -> dict[str, Any]:
     """Replay ``path`` through every method and trial; write ``recording.md/.json`` + PNGs."""
-    from services.evaluation.progress import ProgressBar
+    from gngdt_eval.progress import ProgressBar
 
     path, out_dir = Path(path), Path(out_dir)
     if not path.is_file():
@@ -466,7 +466,7 @@ def _mean_curve(runs: list[dict[str, Any]], method: str, key: str,
 def _plot_over_time(runs: list[dict[str, Any]], methods: list[str], path: Path,
                     out_dir: Path, ghost_distance_m: float) -> Path:
     """Ghost share, nodes, world error / k-means and old-place nodes per frame, per method."""
-    from services.evaluation.plots import plot_method_curves
+    from gngdt_eval.plots import plot_method_curves
 
     def curves(key: str, group: str | None = "dynamics") -> dict[str, Any]:
         result = {m: _mean_curve(runs, m, key, group) for m in methods}
@@ -502,7 +502,7 @@ def _write_plots(
     min_cluster_size: int,
     ghost_distance_m: float,
 ) -> list[Path]:
-    from services.evaluation.plots import TopologyPanel, plot_method_curves, plot_topology_grid
+    from gngdt_eval.plots import TopologyPanel, plot_method_curves, plot_topology_grid
 
     methods = list(summary)
     curves = {
@@ -689,7 +689,7 @@ def render_markdown(data: dict[str, Any], settings: RecordingSettings, plots: li
     parts.append("## Object identity (persistent cluster ids, as the learner publishes them)")
     parts.append(
         "Each cluster keeps an id from frame to frame by node membership "
-        "(`gngdt_core.tracking`); objects are the clusters of at least "
+        "(`gngdt_core.cluster_tracking`); objects are the clusters of at least "
         f"{settings.min_cluster_size} nodes seen in {settings.object_confirm_frames} frame(s) in "
         "a row, as the learner publishes them. *Tracks kept*: share of the objects of a frame "
         "whose id is still an object in the next. With ground truth, each segment is represented "

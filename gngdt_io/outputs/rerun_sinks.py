@@ -10,6 +10,7 @@ a child that dies with the logger, and logs to it over gRPC.
 from __future__ import annotations
 
 import logging
+import os
 import shutil
 import socket
 import subprocess
@@ -18,8 +19,6 @@ import tempfile
 import time
 from pathlib import Path
 from typing import Any
-
-from services import lifecycle
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +31,24 @@ DEFAULT_MAX_RRD_MB = 4096
 DEFAULT_MIN_FREE_MB = 256
 #: a flush of one second of data that takes longer than this means the file cannot be written
 FLUSH_TIMEOUT_S = 10.0
+
+
+#: runs a non-Python command so that it dies with the process that started it (self-contained:
+#: imports nothing from the current folder)
+_TRAMPOLINE = """
+import ctypes, os, signal, sys
+if sys.platform.startswith("linux"):
+    ctypes.CDLL(None).prctl(1, signal.SIGTERM, 0, 0, 0)
+if os.getppid() != int(sys.argv[1]):
+    sys.exit(1)
+os.execvp(sys.argv[2], sys.argv[2:])
+"""
+
+
+def orphan_proof(command: list[str]) -> list[str]:
+    """``command`` wrapped so that it gets SIGTERM when this process exits, however it exits
+    (the death signal survives ``exec``)."""
+    return [sys.executable, "-P", "-c", _TRAMPOLINE, str(os.getpid()), *command]
 
 
 class NullRecording:
@@ -131,7 +148,7 @@ class ViewerServer:
         command = [rerun_binary(), "--serve-web", "--bind", bind,
                    "--port", str(grpc_port), "--web-viewer-port", str(web_port),
                    "--server-memory-limit", SERVER_MEMORY_LIMIT]
-        self.process = subprocess.Popen(lifecycle.orphan_proof(command), stdin=subprocess.DEVNULL,
+        self.process = subprocess.Popen(orphan_proof(command), stdin=subprocess.DEVNULL,
                                         stdout=self._output, stderr=subprocess.STDOUT)
 
     @property
