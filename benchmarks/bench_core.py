@@ -66,9 +66,9 @@ def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
                      frames: int) -> None:
     """Steps/s at 1,000 nodes without forgetting, with it, and with the learner's whole profile
     (forgetting and rehearsal), on one batch and frame by frame."""
+    from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
     from gngdt_io.deproject import Deprojector
     from gngdt_io.synth.render import render_scene
-    from services.learner import LEARNER_MODEL_DEFAULTS
 
     profiles = {"off": {}, "forgetting": {"utility_k": LEARNER_MODEL_DEFAULTS["utility_k"]},
                 "profile": LEARNER_MODEL_DEFAULTS}

@@ -24,12 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
+from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
 from gngdt_eval.dynamics import DynamicsSettings
 from gngdt_eval.recording_eval import RecordingSettings, replay, summarise_over_time
 from gngdt_io.mcap_writer import RecordingWriter
 from gngdt_io.synth.render import SCENE_METADATA, render_scene, scene_metadata
 from gngdt_io.synth.scenes import build_scene
-from services.learner import LEARNER_MODEL_DEFAULTS
 
 #: scene -> frames rendered (the walk goes out and back: 240 frames at 30 fps)
 SCENES = {"tabletop_walk": 240, "tabletop_vanish": 150, "tabletop_move": 150}

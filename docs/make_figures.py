@@ -62,9 +62,9 @@ def learn_scene(recording: Path, params: Path | None, samples_per_frame: int,
     from gngdt_core import GNGDT
     from gngdt_io.deproject import Deprojector
     from gngdt_io.mcap_reader import read_frames
-    from services.learner import load_params
+    from gngdt_io.profiles import load_profile
 
-    config = load_params(params)
+    config = load_profile(params).config
     model = GNGDT(**{**config.model, "random_state": seed})
     deproject = Deprojector()
     last = None

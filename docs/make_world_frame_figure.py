@@ -72,7 +72,7 @@ def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
     from matplotlib.collections import LineCollection
 
     from gngdt_core import GNGDT
-    from services.learner import load_params
+    from gngdt_io.profiles import load_profile
 
     frames = posed_frames(folder)
     first_from_world = np.linalg.inv(frames[0][2])
@@ -86,7 +86,7 @@ def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
         print(f"{name}: median distance to the other frames "
               + ", ".join(f"{v * 1000:.1f} mm" for v in values))
 
-    model = GNGDT(**{**load_params(None).model, "random_state": seed})
+    model = GNGDT(**{**load_profile(None).config.model, "random_state": seed})
     for points, colors, pose in frames:
         model.partial_fit(points, colors, n_steps=SAMPLES_PER_FRAME, camera_pose=pose)
     nodes = model.positions_ @ first_from_world[:3, :3].T + first_from_world[:3, 3]

@@ -1,6 +1,9 @@
-"""Connected components of a node graph (one topology or several combined)."""
+"""Connected components of a node graph (one topology or several combined), and the registry
+of the clusterings gngdt publishes (`CLUSTERINGS`)."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_array
@@ -44,3 +47,52 @@ def rank_by_size(labels: np.ndarray, min_size: int = 1) -> np.ndarray:
     new_label = np.full(sizes.size, -1, dtype=np.int32)
     new_label[kept] = np.arange(kept.size, dtype=np.int32)
     return new_label[dense]
+
+
+@dataclass(frozen=True)
+class Clustering:
+    """One way of grouping a network's nodes, published and drawn under ``name``.
+
+    topologies: the edge sets whose connected components are its clusters (an edge counts where
+    every named topology has it), or ``("cvx",)``: the segmentation by local convexity
+    (`gngdt_core.segmentation`), whose segments are not plain components. Every clustering is
+    drawn the same way: nodes and its edges coloured by persistent cluster id, grey outside any
+    cluster (`schemas.cluster_colors`).
+    """
+
+    name: str
+    topologies: tuple[str, ...]
+    #: what one cluster stands for, for people
+    meaning: str
+
+    @property
+    def is_segmentation(self) -> bool:
+        return self.topologies == (CONVEXITY,)
+
+
+#: the paper's topologies, one edge set per property
+EDGE_PROPERTIES = ("pos", "col", "nor")
+#: the local-convexity topology (derived from positions, fresh normals and position edges)
+CONVEXITY = "cvx"
+#: every clustering gngdt publishes, in the order views show them; read by the learner, the
+#: logger, the scene output and evaluation
+CLUSTERINGS: dict[str, Clustering] = {
+    clustering.name: clustering for clustering in (
+        Clustering("segments", (CONVEXITY,), "objects: segments by local convexity"),
+        Clustering("pos", ("pos",), "objects by shape: nodes joined by position edges"),
+        Clustering("col", ("col",), "regions of one colour"),
+        Clustering("nor", ("nor",), "planes: surfaces of one orientation"),
+        Clustering("col+nor", ("col", "nor"), "faces of one colour and one orientation"),
+    )
+}
+#: the clusterings that are connected components of the paper's topologies (all but segments)
+TOPOLOGY_CLUSTERINGS = tuple(name for name, clustering in CLUSTERINGS.items()
+                             if not clustering.is_segmentation)
+
+
+def clustering(name: str) -> Clustering:
+    """The registered clustering ``name``; ValueError naming the known ones otherwise."""
+    try:
+        return CLUSTERINGS[name]
+    except KeyError:
+        raise ValueError(f"unknown clustering {name!r}; known: {', '.join(CLUSTERINGS)}") from None

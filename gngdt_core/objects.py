@@ -7,7 +7,7 @@ while the cluster keeps most of its nodes. A cluster becomes an object once it h
 ``min_size`` nodes and its track is confirmed (seen in ``confirm_frames`` labellings in a row):
 fragments that split off for a frame or two and merge back are never published.
 
-    tracker = ObjectTracker("segments")        # or "pos", "col+nor", ... (any clustering)
+    tracker = ObjectTracker("segments")        # or "pos", "col+nor" (CLUSTERINGS)
     for points, colors in frames:
         model.partial_fit(points, colors, n_steps=10_000)
         objects = tracker.update(model)        # ObjectSet: ids, centres, sizes, ...
@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from gngdt_core.cluster_tracking import ClusterTracker
+from gngdt_core.clustering import clustering as clustering_spec
 
 
 @dataclass(frozen=True)
@@ -153,33 +154,42 @@ def _dominant_normals(normals: np.ndarray, index: np.ndarray, k: int) -> np.ndar
 
 
 class ObjectTracker:
-    """Objects of one clustering of a `GNGDT`, with ids kept from call to call.
+    """Objects of one clustering of a `GNGDT` (`gngdt_core.clustering.CLUSTERINGS`), with ids
+    kept from call to call; the learner keeps one per clustering.
 
-    clustering: "segments" (the model's segmentation, when it has one) or properties joined by
-    "+" as in ``model.clusters`` ("pos", "col+nor", ...). min_size: fewest nodes of an object;
-    confirm_frames: calls in a row a cluster must be seen in before it is an object (defaults as
-    the learner's). Other arguments go to `ClusterTracker`.
+    min_size: fewest nodes of an object; confirm_frames: labellings in a row a cluster must be
+    seen in before it is an object (defaults as the learner's). Other arguments go to
+    `ClusterTracker` (``tracker``).
     """
 
     def __init__(self, clustering: str = "segments", min_size: int = 5, confirm_frames: int = 5,
                  **tracker_args: Any):
-        self.clustering = clustering
+        self.clustering = clustering_spec(clustering)
         self.min_size = min_size
         self.tracker = ClusterTracker(confirm_frames=confirm_frames, **tracker_args)
 
     def labels(self, model: Any) -> np.ndarray:
         """(n_nodes,) int32 labels of the clustering (segments fall back to "pos" clusters on a
         model without a segmentation)."""
-        if self.clustering == "segments":
+        topologies = self.clustering.topologies
+        if self.clustering.is_segmentation:
             if hasattr(model, "segment"):
                 return np.asarray(model.segment())
-            return model.clusters("pos", min_size=self.min_size)
-        return model.clusters(*self.clustering.split("+"), min_size=self.min_size)
+            topologies = ("pos",)
+        return model.clusters(*topologies, min_size=self.min_size)
+
+    def track(self, node_ids: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        """(K,) int64 persistent id of each label 0..K-1 of this labelling (`ClusterTracker`)."""
+        return self.tracker.update(node_ids, labels)
+
+    def objects(self, model: Any, labels: np.ndarray, ids: np.ndarray) -> ObjectSet:
+        """The confirmed clusters of at least ``min_size`` nodes among ``labels`` (the labelling
+        `track` was last given, ``ids`` what it returned) as objects of ``model``."""
+        return describe_objects(model.positions_, model.colors_, model.normals_,
+                                object_labels(labels, self.tracker.confirmed_, self.min_size), ids)
 
     def update(self, model: Any) -> ObjectSet:
         """The model's objects now (confirmed clusters of at least ``min_size`` nodes); ids
         carried over from the previous call by node membership."""
         labels = self.labels(model)
-        ids = self.tracker.update(model.node_ids_, labels)
-        return describe_objects(model.positions_, model.colors_, model.normals_,
-                                object_labels(labels, self.tracker.confirmed_, self.min_size), ids)
+        return self.objects(model, labels, self.track(model.node_ids_, labels))

@@ -1,10 +1,20 @@
-"""Validation of the learners' hyper-parameters, in one place."""
+"""Every parameter declared once: its type, range and default, validated in one place.
+
+scikit-learn's idea (``_parameter_constraints``): an estimator's constructor signature gives the
+defaults and a table of constraints gives type and range (`MODEL_CONSTRAINTS`, for `GNGDT`,
+`GNG` and `GNGW`); a group of settings that is not an estimator (segmentation, frame schedule,
+learner options) is a frozen dataclass whose fields are declared with `param`, default and
+constraint together, and validated by `check_fields`. `from_mapping` builds such a group from a
+TOML table. Profiles (TOML files) only override these declarations; `gngdt_io.profiles` reads
+them, and `gngdt learn --print-params` shows the effective values and where each came from.
+"""
 
 from __future__ import annotations
 
 import math
 import numbers
-from typing import Any
+from dataclasses import dataclass, field, fields
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -12,93 +22,155 @@ import numpy as np
 #: ~2 GB; a larger budget (e.g. from a crafted checkpoint) is refused before any allocation
 MAX_NODES_LIMIT = 10_000_000
 
-
-def check_integer(name: str, value: Any, minimum: int, maximum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    if value < minimum:
-        raise ValueError(f"{name} must be >= {minimum}, got {value}")
-    if maximum is not None and value > maximum:
-        raise ValueError(f"{name} must be <= {maximum}, got {value}")
-    return int(value)
+_BRACKETS = {"both": "[]", "left": "[)", "right": "(]", "neither": "()"}
 
 
-def check_real(name: str, value: Any, low: float, high: float = math.inf,
-          low_open: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a real number, got {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    if number < low or (low_open and number == low) or number > high:
-        left = "(" if low_open else "["
-        raise ValueError(f"{name} must be in {left}{low}, {high}], got {value!r}")
-    return number
+@dataclass(frozen=True)
+class Interval:
+    """A number of ``kind`` (int or float) within ``low``..``high``; ``closed`` says which ends
+    belong to it ("both", "left", "right", "neither"); ``optional``: None is allowed too."""
+
+    kind: type
+    low: float = -math.inf
+    high: float = math.inf
+    closed: str = "both"
+    optional: bool = False
+
+    def check(self, name: str, value: Any) -> Any:
+        """``value`` normalised (int or float), or ValueError naming ``name``."""
+        if value is None and self.optional:
+            return None
+        integral = self.kind is int
+        wanted = numbers.Integral if integral else numbers.Real
+        if isinstance(value, bool) or not isinstance(value, wanted):
+            raise ValueError(f"{name} must be {'an integer' if integral else 'a real number'}"
+                             f"{' or None' if self.optional else ''}, got {value!r}")
+        number = int(value) if integral else float(value)
+        if not integral and not math.isfinite(number):
+            raise ValueError(f"{name} must be finite, got {value!r}")
+        low_ok = number > self.low or (number == self.low and self.closed in ("both", "left"))
+        high_ok = number < self.high or (number == self.high and self.closed in ("both", "right"))
+        if not (low_ok and high_ok):
+            raise ValueError(f"{name} must be in {self.describe()}, got {value!r}")
+        return number
+
+    def describe(self) -> str:
+        left, right = _BRACKETS[self.closed]
+        return f"{left}{_bound(self.low)}, {_bound(self.high)}{right}"
+
+
+def _bound(value: float) -> str:
+    if math.isinf(value):
+        return "inf" if value > 0 else "-inf"
+    return f"{value:g}"
+
+
+@dataclass(frozen=True)
+class Point3:
+    """Three finite numbers (a point in metres), as a tuple of floats; ``optional``: or None."""
+
+    optional: bool = False
+
+    def check(self, name: str, value: Any) -> tuple[float, float, float] | None:
+        if value is None and self.optional:
+            return None
+        try:
+            point = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"{name} must be 3 numbers or None: {error}") from error
+        if point.shape != (3,) or not np.isfinite(point).all():
+            raise ValueError(f"{name} must be 3 finite numbers or None, got {value!r}")
+        return (float(point[0]), float(point[1]), float(point[2]))
+
+
+@dataclass(frozen=True)
+class OneOf:
+    """A string, one of ``choices`` (empty: any non-empty string)."""
+
+    choices: tuple[str, ...] = ()
+
+    def check(self, name: str, value: Any) -> str:
+        if not isinstance(value, str) or not value:
+            raise ValueError(f"{name} must be a non-empty string, got {value!r}")
+        if self.choices and value not in self.choices:
+            raise ValueError(f"{name} must be one of {', '.join(self.choices)}, got {value!r}")
+        return value
+
+
+Constraint = Interval | Point3 | OneOf
+
+#: the estimators' hyper-parameters (`GNGDT`, `GNG`, `GNGW`; defaults in their signatures)
+MODEL_CONSTRAINTS: dict[str, Constraint] = {
+    "max_nodes": Interval(int, 2, MAX_NODES_LIMIT),
+    "lambda_": Interval(int, 1),
+    "age_max": Interval(int, 1),
+    "eta1": Interval(float, 0.0, 1.0, closed="right"),
+    "eta2": Interval(float, 0.0, 1.0),
+    "alpha": Interval(float, 0.0, 1.0),
+    "beta": Interval(float, 0.0, 1.0, closed="left"),
+    "tau_col": Interval(float, 0.0, closed="neither"),
+    "tau_nor": Interval(float, 0.0, closed="neither"),
+    "normal_mu": Interval(float, 0.0, closed="neither", optional=True),
+    "viewpoint": Point3(optional=True),
+    "normal_angle_deg": Interval(float, 0.0, 90.0, closed="right", optional=True),
+    "normal_refresh_steps": Interval(int, 1, optional=True),
+    # 0 turns forgetting off, like None (params files, TOML, have no None)
+    "utility_k": Interval(float, 0.0, optional=True),
+    "utility_decay": Interval(float, 0.0, 1.0, closed="left"),
+    "view_depth_margin": Interval(float, 0.0, 10.0),
+    "replay_share": Interval(float, 0.0, 1.0, closed="left"),
+    "replay_points": Interval(int, 1, MAX_NODES_LIMIT),
+    "w_pos": Interval(float, 0.0, closed="neither"),
+    "w_col": Interval(float, 0.0),
+    "random_state": Interval(int, 0, optional=True),
+}
 
 
 def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
-    """Check every known hyper-parameter present in ``params``; return them normalised.
+    """Every hyper-parameter in ``params`` checked against `MODEL_CONSTRAINTS`, normalised.
 
-    Raises ValueError naming the offending parameter.
+    Raises ValueError naming the offending parameter (an unknown one included).
     """
-    checked = dict(params)
-    checked["max_nodes"] = check_integer("max_nodes", params["max_nodes"], 2, MAX_NODES_LIMIT)
-    checked["lambda_"] = check_integer("lambda_", params["lambda_"], 1)
-    checked["age_max"] = check_integer("age_max", params["age_max"], 1)
-    checked["eta1"] = check_real("eta1", params["eta1"], 0.0, 1.0, low_open=True)
-    checked["eta2"] = check_real("eta2", params["eta2"], 0.0, 1.0)
-    if checked["eta2"] > checked["eta1"]:
+    checked = {}
+    for name, value in params.items():
+        if name not in MODEL_CONSTRAINTS:
+            raise ValueError(f"unknown parameter {name!r}")
+        checked[name] = MODEL_CONSTRAINTS[name].check(name, value)
+    if checked.get("utility_k") == 0.0:
+        checked["utility_k"] = None
+    if "eta1" in checked and checked.get("eta2", 0.0) > checked["eta1"]:
         raise ValueError(f"eta2 ({checked['eta2']}) must not exceed eta1 ({checked['eta1']})")
-    checked["alpha"] = check_real("alpha", params["alpha"], 0.0, 1.0)
-    checked["beta"] = check_real("beta", params["beta"], 0.0, 1.0, low_open=False)
-    if checked["beta"] >= 1.0:
-        raise ValueError(f"beta must be < 1, got {checked['beta']}")
-    if "tau_col" in params:
-        checked["tau_col"] = check_real("tau_col", params["tau_col"], 0.0, low_open=True)
-    if "tau_nor" in params:
-        checked["tau_nor"] = check_real("tau_nor", params["tau_nor"], 0.0, low_open=True)
-    if params.get("normal_angle_deg") is not None:
-        checked["normal_angle_deg"] = check_real("normal_angle_deg", params["normal_angle_deg"],
-                                                 0.0, 90.0, low_open=True)
-    if params.get("normal_refresh_steps") is not None:
-        checked["normal_refresh_steps"] = check_integer("normal_refresh_steps",
-                                                        params["normal_refresh_steps"], 1)
-    if "normal_mu" in params and params["normal_mu"] is not None:
-        checked["normal_mu"] = check_real("normal_mu", params["normal_mu"], 0.0, low_open=True)
-    if "viewpoint" in params and params["viewpoint"] is not None:
-        try:
-            viewpoint = np.asarray(params["viewpoint"], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"viewpoint must be 3 numbers or None: {exc}") from exc
-        if viewpoint.shape != (3,) or not np.isfinite(viewpoint).all():
-            raise ValueError(
-                f"viewpoint must be 3 finite numbers or None, got {params['viewpoint']!r}"
-            )
-        checked["viewpoint"] = tuple(float(v) for v in viewpoint)
-    if params.get("utility_k") is not None:
-        # 0 turns forgetting off, like None: params files (TOML) have no None
-        checked["utility_k"] = (check_real("utility_k", params["utility_k"], 0.0) or None)
-    if "utility_decay" in params:
-        checked["utility_decay"] = check_real("utility_decay", params["utility_decay"], 0.0, 1.0)
-        if checked["utility_decay"] >= 1.0:
-            raise ValueError(f"utility_decay must be < 1, got {checked['utility_decay']}")
-    if "view_depth_margin" in params:
-        checked["view_depth_margin"] = check_real(
-            "view_depth_margin", params["view_depth_margin"], 0.0, 10.0
-        )
-    if "replay_share" in params:
-        checked["replay_share"] = check_real("replay_share", params["replay_share"], 0.0, 1.0)
-        if checked["replay_share"] >= 1.0:
-            raise ValueError(f"replay_share must be < 1, got {checked['replay_share']}")
-    if "replay_points" in params:
-        checked["replay_points"] = check_integer("replay_points", params["replay_points"], 1,
-                                                 MAX_NODES_LIMIT)
-    for weight in ("w_pos", "w_col"):
-        if weight in params:
-            checked[weight] = check_real(weight, params[weight], 0.0)
-    if "w_pos" in params and checked["w_pos"] == 0.0:
-        raise ValueError("w_pos must be > 0 (the position drives the topology)")
-    random_state = params.get("random_state")
-    if random_state is not None:
-        checked["random_state"] = check_integer("random_state", random_state, 0)
     return checked
+
+
+def param(default: Any, constraint: Constraint, doc: str = "") -> Any:
+    """A dataclass field declaring one setting: default, constraint and meaning together."""
+    return field(default=default, metadata={"constraint": constraint, "doc": doc})
+
+
+def check_fields(instance: Any, what: str = "") -> None:
+    """Check every `param` field of a dataclass ``instance``; ValueError naming the field
+    (prefixed by ``what``, e.g. "learner option")."""
+    for item in fields(instance):
+        constraint = item.metadata.get("constraint")
+        if constraint is not None:
+            name = f"{what} {item.name}" if what else item.name
+            constraint.check(name, getattr(instance, item.name))
+
+
+def describe_fields(cls: type) -> dict[str, str]:
+    """Field name -> its meaning (the ``doc`` given to `param`)."""
+    return {item.name: item.metadata.get("doc", "") for item in fields(cls)}
+
+
+SettingsT = TypeVar("SettingsT")
+
+
+def from_mapping(cls: type[SettingsT], values: dict[str, Any], what: str) -> SettingsT:
+    """``cls`` (a dataclass of `param` fields) from a mapping such as a TOML table; ValueError
+    naming unknown keys (``what``: "segmentation parameter", "frame schedule key", ...)."""
+    known = {item.name for item in fields(cls)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown {what}(s) {unknown}; known: {sorted(known)}")
+    return cls(**values)

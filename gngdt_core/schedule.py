@@ -18,13 +18,13 @@ network and segments out.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from gngdt_core.model import GNGDT
-from gngdt_core.parameters import check_integer, check_real
+from gngdt_core.parameters import Interval, check_fields, from_mapping, param
 from gngdt_core.segmentation import Segmentation, SegmentationParams
 from gngdt_core.view import SensorView
 
@@ -45,53 +45,51 @@ GAP_VIEW_STRIDE = 2
 class FrameSchedule:
     """How frames are turned into learning: steps, points used, attention (validated)."""
 
-    #: learning steps for a frame learned from scratch (independent, first frame, new scene)
-    steps_first_frame: int = 200_000
-    #: learning steps for each later frame of a stream
-    steps_per_frame: int = 10_000
-    #: organized frames only (depth images): a pixel is a veil point (a depth edge's mixed
-    #: measurement) and is not learned when its depth differs from a 4-neighbour's by more
-    #: than this share of the nearer depth; 0 keeps every pixel
-    veil_ratio: float = 0.03
-    #: depth range learned, metres (camera frame z); pixels outside it are still labelled
-    min_depth_m: float = 0.0
-    max_depth_m: float = 10.0
-    #: share of the points on large flat surfaces (tables, floors) that are learned (1.0: all)
-    flat_surface_share: float = 0.05
-    #: a smooth patch is a large flat surface when it holds at least this share of the nodes
-    flat_surface_min_nodes: float = 0.1
-    #: a frame learned from scratch learns this share of its steps from every point first, to
-    #: find the large flat surfaces
-    warm_up_share: float = 0.5
-    #: a frame is a new scene when more than ``scene_change_share`` of its points lie farther
-    #: than ``scene_change_distance_m`` from every node; 1.0 never cuts
-    scene_change_distance_m: float = 0.02
-    scene_change_share: float = 0.015
+    steps_first_frame: int = param(200_000, Interval(int, 1),
+                                   "learning steps for a frame learned from scratch "
+                                   "(independent, first frame, new scene)")
+    steps_per_frame: int = param(10_000, Interval(int, 1),
+                                 "learning steps for each later frame of a stream")
+    veil_ratio: float = param(0.03, Interval(float, 0.0),
+                              "organized frames only: a pixel whose depth differs from a "
+                              "4-neighbour's by more than this share of the nearer depth is a "
+                              "veil point (a depth edge's mixed measurement), not learned; 0 "
+                              "keeps every pixel")
+    min_depth_m: float = param(0.0, Interval(float, 0.0),
+                               "depth range learned, metres (camera z); pixels outside it are "
+                               "still labelled")
+    max_depth_m: float = param(10.0, Interval(float, 0.0, closed="neither"),
+                               "far end of the depth range learned, metres")
+    flat_surface_share: float = param(0.05, Interval(float, 0.0, 1.0, closed="right"),
+                                      "share of the points on large flat surfaces (tables, "
+                                      "floors) that are learned (1.0: all)")
+    flat_surface_min_nodes: float = param(0.1, Interval(float, 0.0, 1.0),
+                                          "a smooth patch is a large flat surface when it holds "
+                                          "at least this share of the nodes")
+    warm_up_share: float = param(0.5, Interval(float, 0.0, 1.0, closed="right"),
+                                 "a frame learned from scratch learns this share of its steps "
+                                 "from every point first, to find the large flat surfaces")
+    scene_change_distance_m: float = param(0.02, Interval(float, 0.0, closed="neither"),
+                                           "a frame is a new scene when more than "
+                                           "scene_change_share of its points lie farther than "
+                                           "this from every node")
+    scene_change_share: float = param(0.015, Interval(float, 0.0, 1.0),
+                                      "see scene_change_distance_m; 1.0 never cuts")
 
     def __post_init__(self) -> None:
-        check_integer("steps_first_frame", self.steps_first_frame, 1)
-        check_integer("steps_per_frame", self.steps_per_frame, 1)
-        check_real("veil_ratio", self.veil_ratio, 0.0)
-        check_real("min_depth_m", self.min_depth_m, 0.0)
-        check_real("max_depth_m", self.max_depth_m, self.min_depth_m, low_open=True)
-        check_real("flat_surface_share", self.flat_surface_share, 0.0, 1.0, low_open=True)
-        check_real("flat_surface_min_nodes", self.flat_surface_min_nodes, 0.0, 1.0)
-        check_real("warm_up_share", self.warm_up_share, 0.0, 1.0, low_open=True)
-        check_real("scene_change_distance_m", self.scene_change_distance_m, 0.0, low_open=True)
-        check_real("scene_change_share", self.scene_change_share, 0.0, 1.0)
+        check_fields(self)
+        if self.max_depth_m <= self.min_depth_m:
+            raise ValueError(f"max_depth_m ({self.max_depth_m}) must exceed min_depth_m "
+                             f"({self.min_depth_m})")
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> FrameSchedule:
         """From a mapping (a TOML ``[frames]`` table); ValueError naming an unknown key."""
-        known = {item.name for item in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown frame schedule key(s) {unknown}; known: {sorted(known)}")
-        return cls(**values)
+        return from_mapping(cls, values, "frame schedule key")
 
 
 @dataclass(frozen=True)
-class LearnedFrame:
+class FrameOutcome:
     """What `StreamLearner.learn_frame` did with one frame."""
 
     steps: int
@@ -131,7 +129,7 @@ class StreamLearner:
 
     def learn_frame(self, positions: np.ndarray, colors: np.ndarray | None,
                     independent: bool = False, camera_pose: np.ndarray | None = None,
-                    on_large_surface: np.ndarray | None = None) -> LearnedFrame:
+                    on_large_surface: np.ndarray | None = None) -> FrameOutcome:
         """Learn from one frame and segment the network.
 
         positions: (N, 3) float metres, N >= 2, finite; colors: (N, 3) uint8 RGB or None.
@@ -140,7 +138,7 @@ class StreamLearner:
         scene-change test and attention compare the frame with it there.
         on_large_surface: (N,) bool, which points lie on a large flat surface as an earlier
         frame showed it (e.g. the previous frame's labels of the same pixels, from
-        ``LearnedFrame.on_large_surface``); attention then trusts it instead of searching each
+        ``FrameOutcome.on_large_surface``); attention then trusts it instead of searching each
         drawn point's nearest node. Ignored when the frame is learned from scratch.
         """
         if len(positions) < 2:
@@ -166,7 +164,7 @@ class StreamLearner:
                 else None)
         segmentation = self.model_.segmentation(self.segmentation, view, camera_pose)
         self._on_large_surface = self._large_surfaces(segmentation.patches)
-        return LearnedFrame(steps, from_scratch, segmentation, self._on_large_surface)
+        return FrameOutcome(steps, from_scratch, segmentation, self._on_large_surface)
 
     def refine(self, positions: np.ndarray, colors: np.ndarray | None, steps: int,
                camera_pose: np.ndarray | None = None) -> None:

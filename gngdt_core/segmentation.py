@@ -45,13 +45,13 @@ concavely. Labels are ordered by decreasing segment size; -1 is no segment.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels, rank_by_size
-from gngdt_core.parameters import check_integer, check_real
+from gngdt_core.parameters import Interval, check_fields, from_mapping, param
 from gngdt_core.view import SensorView
 
 #: points judged along a node pair that may cross a gap of missing depth (step 6)
@@ -66,40 +66,35 @@ GAP_DEPTH_MARGIN = 0.02
 class SegmentationParams:
     """Parameters of `segment_network`, validated on construction (angles in degrees)."""
 
-    #: an edge is smooth (inside a patch) when both elevations are within this angle
-    smooth_angle_deg: float = 8.0
-    #: a node joins a patch only while its normal is within this angle of the patch's mean
-    patch_angle_deg: float = 30.0
-    #: an edge is convex unless one end rises above the other's tangent plane by more than this
-    concavity_angle_deg: float = 10.0
-    #: adjacent patches merge when this share of their boundary edges is convex (the
-    #: boundary's concavity at this quantile is below the concavity angle) ...
-    convex_share: float = 0.5
-    #: ... and the boundary has at least this many edges
-    min_boundary_edges: int = 3
-    #: segments smaller than this many nodes join a larger neighbour, or are no segment (-1)
-    min_segment_nodes: int = 4
-    #: metres: segments apart by a gap of missing depth at most this wide join where the two
-    #: sides meet convexly (step 6; needs the frame's view); 0: no bridging
-    bridge_gap_m: float = 0.0
+    smooth_angle_deg: float = param(8.0, Interval(float, 0.0, 90.0, closed="right"),
+                                    "an edge is smooth (inside a patch) when both elevations "
+                                    "are within this angle")
+    patch_angle_deg: float = param(30.0, Interval(float, 0.0, 90.0, closed="right"),
+                                   "a node joins a patch only while its normal is within this "
+                                   "angle of the patch's mean")
+    concavity_angle_deg: float = param(10.0, Interval(float, 0.0, 90.0, closed="right"),
+                                       "an edge is convex unless one end rises above the "
+                                       "other's tangent plane by more than this")
+    convex_share: float = param(0.5, Interval(float, 0.0, 1.0),
+                                "adjacent patches merge when this share of their boundary "
+                                "edges is convex ...")
+    min_boundary_edges: int = param(3, Interval(int, 1),
+                                    "... and the boundary has at least this many edges")
+    min_segment_nodes: int = param(4, Interval(int, 1),
+                                   "segments smaller than this join a larger neighbour, or are "
+                                   "no segment (-1)")
+    bridge_gap_m: float = param(0.0, Interval(float, 0.0, 1.0),
+                                "metres: segments apart by a gap of missing depth at most this "
+                                "wide join where the two sides meet convexly (step 6; needs the "
+                                "frame's view); 0: no bridging")
 
     def __post_init__(self) -> None:
-        for name in ("smooth_angle_deg", "patch_angle_deg", "concavity_angle_deg"):
-            check_real(name, getattr(self, name), 0.0, 90.0, low_open=True)
-        check_real("convex_share", self.convex_share, 0.0, 1.0)
-        check_integer("min_boundary_edges", self.min_boundary_edges, 1)
-        check_integer("min_segment_nodes", self.min_segment_nodes, 1)
-        check_real("bridge_gap_m", self.bridge_gap_m, 0.0, 1.0)
+        check_fields(self)
 
     @classmethod
     def from_dict(cls, values: dict) -> SegmentationParams:
         """From a mapping (e.g. a TOML table); ValueError naming an unknown key."""
-        known = {item.name for item in fields(cls)}
-        unknown = sorted(set(values) - known)
-        if unknown:
-            raise ValueError(f"unknown segmentation parameter(s) {unknown}; known: "
-                             f"{sorted(known)}")
-        return cls(**values)
+        return from_mapping(cls, values, "segmentation parameter")
 
 
 @dataclass(frozen=True)

@@ -103,13 +103,13 @@ class RecordingSettings:
 
 
 def _learner_model_default(name: str) -> Any:
-    from services.learner import LEARNER_MODEL_DEFAULTS
+    from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
 
     return LEARNER_MODEL_DEFAULTS.get(name)
 
 
 def _learner_default(name: str) -> Any:
-    from services.learner import LearnerOptions
+    from gngdt_core.frame_learner import LearnerOptions
 
     return getattr(LearnerOptions(), name)
 

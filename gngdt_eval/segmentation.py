@@ -103,14 +103,14 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     from gngdt_eval.open3d_peer import Open3DPeer, load_open3d
     from gngdt_eval.progress import ProgressBar
     from gngdt_eval.segment_scores import score_frame
+    from gngdt_io.profiles import load_sensor_profile
+    from gngdt_io.segment_frames import make_segmenter, organized_frames, segment_frames
     from gngdt_io.sources import open_source
-    from services.segment import organized_frames, segment_frames
-    from services.segment_profile import load_profile
 
     settings.validate()
     set_dir = Path(set_dir)
     started = time.perf_counter()
-    profile = load_profile(settings.params)
+    profile = load_sensor_profile(settings.params)
     source = open_source(set_dir)
     frames: list[_Frame] = []
     for name, frame in _limited(source.frames(), settings.max_frames):  # fail before any work
@@ -145,7 +145,7 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
         predictions[method] = drawn_labels
 
     for mode in settings.modes:
-        segmenter = profile.segmenter(random_state=settings.seed)
+        segmenter = make_segmenter(profile, settings.seed)
         items = _limited(segment_frames(source, segmenter, mode == "independent"),
                          settings.max_frames)
         run(method_name(mode), ((item.result.labels, item.milliseconds,
@@ -201,7 +201,7 @@ def _spread(count: int, wanted: int) -> list[int]:
 
 def _method_summary(scores: list, records: list[dict[str, Any]]) -> dict[str, Any]:
     from gngdt_eval.segment_scores import summarize_scores
-    from services.segment import timing_summary
+    from gngdt_io.segment_frames import timing_summary
 
     return {"summary": summarize_scores(scores),
             "milliseconds": timing_summary([record["milliseconds"] for record in records]),

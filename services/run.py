@@ -28,9 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
-from schemas.wire import DEFAULT_CAMERA, topic
-from services.logger import (
-    LIVELINESS_KEY,
+from gngdt_io.outputs.rerun_output import (
     add_rate_arguments,
     add_serve_arguments,
     default_rrd_path,
@@ -38,6 +36,8 @@ from services.logger import (
     rates_from_args,
     unused_rrd_path,
 )
+from schemas.wire import DEFAULT_CAMERA, topic
+from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
 from services.plumbing.session import (
     ZenohSetupError,
@@ -50,6 +50,7 @@ from services.plumbing.session import (
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt_io.outputs.rerun_log import DisplayRates
     from schemas.packing import LearnerStatusInfo, StreamEndInfo
 
 log = logging.getLogger(__name__)
@@ -301,10 +302,10 @@ def sensor_veil_ratio(params: Path | None) -> float | None:
     """The veil ratio of a sensor profile's [frames] table (capture drops those pixels)."""
     if params is None:
         return None
-    from services.learner import load_params
+    from gngdt_io.profiles import load_profile
 
-    frames = load_params(params).frames
-    return None if frames is None else frames.get("veil_ratio")
+    schedule = load_profile(params).config.schedule
+    return None if schedule is None else schedule.veil_ratio
 
 
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
@@ -371,47 +372,57 @@ def recorded_frames(path: Path) -> int | None:
         return None
 
 
-def main(args: argparse.Namespace) -> int:
-    from gngdt_io.mcap_reader import RecordingError, check_recording
+@dataclass
+class RunPlan:
+    """What a run will write, checked before anything starts."""
 
-    try:
-        check_recording(args.recording)
-    except RecordingError as error:
-        log.error("%s", error)
-        return 2
+    rates: DisplayRates
+    veil_ratio: float | None
+    rrd_path: Path | None
+    mcap_path: Path | None
+
+    @property
+    def destination(self) -> str:
+        return "rerun viewer" if self.rrd_path is None else str(self.rrd_path)
+
+
+def plan_run(args: argparse.Namespace) -> RunPlan:
+    """The run's outputs, named (the logger never overwrites a file: the names it will really
+    write); ValueError or RecordingError for anything wrong, before any process starts."""
+    from gngdt_io.mcap_reader import check_recording
+
+    check_recording(args.recording)
     if args.url and not args.connect:
-        log.error("--url needs --connect")
-        return 2
-    try:
-        veil_ratio = sensor_veil_ratio(args.params)
-    except ValueError as error:  # a wrong params file: say so before starting anything
-        log.error("%s", error)
-        return 2
+        raise ValueError("--url needs --connect")
+    veil_ratio = sensor_veil_ratio(args.params)  # a wrong params file: said before starting
     topic(args.cam, "points")  # validates the camera name
-    try:
-        rates = rates_from_args(args)
-    except ValueError as error:
-        log.error("%s", error)
-        return 2
+    rates = rates_from_args(args)
     mcap_path = unused_rrd_path(args.mcap) if args.mcap else None
     if mcap_path is not None:
         mcap_path.parent.mkdir(parents=True, exist_ok=True)
     rrd_path = None
     if not (args.connect or args.serve):
-        # the logger never overwrites a file: name the one it will really write
         rrd_path = unused_rrd_path(args.save or default_rrd_path(args.recording.stem))
         rrd_path.parent.mkdir(parents=True, exist_ok=True)
-        destination = str(rrd_path)
-    else:
-        destination = "rerun viewer"
+    return RunPlan(rates, veil_ratio, rrd_path, mcap_path)
 
-    log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))  # 0700: holds the run's password
+
+@dataclass
+class RunOutcome:
+    """How a run went: what the run's own router heard, and which service failed."""
+
+    status: LearnerStatusInfo | None
+    end: StreamEndInfo | None
+    early_end: str
+    failure: Child | None
+    interrupted: bool
+
+
+def run_pipeline(args: argparse.Namespace, plan: RunPlan, log_dir: Path) -> RunOutcome:
+    """The run's router and services, supervised to the end (`supervise`). Raises
+    ZenohSetupError when the router cannot start, StartupTimeout when the services do not."""
     access = RunAccess(f"tcp/127.0.0.1:{free_tcp_port()}", log_dir)
-    try:
-        router = open_config(access.router(), what="router")
-    except ZenohSetupError as error:
-        log.error("%s", error)
-        return 1
+    router = open_config(access.router(), what="router")
     observed = Observed()
     declared = [
         router.liveliness().declare_subscriber("gngdt/**", observed.on_liveliness, history=True),
@@ -419,15 +430,11 @@ def main(args: argparse.Namespace) -> int:
         router.declare_subscriber(topic(args.cam, "eos"), observed.on_eos),
     ]
     pipeline = Pipeline(access, log_dir, args.log_level)
-    failure: Child | None = None
-    early_end = ""
     try:
         with lifecycle.graceful() as stop:
-            early_end = supervise(args, pipeline, observed, stop, rrd_path, veil_ratio,
-                                  mcap_path)
+            early_end = supervise(args, pipeline, observed, stop, plan.rrd_path,
+                                  plan.veil_ratio, plan.mcap_path)
         failure = pipeline.failed()
-    except StartupTimeout:
-        return 1
     finally:
         pipeline.close()
         for entity in declared:
@@ -437,26 +444,52 @@ def main(args: argparse.Namespace) -> int:
         status, end = observed.status, observed.end
     if stop.is_set():
         early_end = early_end or f"interrupted ({lifecycle.stop_reason()})"
-    outputs = [f"  in the .rrd:      {rates.describe()}"]
-    if rrd_path is not None:
-        outputs[0:0] = [f"  .rrd size:        {file_size(rrd_path)}"]
-    if mcap_path is not None:
-        outputs.append(f"mcap:               {mcap_path} ({file_size(mcap_path)}; every stream, "
-                       "for Foxglove or `rerun`)")
+    return RunOutcome(status, end, early_end, failure, stop.is_set())
+
+
+def report(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome) -> None:
+    """Print the run's summary (and a failed service's last words)."""
+    outputs = [f"  in the .rrd:      {plan.rates.describe()}"]
+    if plan.rrd_path is not None:
+        outputs[0:0] = [f"  .rrd size:        {file_size(plan.rrd_path)}"]
+    if plan.mcap_path is not None:
+        outputs.append(f"mcap:               {plan.mcap_path} ({file_size(plan.mcap_path)}; "
+                       "every stream, for Foxglove or `rerun`)")
+    failure = outcome.failure
     try:  # after a SIGHUP the terminal may be gone: nothing more to say then
-        print(format_summary(status, end, destination, recorded_frames(args.recording),
-                             early_end, outputs), flush=True)
+        print(format_summary(outcome.status, outcome.end, plan.destination,
+                             recorded_frames(args.recording), outcome.early_end, outputs),
+              flush=True)
         if failure is not None:
             print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"
                   f"{failure.stderr_tail()}", file=sys.stderr)
     except OSError:
         pass
-    if failure is not None:
+
+
+def main(args: argparse.Namespace) -> int:
+    from gngdt_io.mcap_reader import RecordingError
+
+    try:
+        plan = plan_run(args)
+    except (RecordingError, ValueError) as error:
+        log.error("%s", error)
+        return 2
+    log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))  # 0700: holds the run's password
+    try:
+        outcome = run_pipeline(args, plan, log_dir)
+    except (ZenohSetupError, StartupTimeout) as error:
+        if isinstance(error, ZenohSetupError):
+            log.error("%s", error)
+        return 1
+    report(args, plan, outcome)
+    if outcome.failure is not None:
+        failure = outcome.failure
         return 2 if failure.name == "capture" and failure.process.returncode == 2 else 1
     shutil.rmtree(log_dir, ignore_errors=True)
-    if stop.is_set():
+    if outcome.interrupted:
         return 130
-    return 1 if early_end else 0
+    return 1 if outcome.early_end else 0
 
 
 class StartupTimeout(Exception):

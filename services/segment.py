@@ -21,20 +21,16 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import math
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 if TYPE_CHECKING:
-    from gngdt_core.frame_segmenter import FrameResult, FrameSegmenter
     from gngdt_io.frame import Frame
+    from gngdt_io.profiles import Profile
     from gngdt_io.sources import FrameSource
-    from services.segment_profile import SegmenterProfile
 
 log = logging.getLogger(__name__)
 
@@ -54,55 +50,6 @@ LABEL_DESCRIPTION = "uint16 PNG per frame, same size as its colour/depth image; 
                     "k >= 1 = segment k (1 = largest)"
 
 
-@dataclass
-class SegmentedFrame:
-    """One frame, its organized points and what the segmenter made of it."""
-
-    name: str
-    frame: Frame
-    #: (H, W, 3) float32 metres, NaN where there is no depth
-    points: np.ndarray
-    result: FrameResult
-    #: milliseconds per phase: deproject + the segmenter's phases, and their ``total``
-    milliseconds: dict[str, float]
-
-
-def organized_frames(source: FrameSource) -> Iterator[tuple[str, Frame, np.ndarray, float]]:
-    """(name, frame, points, milliseconds) of every frame of ``source``: points (H, W, 3)
-    float32 metres in the camera frame, NaN where the depth is 0; milliseconds of deprojection.
-    Raises RecordingError naming the file for a frame that cannot be read."""
-    from gngdt_io.deproject import Deprojector
-
-    deproject = Deprojector(min_depth_m=0.0, max_depth_m=math.inf)  # only "no depth" is dropped
-    for name, frame in source.frames():
-        started = time.perf_counter()
-        points = deproject.organized(frame.depth, frame.intrinsics)
-        yield name, frame, points, (time.perf_counter() - started) * 1000.0
-
-
-def segment_frames(source: FrameSource, segmenter: FrameSegmenter, independent: bool
-                   ) -> Iterator[SegmentedFrame]:
-    """Deproject and segment every frame of ``source`` in order (online unless
-    ``independent``). Raises RecordingError naming the file for a frame that cannot be read."""
-    for name, frame, points, deproject_ms in organized_frames(source):
-        result = segmenter.segment_frame(points, frame.color, independent=independent)
-        milliseconds = {"deproject": deproject_ms, **result.milliseconds}
-        milliseconds["total"] = sum(milliseconds.values())
-        yield SegmentedFrame(name, frame, points, result, milliseconds)
-
-
-def timing_summary(per_frame: list[dict[str, float]]) -> dict[str, dict[str, float]]:
-    """Per phase: mean, p50, p90 and max of the frames' milliseconds (phases in first-seen
-    order; a frame without a phase counts as 0 ms for it)."""
-    phases = list(dict.fromkeys(name for frame in per_frame for name in frame))
-    summary = {}
-    for phase in phases:
-        values = np.array([frame.get(phase, 0.0) for frame in per_frame], dtype=np.float64)
-        summary[phase] = {"mean": float(values.mean()), "p50": float(np.percentile(values, 50)),
-                          "p90": float(np.percentile(values, 90)), "max": float(values.max())}
-    return summary
-
-
 def write_label_image(path: Path, labels: np.ndarray) -> None:
     """Write (H, W) int labels >= 0 as a uint16 PNG; ValueError when they do not fit."""
     import cv2
@@ -113,21 +60,22 @@ def write_label_image(path: Path, labels: np.ndarray) -> None:
         raise OSError(f"{path}: cannot write the label image")
 
 
-def segment_source(source: FrameSource, profile: SegmenterProfile, out: Path, *,
+def segment_source(source: FrameSource, profile: Profile, out: Path, *,
                    independent: bool = False, seed: int = 0, overwrite: bool = False
                    ) -> dict[str, Any]:
     """Segment every frame of ``source`` into ``out`` (label PNGs + summary.json, written as a
     whole or not at all); returns the summary."""
     from gngdt_eval.report import to_jsonable
     from gngdt_io.errors import RecordingError
+    from gngdt_io.segment_frames import make_segmenter, segment_frames, timing_summary
     from gngdt_io.staged_directory import StagedDirectory
 
     staged = StagedDirectory(out, overwrite=overwrite)  # refuses a non-empty DIR before work
     log.info("checking %s (%s) ...", source.path, source.format)
     total = source.check()
     mode = "independent" if independent else "online"
-    log.info("%d frames; segmenting %s with %s", total, mode, profile.source)
-    segmenter = profile.segmenter(random_state=seed)
+    log.info("%d frames; segmenting %s with %s", total, mode, profile.path)
+    segmenter = make_segmenter(profile, seed)
     frames: list[dict[str, Any]] = []
     first: Frame | None = None
     started = time.perf_counter()
@@ -186,11 +134,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     """Run ``gngdt segment``; bad input: one error line naming the file, exit code 2."""
     from gngdt_io.errors import RecordingError
+    from gngdt_io.profiles import default_sensor_profile, load_profile
     from gngdt_io.sources import open_source
-    from services.segment_profile import load_profile
 
     try:
-        profile = load_profile(args.params)
+        profile = load_profile(args.params or default_sensor_profile(), base_model={})
         source = open_source(args.source, args.source_format, args.camera_json)
         summary = segment_source(source, profile, args.out, independent=args.independent,
                                  seed=args.seed, overwrite=args.overwrite)

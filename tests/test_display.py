@@ -65,10 +65,11 @@ def test_the_rrd_holds_nodes_once_with_each_clusterings_colours_and_views_pick_t
     import rerun as rr
     from rerun.chunk import RrdReader
 
+    from gngdt_io.outputs.rerun_blueprint import CLUSTERING_VIEWS, EntityPaths, blueprint
+    from gngdt_io.outputs.rerun_log import RerunLog
     from schemas.cluster_colors import UNCLUSTERED_RGB, clustering_edges
     from schemas.packing import TopologySnapshot
     from schemas.wire import FrameStamp
-    from services.logger import CLUSTERING_VIEWS, EntityPaths, RerunLog, blueprint
 
     rng = np.random.default_rng(1)
     positions = rng.random((60, 3)).astype(np.float32)

@@ -169,8 +169,8 @@ def test_the_peer_segments_a_plane_and_clusters(synthetic_set: Path, tmp_path: P
     import open3d
 
     from gngdt_eval.open3d_peer import Open3DPeer, PeerParams
+    from gngdt_io.segment_frames import organized_frames
     from gngdt_io.sources import open_source
-    from services.segment import organized_frames
 
     _, frame, points, _ = next(organized_frames(open_source(synthetic_set)))
     labels, milliseconds = Open3DPeer(open3d, PeerParams(voxel_m=0.01, dbscan_eps_m=0.03)

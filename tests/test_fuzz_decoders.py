@@ -36,7 +36,7 @@ from schemas.packing import (
     raw_to_image,
 )
 from schemas.wire import FrameStamp
-from services.learner import decode_points
+from services.learner.messages import decode_points
 
 FUZZ = settings(max_examples=200)  # on top of tests/conftest.py's profile
 
@@ -252,7 +252,8 @@ def dispatcher():
     """The logger's real per-sample path (decode + rerun logging) into an in-memory recording."""
     import rerun as rr
 
-    from services.logger import Dispatcher, DisplayRates, RerunLog
+    from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
+    from services.logger.dispatch import Dispatcher
 
     recording = rr.RecordingStream("gngdt-fuzz")
     recording.memory_recording()
@@ -353,7 +354,7 @@ def test_flooded_learner_and_logger_count_garbage_and_keep_working(
     malformed = int(re.search(r"logger done: (\d+) malformed", logged).group(1))
     # every garbage message on a queued stream is counted; on a latest-only stream (images,
     # clouds, objects) a newer one may supersede it before it is decoded, but not all are
-    from services.logger import LATEST_ONLY_STREAMS
+    from services.logger.inbox import LATEST_ONLY_STREAMS
 
     queued = sum(1 for index in range(60)
                  if STREAMS[index % len(STREAMS)] not in LATEST_ONLY_STREAMS)
@@ -387,8 +388,8 @@ def test_a_capture_time_a_day_away_from_this_clock_is_refused_by_the_learner() -
 
 
 def test_learner_counters_saturate_and_always_encode() -> None:
+    from gngdt_core.frame_learner import MAX_COUNTER, Counters
     from schemas.packing import encode_status
-    from services.learner import MAX_COUNTER, Counters
 
     counters = Counters()
     for sequence in (0, 2**63 - 1, 0, 2**63 - 1, 5, 2**40, 2**40 + 3):

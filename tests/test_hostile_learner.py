@@ -156,24 +156,26 @@ def test_stale_temporaries_of_one_checkpoint_only_are_removed(tmp_path: Path) ->
 
 
 def test_a_camera_mismatch_is_a_checkpoint_error(tmp_path: Path) -> None:
+    from gngdt_core.frame_learner import LearnerConfig
     from gngdt_io.checkpoints import CheckpointError
-    from services.learner import Learner, LearnerConfig
+    from services.learner import checkpoints
 
     path = tmp_path / "left.npz"
     _checkpoint(path, camera="left")
-    assert Learner.resume(path, "left", LearnerConfig()).camera == "left"
+    assert checkpoints.resume(path, "left", LearnerConfig()).camera == "left"
     with pytest.raises(CheckpointError, match="--cam left"):
-        Learner.resume(path, "camera", LearnerConfig())
+        checkpoints.resume(path, "camera", LearnerConfig())
 
 
 def test_counters_beyond_64_bits_in_a_checkpoint_are_refused(tmp_path: Path) -> None:
     from gngdt_core import GNGDT
+    from gngdt_core.frame_learner import LearnerConfig
     from gngdt_io.checkpoints import CheckpointError, save_checkpoint
-    from services.learner import Learner, LearnerConfig
+    from services.learner import checkpoints
 
     path = tmp_path / "overflowed.npz"
     model = GNGDT(random_state=0)
     save_checkpoint(path, model.get_state(),
                     {"camera": "camera", "counters": {"frames_dropped": 2**64 + 5}})
     with pytest.raises(CheckpointError, match="frames_dropped"):
-        Learner.resume(path, "camera", LearnerConfig())
+        checkpoints.resume(path, "camera", LearnerConfig())

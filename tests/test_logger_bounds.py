@@ -17,7 +17,8 @@ def dispatcher():
     """The logger's real per-sample path into an in-memory recording."""
     import rerun as rr
 
-    from services.logger import Dispatcher, DisplayRates, RerunLog
+    from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
+    from services.logger.dispatch import Dispatcher
 
     recording = rr.RecordingStream("gngdt-test")
     recording.memory_recording()
@@ -55,8 +56,9 @@ def test_a_capture_that_leaves_without_an_end_of_stream_ends_its_camera(dispatch
 def test_garbage_on_new_camera_names_makes_no_camera_and_cameras_are_bounded() -> None:
     import rerun as rr
 
+    from gngdt_io.outputs.rerun_log import RerunLog
     from schemas.packing import encode_status
-    from services.logger import Dispatcher, RerunLog
+    from services.logger.dispatch import Dispatcher
 
     recording = rr.RecordingStream("gngdt-test")
     recording.memory_recording()
@@ -116,7 +118,7 @@ def test_the_edge_limit_is_what_the_kernel_can_hold() -> None:
 def test_the_inbox_of_a_busy_logger_is_bounded_in_bytes(router_endpoint: str) -> None:
     import zenoh
 
-    from services.logger import Inbox
+    from services.logger.inbox import Inbox
     from services.plumbing.session import client_config, open_config
 
     inbox = Inbox(max_bytes=5_000_000)  # nothing takes from it: a logger busy elsewhere
@@ -261,14 +263,11 @@ def _metric_chunks_at_30_fps(tmp_path, extra: list[str], seconds: float) -> list
 
     from rerun.chunk import RrdReader
 
+    from gngdt_io.outputs.rerun_blueprint import EntityPaths
+    from gngdt_io.outputs.rerun_log import RerunLog
+    from gngdt_io.outputs.rerun_output import RRD_FLUSH_SECONDS, open_recording
     from gngdt_io.outputs.rerun_sinks import RrdFile
-    from services.logger import (
-        RRD_FLUSH_SECONDS,
-        EntityPaths,
-        RerunLog,
-        add_arguments,
-        open_recording,
-    )
+    from services.logger import add_arguments
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
+from gngdt_core.frame_learner import FrameLearner, LearnerConfig
 from gngdt_io.deproject import Deprojector
 from gngdt_io.mcap_reader import read_frames
-from services.learner import Learner, LearnerConfig
 
 STATIC_RECORDING = Path(__file__).resolve().parents[1] / "recordings" / "tabletop.mcap"
 
@@ -18,7 +18,7 @@ def test_objects_of_the_static_tabletop_keep_their_ids_frame_to_frame() -> None:
     so in its frame the scene moves) while the network grows; objects only from confirmed ones."""
     config = LearnerConfig()
     assert config.options.objects_from == "segments"
-    learner = Learner("camera", config)
+    learner = FrameLearner("camera", config)
     deproject = Deprojector()
     published: list[list[int]] = []
     for frame in read_frames(STATIC_RECORDING):

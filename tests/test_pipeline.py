@@ -332,7 +332,7 @@ def _blueprint_only_rrd_bytes(path: Path) -> int:
     """Size of an .rrd holding only the logger's blueprint (what it writes before any frame)."""
     import rerun as rr
 
-    from services.logger import blueprint
+    from gngdt_io.outputs.rerun_blueprint import blueprint
 
     recording = rr.RecordingStream("gngdt")
     recording.save(str(path), default_blueprint=blueprint(["camera"]))

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
 from gngdt_io.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
-from services.learner import LEARNER_MODEL_DEFAULTS, load_params
+from gngdt_io.profiles import load_profile
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -18,7 +19,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 def test_example_params_file_builds_a_model() -> None:
     from gngdt_core import GNGDT
 
-    config = load_params(REPO_ROOT / "config" / "learner.toml")
+    config = load_profile(REPO_ROOT / "config" / "learner.toml").config
     assert config.model["lambda_"] == 500
     assert config.options.samples_per_frame == 10000
     GNGDT(**config.model)
@@ -27,7 +28,7 @@ def test_example_params_file_builds_a_model() -> None:
 def test_params_accept_flat_keys_and_learner_options(tmp_path: Path) -> None:
     path = tmp_path / "p.toml"
     path.write_text("max_nodes = 300\nlambda_ = 100\nsamples_per_frame = 777\n")
-    config = load_params(path)
+    config = load_profile(path).config
     assert config.model == {**LEARNER_MODEL_DEFAULTS, "max_nodes": 300, "lambda_": 100}
     assert config.options.samples_per_frame == 777
 
@@ -35,10 +36,10 @@ def test_params_accept_flat_keys_and_learner_options(tmp_path: Path) -> None:
 def test_the_learner_forgets_unless_told_not_to(tmp_path: Path) -> None:
     from gngdt_core import GNGDT
 
-    assert load_params(None).model["utility_k"] == LEARNER_MODEL_DEFAULTS["utility_k"] > 0
+    assert load_profile(None).config.model["utility_k"] == LEARNER_MODEL_DEFAULTS["utility_k"] > 0
     path = tmp_path / "paper.toml"
     path.write_text("[gngdt]\nutility_k = 0   # the paper's GNG-DT: no forgetting\n")
-    model = GNGDT(**load_params(path).model)
+    model = GNGDT(**load_profile(path).config.model)
     assert model.utility_k is None and model.n_forgotten_ == 0
 
 
@@ -46,14 +47,14 @@ def test_unknown_params_key_is_named(tmp_path: Path) -> None:
     path = tmp_path / "p.toml"
     path.write_text("[gngdt]\nmax_nodez = 10\n")
     with pytest.raises(ValueError, match=r"unknown key 'max_nodez'"):
-        load_params(path)
+        load_profile(path)
 
 
 def test_invalid_toml_names_the_file(tmp_path: Path) -> None:
     path = tmp_path / "broken.toml"
     path.write_text("max_nodes = = 3\n")
     with pytest.raises(ValueError, match=r"broken\.toml"):
-        load_params(path)
+        load_profile(path)
 
 
 def test_checkpoint_round_trip_and_model_resume(tmp_path: Path) -> None:
@@ -106,7 +107,7 @@ def test_logger_viewer_options_are_reruns_own() -> None:
 
     import rerun as rr
 
-    from services.logger import add_viewer_arguments
+    from gngdt_io.outputs.rerun_output import add_viewer_arguments
 
     ours, theirs = argparse.ArgumentParser(), argparse.ArgumentParser()
     add_viewer_arguments(ours)

@@ -264,12 +264,12 @@ def test_checkpoint_zip_bomb_is_refused_before_reading(tmp_path: Path, monkeypat
 
 
 def test_params_values_are_type_checked_never_evaluated(tmp_path: Path) -> None:
-    from services.learner import load_params
+    from gngdt_io.profiles import load_profile
 
     marker = tmp_path / "evaluated"
     params = tmp_path / "evil.toml"
     params.write_text(f'samples_per_frame = "__import__(\'pathlib\').Path(\'{marker}\').touch()"\n')
     with pytest.raises(ValueError, match=r"evil\.toml: learner option samples_per_frame must be "
                                          r"int"):
-        load_params(params)
+        load_profile(params)
     assert not marker.exists()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -9,12 +10,13 @@ import pytest
 from scipy.spatial import cKDTree
 
 from gngdt_core import model as model_module
+from gngdt_core.frame_learner import FrameLearner
 from gngdt_core.frame_segmenter import FrameSegmenter, veil_pixels
 from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_io.deproject import Deprojector
 from gngdt_io.mcap_reader import read_frames
+from gngdt_io.profiles import load_profile
 from services.capture import CloudOptions, FrameToCloud
-from services.learner import Learner, load_params
 
 ROOT = Path(__file__).resolve().parents[1]
 PROFILE = ROOT / "config" / "kinect.toml"
@@ -154,12 +156,12 @@ def test_capture_drops_veil_points_when_asked() -> None:
 
 
 def test_the_learner_learns_and_segments_through_the_sensor_profile() -> None:
-    config = load_params(PROFILE)
-    assert config.frames is not None and config.model["max_nodes"] == 4000
-    config.model.update(QUICK)
-    config.frames.update(steps_first_frame=15_000)
-    config.options.samples_per_frame = 3_000
-    learner = Learner("camera", config)
+    config = load_profile(PROFILE).config
+    assert config.schedule is not None and config.model["max_nodes"] == 4000
+    config = replace(config, model={**config.model, **QUICK},
+                     options=replace(config.options, samples_per_frame=3_000),
+                     schedule=replace(config.schedule, steps_first_frame=15_000))
+    learner = FrameLearner("camera", config)
     for positions, colors in frame_clouds("tabletop_small.mcap", 2):
         learner.learn(positions, colors)
     assert learner.counters.learning_steps == 18_000
@@ -172,14 +174,14 @@ def test_a_profile_with_a_wrong_frames_key_names_it(tmp_path: Path) -> None:
     path = tmp_path / "profile.toml"
     path.write_text("[frames]\nsteps_per_franme = 10\n")
     with pytest.raises(ValueError, match="steps_per_franme"):
-        load_params(path)
+        load_profile(path)
 
 
 def test_settling_stops_at_its_step_limit_and_says_so() -> None:
-    config = load_params(None)
-    config.model.update(max_nodes=5000)  # a budget it cannot reach in the steps allowed
-    config.options.settle_max_steps = 30_000
-    learner = Learner("camera", config)
+    config = load_profile(None).config
+    config = replace(config, model={**config.model, "max_nodes": 5000},  # a budget it cannot
+                     options=replace(config.options, settle_max_steps=30_000))  # reach in time
+    learner = FrameLearner("camera", config)
     positions, colors = frame_clouds("tabletop_small.mcap", 1)[0]
     learner.learn(positions, colors)
     reason = learner.settle(positions, colors)

@@ -6,17 +6,20 @@ from __future__ import annotations
 import signal
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 from test_pipeline import Watcher, log_text, points_publisher, wait_exit
 
+from gngdt_core.frame_learner import FrameLearner, Ghosts, LearnerConfig, OtherFrameError
 from gngdt_io.mcap_writer import RecordingWriter
 from gngdt_io.synth.render import render_scene
 from schemas.packing import MessageError, cloud_to_msg, decode_topology
 from schemas.wire import FrameStamp
-from services.learner import Ghosts, Learner, LearnerConfig, OtherFrameError, decode_points
+from services.learner import checkpoints
+from services.learner.messages import decode_points, status_message, topology_message
 from services.plumbing.session import client_config, open_config
 
 FRAMES = 4
@@ -66,7 +69,7 @@ def test_capture_publishes_each_cloud_with_its_pose(run_capture: Callable, walk_
 
 
 def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path: Path):
-    learner = Learner("camera", LearnerConfig(model={"max_nodes": 50, "lambda_": 100}))
+    learner = FrameLearner("camera", LearnerConfig(model={"max_nodes": 50, "lambda_": 100}))
     for sequence, x in enumerate((0.0, 0.5, 1.0)):
         message = decode_points(posed_cloud(pose_at(x), "world", sequence), attachment(sequence))
         learner.learn(message.positions, message.colors, message.frame_id, message.pose)
@@ -77,7 +80,7 @@ def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path:
     last = message.positions, message.colors
     assert learner.quantization_error(*last)["pos"] < 0.2
     # settling on the last frame learns it where it was, in the world
-    learner.options.settle_max_steps = 2_000
+    learner.options = replace(learner.options, settle_max_steps=2_000)
     learner.ghosts = Ghosts(seen_nodes=-1)
     learner.settle(*last)
     assert learner.model.positions_[:, 0].max() > 1.3
@@ -92,14 +95,14 @@ def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path:
         learner.learn(unposed.positions, unposed.colors, unposed.frame_id, unposed.pose)
     assert learner.counters.frames_other_frame == 1 and learner.counters.frames_used == 3
     stamp = FrameStamp(3, 1)
-    topology = learner.topology(stamp, {})
+    topology = topology_message(learner, stamp, {}, learner.learned_frame())
     assert topology.frame_id == "world"
-    status = learner.status(stamp, 1.0, topology)
+    status = status_message(learner, stamp, 1.0, (0.0, 0.0), topology)
     assert status.frames_other_frame == 1 and status.ghost_distance_m == 0.05
     assert 0 < status.seen_nodes <= status.nodes and 0.0 <= status.ghost_share <= 1.0
     # a checkpoint remembers the frame
-    learner.save(tmp_path / "learner.npz")
-    resumed = Learner.resume(tmp_path / "learner.npz", "camera", LearnerConfig())
+    checkpoints.save(learner, tmp_path / "learner.npz")
+    resumed = checkpoints.resume(tmp_path / "learner.npz", "camera", LearnerConfig())
     assert resumed.frame_id == "world"
 
 
@@ -154,7 +157,8 @@ def test_the_logger_puts_a_posed_cloud_and_the_camera_in_the_world(tmp_path: Pat
     import rerun as rr
     from rerun.chunk import RrdReader
 
-    from services.logger import EntityPaths, RerunLog
+    from gngdt_io.outputs.rerun_blueprint import EntityPaths
+    from gngdt_io.outputs.rerun_log import RerunLog
 
     path = tmp_path / "posed.rrd"
     recording = rr.RecordingStream("gngdt-test")

@@ -1,1 +1,14 @@
-"""Where the logger's streams go: rerun (a .rrd file, a viewer), an MCAP recording."""
+"""Where the logger's streams go, behind one interface (`base.Output`).
+
+A new output is one module with an `Output` subclass and one line in `OUTPUTS`: the logger adds
+its options to ``gngdt log`` and drives every output the options ask for.
+"""
+
+from gngdt_io.outputs.base import Output, StreamSample, split_key
+from gngdt_io.outputs.mcap import McapOutput
+from gngdt_io.outputs.rerun_output import RerunOutput
+
+#: every output the logger knows, in the order their options are shown
+OUTPUTS: tuple[type[Output], ...] = (RerunOutput, McapOutput)
+
+__all__ = ["OUTPUTS", "Output", "StreamSample", "split_key"]

@@ -15,6 +15,7 @@ and counted, never buffered without limit.
 
 from __future__ import annotations
 
+import argparse
 import logging
 import threading
 import time
@@ -23,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gngdt_io.outputs.base import Output
 from schemas.wire import FrameStamp
 
 if TYPE_CHECKING:
@@ -188,3 +190,34 @@ class McapRecorder:
         self._file.close()
         log.info("recorded %d messages to %s (%d dropped, %d not gngdt protobuf)", self.written,
                  self.path, self.dropped, self.skipped)
+
+
+class McapOutput(Output):
+    """``--mcap PATH``: every sample of ``gngdt/**`` as it arrived, into an MCAP file."""
+
+    raw = True
+
+    def __init__(self, path: Path) -> None:
+        self.recorder = McapRecorder(path)
+
+    @classmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        parser.add_argument("--mcap", type=Path, metavar="PATH",
+                            help="also record every gngdt stream as it is (images, clouds, "
+                            "topology, scene, objects, status) into this MCAP file, which "
+                            "Foxglove and rerun open directly; <name>.1.mcap if it exists")
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> McapOutput | None:
+        from gngdt_io.outputs.rerun_output import unused_rrd_path
+
+        return cls(unused_rrd_path(args.mcap)) if args.mcap else None
+
+    def describe(self) -> str:
+        return f"recording to {self.recorder.path}"
+
+    def receive(self, sample: zenoh.Sample) -> None:
+        self.recorder.put(sample)
+
+    def close(self) -> None:
+        self.recorder.close()  # writes the MCAP index and footer

@@ -122,10 +122,10 @@ class RrdFile:
             self._close_file()
 
 
-def exit_now_if_stuck(output: RrdFile | None, code: int) -> int:
-    """After a failed write rerun's exit handler waits forever on its dead file sink: leave at
-    once, as a kill would, once everything else is closed."""
-    if output is None or not output.failed:
+def exit_now_if_stuck(stuck: bool, code: int) -> int:
+    """After a failed write (``stuck``: `RrdFile.failed`) rerun's exit handler waits forever on
+    its dead file sink: leave at once, as a kill would, once everything else is closed."""
+    if not stuck:
         return code
     import os
 

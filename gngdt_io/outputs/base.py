@@ -1,0 +1,94 @@
+"""The output interface the logger drives: one object per destination of gngdt's streams.
+
+An output takes the samples of ``gngdt/**`` in one of two ways:
+
+- *raw* outputs (``raw = True``: recorders, live servers) get every sample on zenoh's thread,
+  as it arrives, in `receive`; they must never block there (queue and write from a thread);
+- the others (viewers: rerun) get the samples from the logger's loop in `write`, after its
+  inbox has kept only the newest image and cloud of each camera when the logger fell behind.
+
+Both get `tick` on every loop (flush, bounds) and `close` at the end. A malformed sample raises
+ValueError from `write`; the logger counts and skips it. Options come from the command line:
+`add_arguments` declares them (no heavy import: ``gngdt --help`` stays fast) and `from_args`
+builds the output, or None when its options do not ask for it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from schemas.wire import FrameStamp
+
+if TYPE_CHECKING:
+    import zenoh
+
+
+@dataclass(frozen=True)
+class StreamSample:
+    """One sample of one camera's stream: ``gngdt/<camera>/<stream>``."""
+
+    camera: str
+    #: ``color``, ``points``, ``learner/status``, ...
+    stream: str
+    stamp: FrameStamp
+    payload: bytes
+
+    @property
+    def key(self) -> str:
+        return f"gngdt/{self.camera}/{self.stream}"
+
+
+def split_key(key: str) -> tuple[str, str] | None:
+    """``(camera, stream)`` of ``gngdt/<camera>/<stream>``, or None for any other key."""
+    parts = key.split("/", 2)
+    if len(parts) < 3 or parts[0] != "gngdt" or not parts[1] or not parts[2]:
+        return None
+    return parts[1], parts[2]
+
+
+class Output(ABC):
+    """Where the logger's streams go (see the module's docstring)."""
+
+    #: gets every sample on zenoh's thread (`receive`) instead of the loop's (`write`)
+    raw: ClassVar[bool] = False
+
+    @classmethod
+    @abstractmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        """Declare this output's command-line options."""
+
+    @classmethod
+    @abstractmethod
+    def from_args(cls, args: argparse.Namespace) -> Output | None:
+        """The output the options ask for, or None. ValueError/OSError: a clear error."""
+
+    @abstractmethod
+    def describe(self) -> str:
+        """Where the streams go, for people (``logging to runs/x.rrd``)."""
+
+    def receive(self, sample: zenoh.Sample) -> None:
+        """A raw output's sample, on zenoh's thread (never blocks)."""
+        raise NotImplementedError
+
+    def write(self, sample: StreamSample) -> None:
+        """A sample from the logger's loop; ValueError when it is malformed."""
+        raise NotImplementedError
+
+    def cameras_changed(self, cameras: list[str]) -> None:
+        """The logger now knows these cameras (a new one came)."""
+        return None
+
+    def tick(self) -> None:
+        """Called on every turn of the logger's loop."""
+        return None
+
+    def stopped_early(self) -> str:
+        """Why this output stopped writing before the end (``""``: it did not)."""
+        return ""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Finish the output (files complete and readable)."""

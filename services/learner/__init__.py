@@ -1,0 +1,134 @@
+"""Learn GNG-DT topologies from a camera's point clouds and publish them with their clusterings.
+
+Each cloud on ``gngdt/<cam>/points`` is learned by the learner's per-frame policy
+(`gngdt_core.frame_learner.FrameLearner`: one network, in the frame of the first cloud; the
+learner's profile forgets nodes that stand for nothing any more and rehearses earlier frames of
+a moving camera). After each learned frame the learner publishes the topology (edges per
+property, every clustering of `gngdt_core.clustering.CLUSTERINGS` with persistent cluster ids,
+and persistent node ids), the objects (one per confirmed cluster of ``objects_from``, as a
+foxglove SceneUpdate) and a status message, and every ``scene_every_frames`` frames the whole
+scene as a foxglove SceneUpdate; a queryable on the topology key answers a late joiner with the
+latest topology (`services.learner.serve`). The model is checkpointed periodically and on
+SIGINT/SIGTERM, and resumed from the checkpoint on start (`services.learner.checkpoints`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from gngdt_core.clustering import CLUSTERINGS
+from schemas.wire import DEFAULT_CAMERA, topic
+from services.plumbing.session import ZenohSetupError, add_zenoh_arguments, open_session
+
+if TYPE_CHECKING:
+    from gngdt_io.profiles import Profile
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt learn                                          # camera "camera", the learner's defaults
+  gngdt learn --params config/learner.toml --checkpoint runs/learner.npz
+  gngdt learn --cam left --samples-per-frame 20000 --max-nodes 2000
+  gngdt learn --params config/kinect.toml --print-params   # effective values, and from where
+"""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
+    parser.add_argument("--params", type=Path, metavar="FILE.toml",
+                        help="GNG-DT parameters and learner options; config/learner.toml "
+                        "documents every key (installed with gngdt: `python -m gngdt_config` "
+                        "prints where)")
+    parser.add_argument("--print-params", action="store_true",
+                        help="print every effective parameter and where it came from (a "
+                        "default, the --params file or an option), then exit")
+    parser.add_argument("--checkpoint", type=Path, metavar="PATH",
+                        help="checkpoint file (.npz): resumed from if present, saved periodically "
+                        "and on shutdown")
+    parser.add_argument("--samples-per-frame", type=int,
+                        help="learning steps per frame (default 10000)")
+    parser.add_argument("--max-nodes", type=int, help="node budget (default 1000)")
+    parser.add_argument("--min-cluster-size", type=int,
+                        help="smallest component counted as a cluster (default 5)")
+    parser.add_argument("--checkpoint-every", type=int, metavar="FRAMES",
+                        help="checkpoint every this many learned frames (default 30)")
+    parser.add_argument("--seed", type=int, help="random seed of the model (default 0)")
+    parser.add_argument("--objects-from", metavar="CLUSTERING",
+                        help="clustering published as objects on gngdt/<cam>/objects (default "
+                        f"segments; any of {', '.join(CLUSTERINGS)})")
+    parser.add_argument("--object-confirm-frames", type=int, metavar="FRAMES",
+                        help="a cluster is published as an object once seen in this many "
+                        "learned frames in a row (default 5; 1: at once)")
+    parser.add_argument("--scene-every", type=int, metavar="FRAMES",
+                        help="publish the foxglove scene on gngdt/<cam>/scene every this many "
+                        "learned frames (default 3; 0: never)")
+    parser.add_argument("--exit-on-eos", action="store_true",
+                        help="exit after learning the last frame of a stream (used by `gngdt run`)")
+    add_zenoh_arguments(parser)
+
+
+def profile_from_args(args: argparse.Namespace) -> Profile:
+    """The params file (or the learner's defaults) overridden by explicit command-line options;
+    ValueError naming the file or option that is wrong."""
+    from gngdt_io.profiles import load_profile
+
+    options = {
+        "samples_per_frame": args.samples_per_frame,
+        "min_cluster_size": args.min_cluster_size,
+        "checkpoint_every_frames": args.checkpoint_every,
+        "seed": args.seed,
+        "objects_from": args.objects_from,
+        "object_confirm_frames": args.object_confirm_frames,
+        "scene_every_frames": args.scene_every,
+    }
+    return load_profile(args.params).with_overrides({"max_nodes": args.max_nodes}, options,
+                                                    "command line")
+
+
+def main(args: argparse.Namespace) -> int:
+    from gngdt_core.frame_learner import FrameLearner
+    from gngdt_io.checkpoints import CheckpointError, CheckpointLock
+    from gngdt_io.profiles import format_parameters
+    from services.learner import checkpoints
+    from services.learner.serve import serve, warm_up
+
+    lock = None
+    try:
+        profile = profile_from_args(args)
+        if args.print_params:
+            print(format_parameters(profile), end="")
+            return 0
+        config = profile.config
+        topic(args.cam, "points")
+        if args.checkpoint is not None:
+            lock = CheckpointLock(args.checkpoint).acquire()
+            checkpoints.clean_checkpoint_directory(args.checkpoint)
+        if args.checkpoint is not None and args.checkpoint.exists():
+            learner = checkpoints.resume(args.checkpoint, args.cam, config)
+        else:
+            learner = FrameLearner(args.cam, config)
+        started = time.monotonic()
+        log.info("preparing the learning kernels (the first run on a machine compiles them "
+                 "with numba, ~20 s; later runs load them from its cache)")
+        warm_up(config)
+        log.info("kernels ready in %.1f s", time.monotonic() - started)
+        try:
+            session = open_session(args)
+        except ZenohSetupError as error:
+            log.error("%s", error)
+            return 1
+        try:
+            return serve(args, config, learner, session)
+        finally:
+            time.sleep(0.1)  # let the last BLOCK puts reach the router
+            session.close()
+    except (ValueError, CheckpointError) as error:
+        log.error("%s", error)
+        return 2
+    finally:
+        if lock is not None:
+            lock.release()

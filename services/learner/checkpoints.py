@@ -1,0 +1,95 @@
+"""The learner's checkpoints: its network, counters and frame saved to a file and resumed from
+it (`gngdt_io.checkpoints` writes and checks the file)."""
+
+from __future__ import annotations
+
+import json
+import logging
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+from gngdt_core.frame_learner import MAX_COUNTER, Counters, FrameLearner, LearnerConfig
+from gngdt_core.model import GNGDT
+from gngdt_io.checkpoints import (
+    CheckpointError,
+    load_checkpoint,
+    remove_stale_temporaries,
+    save_checkpoint,
+)
+
+log = logging.getLogger(__name__)
+
+
+def save(learner: FrameLearner, path: Path) -> bool:
+    """Checkpoint to ``path``; a failed write (disk full, permissions) is logged, not fatal:
+    the learner goes on and the previous checkpoint, replaced atomically, stays intact."""
+    counters = {item.name: getattr(learner.counters, item.name) for item in fields(Counters)}
+    try:
+        save_checkpoint(path, learner.model.get_state(),
+                        {"camera": learner.camera, "counters": counters,
+                         "frame_id": learner.frame_id})
+    except OSError as error:
+        log.error("checkpoint %s not written: %s", path, error)
+        return False
+    log.debug("checkpoint %s: %d nodes, %d steps", path, learner.model.n_nodes_,
+              learner.model.n_steps_)
+    return True
+
+
+def resume(path: Path, camera: str, config: LearnerConfig) -> FrameLearner:
+    """A learner restored from ``path`` (raises ``CheckpointError`` when it is corrupt)."""
+    state, metadata = load_checkpoint(path)
+    saved_camera = metadata.get("camera", camera)
+    if saved_camera != camera:
+        raise CheckpointError(
+            f"checkpoint {path} holds what camera {saved_camera!r} learned, not {camera!r}; "
+            f"resume it with --cam {saved_camera} or give this camera its own --checkpoint")
+    try:
+        model = GNGDT.from_state(state)
+    except (KeyError, ValueError, TypeError) as error:
+        raise CheckpointError(f"checkpoint {path}: not a GNG-DT state ({error})") from error
+    counters = counters_from_metadata(path, metadata.get("counters", {}))
+    counters.last_sequence = -1  # a new capture restarts its sequence numbers
+    saved_params = json.loads(str(state["params"]))
+    ignored = sorted(name for name, value in config.model.items()
+                     if saved_params.get(name) != value)
+    if ignored:  # the learned network carries its parameters; changing them mid-life is not
+        log.warning("resuming %s with its own parameters; ignoring the requested %s", path,
+                    ", ".join(f"{name}={config.model[name]!r}" for name in ignored))
+    frame_id = metadata.get("frame_id")
+    if frame_id is not None and not isinstance(frame_id, str):
+        raise CheckpointError(f"checkpoint {path}: frame_id is {frame_id!r}, not a name")
+    log.info("resumed from %s: %d nodes, %d steps, in frame %r", path, model.n_nodes_,
+             model.n_steps_, frame_id)
+    return FrameLearner(camera, config, model=model, counters=counters, frame_id=frame_id)
+
+
+def counters_from_metadata(path: Path, saved: Any) -> Counters:
+    """The counters kept in a checkpoint's metadata, type-checked (``CheckpointError``)."""
+    if not isinstance(saved, dict):
+        raise CheckpointError(f"checkpoint {path}: counters are not a mapping")
+    values: dict[str, Any] = {}
+    for item in fields(Counters):
+        if item.name not in saved:
+            continue
+        value = saved[item.name]
+        expected = float if item.type in ("float", float) else int
+        if isinstance(value, bool) or not isinstance(value, int | float) or (
+                expected is int and not isinstance(value, int)):
+            raise CheckpointError(
+                f"checkpoint {path}: counter {item.name} is {value!r}, expected a number")
+        low = -1 if item.name == "last_sequence" else 0
+        if not low <= value <= MAX_COUNTER:
+            raise CheckpointError(
+                f"checkpoint {path}: counter {item.name} is {value!r}, outside {low}..2**63-1")
+        values[item.name] = expected(value)
+    return Counters(**values)
+
+
+def clean_checkpoint_directory(path: Path) -> None:
+    """Remove the temporaries a killed learner left beside ``path`` (under its lock)."""
+    removed = remove_stale_temporaries(path)
+    if removed:
+        log.warning("removed %d stale checkpoint temporaries left by an interrupted write: %s",
+                    len(removed), ", ".join(item.name for item in removed))

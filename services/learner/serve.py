@@ -1,0 +1,357 @@
+"""The learner on zenoh: subscribe to a camera's clouds, learn each through the `FrameLearner`,
+publish what it learned, answer late joiners, checkpoint, stop at the stream's end when asked.
+
+Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
+size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
+memory stays bounded. Objects and scene are published latest-wins (congestion control DROP): a
+consumer that cannot keep up misses updates, and never slows the learner down.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+import time
+from collections import deque
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from gngdt_core.frame_learner import FrameLearner, LearnerConfig, OtherFrameError
+from schemas.wire import (
+    ENCODING_SCENE_UPDATE,
+    ENCODING_STATUS,
+    ENCODING_TOPOLOGY,
+    FrameStamp,
+    topic,
+)
+from services.learner import checkpoints
+from services.learner.messages import (
+    decode_points,
+    objects_message,
+    scene_message,
+    status_message,
+    topology_message,
+)
+from services.plumbing import lifecycle
+from services.plumbing.session import declare_publisher
+
+if TYPE_CHECKING:
+    import zenoh
+
+log = logging.getLogger(__name__)
+
+#: bytes a stream-end message may take (a real one is under 200)
+MAX_EOS_BYTES = 64 * 1024
+#: bytes per point a foreign cloud layout may use (gngdt's own uses 15)
+MAX_POINT_STRIDE_BYTES = 64
+
+
+class LatencyWindow:
+    """The last ``size`` frame-to-topology latencies (ms), for p50/p99."""
+
+    def __init__(self, size: int = 1000) -> None:
+        self._values: deque[float] = deque(maxlen=size)
+
+    def add(self, latency_ms: float) -> None:
+        self._values.append(latency_ms)
+
+    def percentile(self, q: float) -> float:
+        return float(np.percentile(np.fromiter(self._values, float), q)) if self._values else 0.0
+
+
+class EndOfStream:
+    """Remembers the last end-of-stream announced on the camera (set from zenoh's thread)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self.last_sequence: int | None = None
+        self.received_at = 0.0
+
+    def set(self, last_sequence: int) -> None:
+        with self._lock:
+            self.last_sequence = last_sequence
+            self.received_at = time.monotonic()
+
+    def finished(self, learned_sequence: int, drain_seconds: float = 5.0) -> bool:
+        """True once the last frame was learned, or ``drain_seconds`` after eos without it."""
+        with self._lock:
+            if self.last_sequence is None:
+                return False
+            return (learned_sequence >= self.last_sequence
+                    or time.monotonic() - self.received_at > drain_seconds)
+
+
+class LatestTopology:
+    """The latest encoded topology and its attachment, served to late joiners."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._payload: bytes | None = None
+        self._attachment: bytes | None = None
+
+    def set(self, payload: bytes, attachment: bytes) -> None:
+        with self._lock:
+            self._payload, self._attachment = payload, attachment
+
+    def reply(self, query: zenoh.Query) -> None:
+        with self._lock:
+            payload, attachment = self._payload, self._attachment
+        if payload is not None:
+            query.reply(query.key_expr, payload, encoding=ENCODING_TOPOLOGY, attachment=attachment)
+
+
+class DuplicateLearnerError(ValueError):
+    """Another learner already learns this camera."""
+
+
+class LearnerInstances:
+    """Every learner announces itself on ``gngdt/<cam>/learner/instance/<zenoh id>``; two on one
+    camera would interleave their topologies, so a second one refuses to start, and of two that
+    start at the same moment the one with the larger id stops."""
+
+    def __init__(self, session: zenoh.Session, camera: str) -> None:
+        self.camera = camera
+        self.own_id = str(session.zid())
+        self._prefix = f"gngdt/{camera}/learner/instance"
+        self.conflict = threading.Event()
+        self.other_id = ""
+        others = [str(reply.ok.key_expr).rsplit("/", 1)[-1]
+                  for reply in session.liveliness().get(f"{self._prefix}/*", timeout=2.0)
+                  if reply.ok is not None]
+        if others:
+            raise DuplicateLearnerError(
+                f"another learner (zenoh id {others[0]}) already learns camera {camera!r}; "
+                "stop it, or give this one another --cam")
+        self._token = session.liveliness().declare_token(f"{self._prefix}/{self.own_id}")
+        self._subscriber = session.liveliness().declare_subscriber(
+            f"{self._prefix}/*", self._on_token, history=True)
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        other = str(sample.key_expr).rsplit("/", 1)[-1]
+        if other == self.own_id or sample.kind != zenoh.SampleKind.PUT:
+            return
+        log.error("a second learner (zenoh id %s) learns camera %r too: their topologies "
+                  "would interleave", other, self.camera)
+        if other < self.own_id:
+            self.other_id = other
+            self.conflict.set()
+
+    def close(self) -> None:
+        self._subscriber.undeclare()
+        self._token.undeclare()
+
+
+def payload_bytes(sample: zenoh.Sample, limit: int) -> bytes:
+    """The sample's payload, refused (``MessageError``) before any copy when over ``limit``."""
+    from schemas.packing import MessageError
+
+    size = len(sample.payload)
+    if size > limit:
+        raise MessageError(f"{size} bytes, more than the limit of {limit}")
+    return sample.payload.to_bytes()
+
+
+def attachment_bytes(sample: zenoh.Sample) -> bytes | None:
+    attachment = sample.attachment
+    if attachment is None or len(attachment) > 64:
+        return None
+    return attachment.to_bytes()
+
+
+def warn_other_frame(error: OtherFrameError, count: int) -> None:
+    """Warn about clouds in another frame: the first, then every 100th (counted in status)."""
+    if count == 1 or count % 100 == 0:
+        log.warning("points message skipped (%d so far): %s", count, error)
+
+
+class LearnerService:
+    """One camera's learner on a zenoh session: its subscribers, publishers and queryable."""
+
+    def __init__(self, session: zenoh.Session, camera: str, config: LearnerConfig,
+                 learner: FrameLearner, checkpoint: Path | None = None) -> None:
+        import zenoh
+
+        self.camera = camera
+        self.options = config.options
+        self.learner = learner
+        self.checkpoint = checkpoint
+        self.end = EndOfStream()
+        self.latest = LatestTopology()
+        self.latencies = LatencyWindow()
+        self.instances = LearnerInstances(session, camera)
+        self.points = session.declare_subscriber(topic(camera, "points"),
+                                                 zenoh.handlers.RingChannel(1))
+        self._eos = session.declare_subscriber(topic(camera, "eos"), self._on_eos)
+        self._topology = declare_publisher(session, topic(camera, "topology"),
+                                           ENCODING_TOPOLOGY, latest_wins=True)
+        self._status = declare_publisher(session, topic(camera, "learner/status"),
+                                         ENCODING_STATUS, latest_wins=False)
+        # latest-wins views: a consumer that never reads must not hold the learner back
+        self._objects = declare_publisher(session, topic(camera, "objects"),
+                                          ENCODING_SCENE_UPDATE, latest_wins=True)
+        self._scene = declare_publisher(session, topic(camera, "scene"),
+                                        ENCODING_SCENE_UPDATE, latest_wins=True)
+        self._queryable = session.declare_queryable(topic(camera, "topology"), self.latest.reply)
+        self._token = session.liveliness().declare_token(f"gngdt/{camera}/learner/alive")
+        self._max_cloud_bytes = self.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
+        #: the last learned frame (stamp, positions, colours), kept to settle on at the end
+        self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
+        self.learned_sequence = -1
+        self._settled_end = 0.0  # the end of stream (its arrival time) already settled on
+        self._frames_since_checkpoint = 0
+        self._last_checkpoint = time.monotonic()
+
+    def _on_eos(self, sample: zenoh.Sample) -> None:
+        from schemas.packing import MessageError, decode_stream_end
+
+        try:
+            end = decode_stream_end(payload_bytes(sample, MAX_EOS_BYTES))
+        except MessageError as error:
+            self.learner.counters.malformed_messages += 1
+            log.warning("malformed end-of-stream skipped: %s", error)
+            return
+        self.end.set(end.last_frame_sequence)
+
+    def publish(self, stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray | None,
+                settled: str = "") -> float:
+        """Publish the topology and status after learning a frame, then its objects and (every
+        ``scene_every_frames`` frames, and the settled last one) the scene; the latency in ms."""
+        learner = self.learner
+        learned = learner.learned_frame()
+        topology = topology_message(learner, stamp,
+                                    learner.quantization_error(positions, colors), learned)
+        payload = topology.SerializeToString()
+        attachment = stamp.to_attachment()
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        self._topology.put(payload, attachment=attachment)
+        self.latest.set(payload, attachment)
+        percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
+        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled)
+        self._status.put(status.SerializeToString(), attachment=attachment)
+        objects = objects_message(learner, stamp, learner.objects(learned))
+        self._objects.put(objects.SerializeToString(), attachment=attachment)
+        every = self.options.scene_every_frames
+        if every and (settled or learner.counters.frames_used % every == 1 % every):
+            scene = scene_message(learner, stamp, learned)
+            self._scene.put(scene.SerializeToString(), attachment=attachment)
+        return latency_ms
+
+    def handle(self, sample: zenoh.Sample) -> None:
+        """Decode, learn and publish one points sample; a bad one is counted and skipped."""
+        counters = self.learner.counters
+        counters.frames_received += 1
+        try:
+            stamp, positions, colors, frame_id, pose = decode_points(
+                payload_bytes(sample, self._max_cloud_bytes), attachment_bytes(sample),
+                self.options.max_points)
+            counters.note_sequence(stamp.sequence)
+            received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+            self.learner.learn(positions, colors, frame_id, pose)
+        except OtherFrameError as error:  # counted by the learner, warned sparingly
+            warn_other_frame(error, counters.frames_other_frame)
+            return
+        except ValueError as error:  # MessageError is a ValueError
+            counters.malformed_messages += 1
+            log.warning("points message skipped: %s", error)
+            return
+        latency_ms = self.publish(stamp, positions, colors)
+        self.latencies.add(latency_ms)
+        self.last_frame = (stamp, positions, colors)
+        self.learned_sequence = stamp.sequence
+        log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
+                  stamp.sequence, len(positions), received_ms, latency_ms)
+        self._checkpoint_if_due()
+
+    def _checkpoint_if_due(self) -> None:
+        self._frames_since_checkpoint += 1
+        if self.checkpoint is not None and (
+            self._frames_since_checkpoint >= self.options.checkpoint_every_frames
+            or time.monotonic() - self._last_checkpoint >= self.options.checkpoint_every_seconds
+        ):
+            checkpoints.save(self.learner, self.checkpoint)
+            self._frames_since_checkpoint, self._last_checkpoint = 0, time.monotonic()
+
+    def stream_over(self) -> bool:
+        """Whether the stream ended and its last frame was learned; the first time, settle on
+        that frame and publish the final network."""
+        if not self.end.finished(self.learned_sequence):
+            return False
+        if self.last_frame is not None and self.end.received_at != self._settled_end:
+            stamp, positions, colors = self.last_frame
+            self.publish(stamp, positions, colors,
+                         settled=self.learner.settle(positions, colors))
+            self._settled_end = self.end.received_at
+        return True
+
+    def run(self, exit_on_eos: bool) -> int:
+        """Learn until a stop signal, the stream's end (``exit_on_eos``) or a second learner on
+        the camera; the exit code."""
+        with lifecycle.graceful() as stop:
+            while not stop.is_set():
+                if self.instances.conflict.is_set():
+                    log.error("stopping: learner %s came first on camera %r",
+                              self.instances.other_id, self.camera)
+                    return 2
+                sample = self.points.try_recv()
+                if sample is not None:
+                    self.handle(sample)
+                    continue
+                if self.stream_over() and exit_on_eos:
+                    break
+                time.sleep(0.002)
+        return 0
+
+    def close(self) -> None:
+        """Save the last checkpoint and undeclare everything (the session stays open)."""
+        if self.checkpoint is not None and self.learner.counters.frames_used > 0:
+            checkpoints.save(self.learner, self.checkpoint)
+        self._token.undeclare()
+        self.instances.close()
+        for entity in (self._queryable, self._eos, self.points, self._objects, self._scene):
+            entity.undeclare()
+
+
+def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner,
+          session: zenoh.Session) -> int:
+    """Learn on ``session`` until stopped; checkpoint on the way out."""
+    service = LearnerService(session, args.cam, config, learner, args.checkpoint)
+    log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
+             config.options.samples_per_frame)
+    try:
+        exit_code = service.run(args.exit_on_eos)
+    finally:
+        service.close()
+    counters = learner.counters
+    model = learner.model
+    log.info("learned %d frames (%d dropped, %d malformed), %d nodes, %d steps",
+             counters.frames_used, counters.frames_dropped, counters.malformed_messages,
+             model.n_nodes_ if model else 0, model.n_steps_ if model else 0)
+    return exit_code
+
+
+def warm_up(config: LearnerConfig) -> None:
+    """Run every model and message operation once on random points, so that numba compiles (or
+    loads its cache) and modules load before the first frame instead of adding to its latency."""
+    from gngdt_core.model import GNGDT
+
+    rng = np.random.default_rng(0)
+    positions = rng.random((500, 3), dtype=np.float32)
+    colors = rng.integers(0, 256, (500, 3), dtype=np.uint8)
+    positions[:, 2] += 1.0  # in front of the camera, as a depth camera's points are
+    model = GNGDT(**{**config.model, "random_state": 0})
+    pose = np.eye(4)
+    pose[:3, 3] = 0.1
+    model.partial_fit(positions, colors, n_steps=2_000, camera_pose=pose)
+    model.quantization_error(positions, colors)
+    learner = FrameLearner("warm-up", config, model=model)
+    learner.measure_ghosts(positions, pose)
+    learned = learner.learned_frame()
+    stamp = FrameStamp(0, 1)
+    topology_message(learner, stamp, {}, learned)
+    objects_message(learner, stamp, learner.objects(learned))
+    scene_message(learner, stamp, learned)

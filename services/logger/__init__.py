@@ -1,0 +1,75 @@
+"""Log every gngdt stream (``gngdt/**``) to its outputs: rerun (a .rrd by default, or a viewer)
+and, when asked, an MCAP recording of every stream as it is (``--mcap``); `gngdt_io.outputs`
+has them all behind one interface.
+
+The logger stops on its own once every camera it knows of (from its first message, or from its
+capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of
+its last frame has arrived, or ``--eos-drain`` seconds after that eos (or after its capture left
+without one).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from services.logger.cameras import DEFAULT_MAX_CAMERAS
+from services.logger.inbox import DEFAULT_QUEUE_MB
+from services.logger.run import LIVELINESS_KEY
+from services.plumbing.session import add_zenoh_arguments
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt log                                   # saves runs/log-<time>.rrd
+  gngdt log --save out.rrd                    # out.1.rrd if out.rrd exists (never overwritten)
+  gngdt log --connect --url rerun+http://127.0.0.1:9876/proxy   # a running viewer
+  gngdt log --stdout | rerun -
+  gngdt log --mcap runs/all.mcap              # + every stream as it is, for Foxglove
+"""
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from gngdt_io.outputs import OUTPUTS
+
+    for output in OUTPUTS:
+        output.add_arguments(parser)
+    parser.add_argument("--eos-drain", type=float, default=10.0, metavar="SECONDS",
+                        help="after an end-of-stream, wait at most this long for the last "
+                        "topology (default 10)")
+    parser.add_argument("--keep-running", action="store_true",
+                        help="do not stop at end-of-stream (only on SIGINT/SIGTERM)")
+    limits = parser.add_argument_group("limits (what arrives beyond them is refused, counted)")
+    limits.add_argument("--max-cameras", type=int, default=DEFAULT_MAX_CAMERAS, metavar="N",
+                        help=f"cameras logged at most (default {DEFAULT_MAX_CAMERAS})")
+    limits.add_argument("--max-queue-mb", type=int, default=DEFAULT_QUEUE_MB, metavar="MB",
+                        help="messages held while the logger is busy, in MB (default "
+                        f"{DEFAULT_QUEUE_MB}); the oldest make room")
+    add_zenoh_arguments(parser)
+
+
+def main(args: argparse.Namespace) -> int:
+    from gngdt_io.outputs import OUTPUTS, Output
+    from gngdt_io.outputs.rerun_sinks import exit_now_if_stuck
+    from services.logger.run import run_logger
+
+    if args.max_queue_mb < 0 or args.max_cameras < 1:
+        log.error("--max-queue-mb must be >= 0 and --max-cameras >= 1, got %s and %s",
+                  args.max_queue_mb, args.max_cameras)
+        return 2
+    outputs: list[Output] = []
+    try:
+        for kind in OUTPUTS:
+            output = kind.from_args(args)
+            if output is not None:
+                outputs.append(output)
+    except (ValueError, OSError) as error:
+        log.error("%s", error)
+        for output in outputs:
+            output.close()
+        return 2
+    if not args.stdout:  # with --stdout, standard output is rerun's stream
+        for output in outputs:
+            print(output.describe(), flush=True)
+    code = run_logger(args, outputs)
+    stuck = any(getattr(output, "stuck", False) for output in outputs)
+    return exit_now_if_stuck(stuck, code)

@@ -1,0 +1,65 @@
+"""Every sample the logger takes from its inbox: checked, counted, handed to its outputs."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from gngdt_io.outputs import Output, StreamSample, split_key
+from schemas.wire import FrameStamp
+from services.logger.cameras import Cameras
+
+log = logging.getLogger(__name__)
+
+#: the streams of a camera the logger takes (others on ``gngdt/**`` are not its business)
+LOGGED_STREAMS = ("calibration", "color", "depth", "points", "topology", "objects",
+                  "learner/status", "eos")
+
+
+class Dispatcher:
+    """Hands each valid sample to every (non-raw) output; malformed ones are counted, skipped.
+
+    A sample must carry a valid frame stamp (`FrameStamp`) with a plausible capture time, and
+    decode in every output; a camera becomes known only with a valid sample (or its capture's
+    liveliness token), so garbage on made-up camera names makes no camera.
+    """
+
+    def __init__(self, outputs: list[Output], cameras: Cameras) -> None:
+        self.outputs = [output for output in outputs if not output.raw]
+        self.cameras = cameras
+        self.malformed = 0
+
+    def handle(self, key: str, payload: bytes, attachment: bytes | None) -> None:
+        parts = split_key(key)
+        if parts is None or parts[1] not in LOGGED_STREAMS:
+            return
+        camera, stream = parts
+        new_camera = camera not in self.cameras
+        if new_camera and not self.cameras.admit(camera):
+            return
+        try:
+            stamp = FrameStamp.from_attachment(attachment)
+            stamp.check_clock(time.time_ns())
+            if new_camera:
+                self.cameras.add(camera)
+            self.cameras.note(camera, stream, stamp.sequence, payload)
+            sample = StreamSample(camera, stream, stamp, payload)
+            for output in self.outputs:
+                output.write(sample)
+        except (ValueError, OverflowError) as error:  # MessageError is a ValueError
+            if new_camera:  # a camera is made by a valid message, not by garbage
+                self.cameras.progress.pop(camera, None)
+            self.malformed += 1
+            log.warning("%s: malformed message skipped: %s", key, error)
+            return
+        if new_camera:
+            self.cameras_changed()
+
+    def capture_seen(self, camera: str, alive: bool) -> None:
+        """A capture of ``camera`` started (``alive``) or left."""
+        if self.cameras.capture_seen(camera, alive):
+            self.cameras_changed()
+
+    def cameras_changed(self) -> None:
+        for output in self.outputs:
+            output.cameras_changed(self.cameras.names())

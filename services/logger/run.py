@@ -1,0 +1,70 @@
+"""The logger's loop: zenoh in, outputs out, until every camera's stream is over."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from gngdt_io.outputs import Output
+from services.logger.cameras import Cameras, CaptureWatch
+from services.logger.dispatch import Dispatcher
+from services.logger.inbox import Inbox
+from services.plumbing import lifecycle
+from services.plumbing.session import ZenohSetupError, open_session
+
+log = logging.getLogger(__name__)
+
+#: the logger's liveliness token (``gngdt run`` waits for it)
+LIVELINESS_KEY = "gngdt/logger/alive"
+
+
+def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
+    """Subscribe to ``gngdt/**`` and drive ``outputs`` until stopped or every stream is over;
+    the outputs are closed on the way out. The exit code."""
+    inbox = Inbox(args.max_queue_mb * 1024 * 1024)
+    dispatcher = Dispatcher(outputs, Cameras(args.max_cameras))
+    try:
+        session = open_session(args)
+    except ZenohSetupError as error:
+        log.error("%s", error)
+        for output in outputs:
+            output.close()
+        return 1
+    declared = [session.declare_subscriber("gngdt/**", inbox.put)]
+    declared += [session.declare_subscriber("gngdt/**", output.receive)
+                 for output in outputs if output.raw]
+    captures = CaptureWatch()
+    declared.append(session.liveliness().declare_subscriber(
+        CaptureWatch.KEY, captures.on_token, history=True))
+    declared.append(session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}"))
+    try:
+        with lifecycle.graceful() as stop:
+            while not stop.is_set():
+                inbox.arrived.wait(0.05)
+                for key, payload, attachment in inbox.take():
+                    dispatcher.handle(key, payload, attachment)
+                    tick(outputs)
+                for camera, alive in captures.take():
+                    dispatcher.capture_seen(camera, alive)
+                tick(outputs)
+                if not args.keep_running and dispatcher.cameras.all_finished(args.eos_drain):
+                    break
+    finally:
+        for entity in reversed(declared):
+            entity.undeclare()
+        session.close()
+        for key, payload, attachment in inbox.take():
+            dispatcher.handle(key, payload, attachment)
+        for output in outputs:
+            output.close()
+    stopped = "; ".join(f"{output.describe()}: stopped early: {output.stopped_early()}"
+                        for output in outputs if output.stopped_early())
+    log.info("logger done: %d malformed, %d dropped, %d oversized, %d refused (cameras beyond "
+             "--max-cameras)%s", dispatcher.malformed, inbox.dropped, inbox.oversized,
+             dispatcher.cameras.refused, f"; {stopped}" if stopped else "")
+    return 0
+
+
+def tick(outputs: list[Output]) -> None:
+    for output in outputs:
+        output.tick()

@@ -1,0 +1,167 @@
+"""The house rules (ARCHITECTURE.md), checked on the source: layers whose imports point down, no
+import cycle, modules and functions of a readable size."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+#: each top-level package's layer: a module may import its own layer and the ones below
+LAYERS = {"gngdt_core": 0, "schemas": 1, "gngdt_io": 2, "gngdt_eval": 3, "services": 4,
+          "benchmarks": 5, "docs": 5}
+MAX_MODULE_LINES = 600
+MAX_FUNCTION_LINES = 80
+#: decorators of numba kernels, which are exempt from the function size (one loop each)
+KERNEL_DECORATORS = ("njit", "jit", "inlined")
+#: old import paths kept for one release, each only re-exporting its new home with a warning
+DEPRECATED_SHIMS = {"services.pointcloud", "services.recording", "services.recording.reader",
+                    "gngdt_core.stream", "schemas.packing"}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(path): path for top in LAYERS for path in (ROOT / top).rglob("*.py")}
+
+
+MODULES = _modules()
+
+
+def _imported(module: str, node: ast.Import | ast.ImportFrom, is_package: bool) -> list[str]:
+    """Names of ours that one import statement of ``module`` imports (modules, or the package
+    a name is taken from)."""
+    if isinstance(node, ast.Import):
+        names = [alias.name for alias in node.names]
+    else:
+        base = node.module or ""
+        if node.level:
+            package = module.split(".") if is_package else module.split(".")[:-1]
+            package = package[:len(package) - node.level + 1]
+            base = ".".join([*package, *([base] if base else [])])
+        names = [f"{base}.{alias.name}" if f"{base}.{alias.name}" in MODULES else base
+                 for alias in node.names]
+    return [resolved for name in names if (resolved := _resolve(name)) and resolved != module]
+
+
+def _resolve(name: str) -> str | None:
+    parts = name.split(".")
+    while parts:
+        if ".".join(parts) in MODULES:
+            return ".".join(parts)
+        parts.pop()
+    return None
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module -> the modules of ours it imports (anywhere in it: top level, functions,
+    TYPE_CHECKING blocks)."""
+    graph: dict[str, set[str]] = defaultdict(set)
+    for module, path in MODULES.items():
+        tree = ast.parse(path.read_text(), str(path))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import | ast.ImportFrom):
+                graph[module].update(_imported(module, node, path.name == "__init__.py"))
+    return graph
+
+
+def layer(module: str) -> int:
+    return LAYERS[module.split(".")[0]]
+
+
+def test_every_import_points_down_or_across() -> None:
+    upward = sorted(f"{module} -> {imported}" for module, imports in import_graph().items()
+                    for imported in imports
+                    if layer(imported) > layer(module) and module not in DEPRECATED_SHIMS)
+    assert not upward, "imports of a higher layer:\n" + "\n".join(upward)
+
+
+def test_no_import_tests_outside_tests() -> None:
+    offenders = sorted(module for module, path in MODULES.items()
+                       if any(isinstance(node, ast.ImportFrom | ast.Import) and any(
+                           name.split(".")[0] in ("tests", "conftest") or name.startswith("test_")
+                           for name in ([node.module or ""] if isinstance(node, ast.ImportFrom)
+                                        else [alias.name for alias in node.names]))
+                              for node in ast.walk(ast.parse(path.read_text()))))
+    assert not offenders, f"modules importing test helpers: {offenders}"
+
+
+def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Import cycles: the strongly connected components of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    cycles: list[list[str]] = []
+    counter = [0]
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = counter[0]
+        counter[0] += 1
+        stack.append(node)
+        on_stack.add(node)
+        for other in graph.get(node, ()):
+            if other not in index:
+                visit(other)
+                low[node] = min(low[node], low[other])
+            elif other in on_stack:
+                low[node] = min(low[node], index[other])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    limit = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(limit, 10 * len(graph) + 100))
+    try:
+        for node in sorted(graph):
+            if node not in index:
+                visit(node)
+    finally:
+        sys.setrecursionlimit(limit)
+    return cycles
+
+
+def test_no_import_cycle() -> None:
+    assert strongly_connected(import_graph()) == []
+
+
+def test_the_cycle_finder_finds_a_cycle() -> None:
+    """The check above can fail: a two-module loop and a three-module ring are found."""
+    graph = {"a": {"b"}, "b": {"a", "c"}, "c": {"d"}, "d": {"e"}, "e": {"c"}, "f": set()}
+    assert sorted(strongly_connected(graph)) == [["a", "b"], ["c", "d", "e"]]
+
+
+def _python_files() -> list[Path]:
+    return sorted([*MODULES.values(), *(ROOT / "tests").rglob("*.py")])
+
+
+@pytest.mark.parametrize("path", _python_files(), ids=lambda path: str(path.relative_to(ROOT)))
+def test_module_and_function_sizes(path: Path) -> None:
+    source = path.read_text()
+    lines = source.count("\n")
+    assert lines <= MAX_MODULE_LINES, f"{lines} lines: split it by responsibility"
+    long = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+            decorators = " ".join(ast.unparse(decorator) for decorator in node.decorator_list)
+            size = node.end_lineno - node.lineno + 1
+            if size > MAX_FUNCTION_LINES and not any(name in decorators
+                                                     for name in KERNEL_DECORATORS):
+                long.append(f"{node.name} ({size} lines)")
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines: {long}"
