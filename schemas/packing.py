@@ -30,7 +30,7 @@ from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.message import Message
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from gngdt_io.frame import CameraIntrinsics
+from gngdt_core.geometry import CameraIntrinsics, TransformError, matrix_to_pose, pose_to_matrix
 from schemas import gngdt_pb2
 
 __all__ = [
@@ -429,8 +429,6 @@ def cloud_to_msg(
 
 def _set_rigid(translation: Vector3, rotation: Quaternion, matrix: np.ndarray) -> None:
     """Fill a foxglove translation/position and quaternion from a (4, 4) rigid transform."""
-    from gngdt_io.tf_tree import matrix_to_pose
-
     offset, quaternion = matrix_to_pose(matrix)
     translation.x, translation.y, translation.z = offset.tolist()
     rotation.x, rotation.y, rotation.z, rotation.w = quaternion.tolist()
@@ -441,10 +439,8 @@ def cloud_pose(message: PointCloud | bytes) -> np.ndarray:
 
     An unset orientation (all zero, as a publisher that never set the pose leaves it) is the
     identity. Raises :class:`MessageError` naming the frame for non-finite numbers or a quaternion
-    that is not of unit length (see ``gngdt_io.tf_tree.QUATERNION_TOLERANCE``).
+    that is not of unit length (see ``gngdt_core.geometry.QUATERNION_TOLERANCE``).
     """
-    from gngdt_io.tf_tree import TransformError, pose_to_matrix
-
     message = parse_message(PointCloud, message)
     position, rotation = message.pose.position, message.pose.orientation
     quaternion = [rotation.x, rotation.y, rotation.z, rotation.w]
