@@ -1,4 +1,7 @@
-"""In-memory RGB-D frame types shared by recording readers, writers and the capture service."""
+"""In-memory RGB-D frame types shared by recording readers, writers and the capture service.
+
+``CameraIntrinsics`` lives in :mod:`gngdt_core.geometry` and is re-exported here.
+"""
 
 from __future__ import annotations
 
@@ -6,25 +9,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gngdt_core.geometry import CameraIntrinsics
 
-@dataclass(frozen=True)
-class CameraIntrinsics:
-    """Pinhole intrinsics of a colour-registered depth camera (pixels)."""
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    #: plumb_bob coefficients k1, k2, p1, p2, k3 (informational; depth is not undistorted)
-    distortion: tuple[float, ...] = ()
-
-    def matrix(self) -> np.ndarray:
-        """(3, 3) float64 camera matrix K."""
-        return np.array(
-            [[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]], dtype=np.float64
-        )
+__all__ = ["DEFAULT_FIXED_FRAME", "CameraIntrinsics", "CameraPose", "Frame"]
 
 
 #: the fixed frame poses are given in when nothing names it (pose files, synthetic scenes)

@@ -84,7 +84,7 @@ class RecordingWriter:
 
     def write_frame(self, frame: Frame) -> None:
         """Append one frame; raises ValueError naming the frame if its arrays are inconsistent."""
-        from schemas.packing import image_to_raw, intrinsics_to_calibration
+        from schemas.images import image_to_raw, intrinsics_to_calibration
 
         self._check_frame(frame)
         stamp = int(frame.timestamp_ns)
@@ -128,7 +128,7 @@ class RecordingWriter:
     ) -> None:
         """Append a ``foxglove.FrameTransform`` ``parent -> child``: ``matrix`` (4, 4) maps
         points of the child frame into the parent frame."""
-        from schemas.packing import pose_to_transform
+        from schemas.clouds import pose_to_transform
 
         transform = pose_to_transform(
             matrix, parent_frame_id, child_frame_id, timestamp_ns=timestamp_ns
@@ -144,7 +144,8 @@ class RecordingWriter:
     def _color_message(self, color: np.ndarray, timestamp_ns: int):
         from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 
-        from schemas.packing import image_to_raw, ns_to_timestamp
+        from schemas.images import image_to_raw
+        from schemas.messages import ns_to_timestamp
 
         if self.color_format == "raw":
             return image_to_raw(color, timestamp_ns=timestamp_ns, frame_id=self.frame_id)

@@ -27,14 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
+from gngdt_core.geometry import TransformError, matrix_to_pose, pose_to_matrix
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import DEFAULT_FIXED_FRAME, CameraPose, Frame
-from gngdt_io.tf_tree import (
-    TransformError,
-    TransformTree,
-    matrix_to_pose,
-    pose_to_matrix,
-)
+from gngdt_io.tf_tree import TransformTree
 
 __all__ = ["PoseFile", "attach_poses", "load_poses"]
 

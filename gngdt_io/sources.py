@@ -21,6 +21,7 @@ from pathlib import Path
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import Frame
 from gngdt_io.images import DEFAULT_CAMERAS, FORMATS, iter_image_frames, load_camera
+from gngdt_io.mcap_reader import MCAP_MAGIC
 
 __all__ = ["SOURCE_FORMATS", "FrameSource", "detect_format", "open_source"]
 
@@ -28,7 +29,6 @@ logger = logging.getLogger(__name__)
 
 #: source formats: an MCAP recording, or one of the image folder layouts
 SOURCE_FORMATS = ("mcap", *FORMATS)
-_MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def detect_format(path: str | Path) -> str:
@@ -37,7 +37,7 @@ def detect_format(path: str | Path) -> str:
     path = Path(path)
     if path.is_file():
         with open(path, "rb") as stream:
-            if stream.read(len(_MCAP_MAGIC)) == _MCAP_MAGIC:
+            if stream.read(len(MCAP_MAGIC)) == MCAP_MAGIC:
                 return "mcap"
         raise RecordingError(path, None, "not an MCAP recording (no MCAP magic) nor a folder")
     if not path.is_dir():

@@ -8,9 +8,9 @@ Static transforms (``/tf_static``) hold at every time; the others are interpolat
 requested time (linear translation, spherical-linear rotation) between the two samples around
 it, and held for at most ``max_extrapolation_ns`` beyond the first or last sample.
 
-Quaternions are (x, y, z, w). As tf2 does, a quaternion whose squared norm is more than
-``QUATERNION_TOLERANCE`` away from 1 is refused (a sign of a wrong field order, not rounding);
-one within it is normalised.
+Quaternions are (x, y, z, w), checked as :mod:`gngdt_core.geometry` does (the rigid-transform
+math lives there; ``TransformError``, ``QUATERNION_TOLERANCE``, ``pose_to_matrix``,
+``matrix_to_pose`` and ``unit_quaternion`` are re-exported here).
 """
 
 from __future__ import annotations
@@ -19,6 +19,18 @@ from array import array
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from gngdt_core.geometry import (
+    QUATERNION_TOLERANCE,
+    TransformError,
+    checked_translation,
+    matrix_to_pose,
+    pose_to_matrix,
+    quaternion_to_rotation,
+    rigid_inverse,
+    slerp,
+    unit_quaternion,
+)
 
 __all__ = [
     "QUATERNION_TOLERANCE",
@@ -29,8 +41,6 @@ __all__ = [
     "unit_quaternion",
 ]
 
-#: largest | |q|^2 - 1 | accepted (tf2's own bound); anything closer to 1 is normalised
-QUATERNION_TOLERANCE = 0.01
 #: a lookup may use the first/last sample this far outside the samples' time span (20 ms: a
 #: camera frame stamped just after the last transform of a 50 Hz stream still gets it)
 DEFAULT_MAX_EXTRAPOLATION_NS = 20_000_000
@@ -38,101 +48,6 @@ DEFAULT_MAX_EXTRAPOLATION_NS = 20_000_000
 #: tree of a million frames would cost hours; a robot's has a few dozen
 MAX_LINKS = 1024
 INT64_MIN, INT64_MAX = -(2**63), 2**63 - 1
-
-
-class TransformError(ValueError):
-    """A transform is invalid or cannot be looked up; the message names the frames."""
-
-
-def unit_quaternion(quaternion: object, what: str) -> np.ndarray:
-    """(4,) float64 unit quaternion (x, y, z, w); ``TransformError`` naming ``what`` when it is
-    not finite or not within ``QUATERNION_TOLERANCE`` of unit length."""
-    q = np.asarray(quaternion, dtype=np.float64).reshape(-1)
-    if q.shape != (4,) or not np.isfinite(q).all():
-        raise TransformError(f"{what}: rotation must be 4 finite numbers (x, y, z, w), got {q}")
-    norm2 = float(q @ q)
-    if abs(norm2 - 1.0) > QUATERNION_TOLERANCE:
-        raise TransformError(
-            f"{what}: rotation quaternion (x, y, z, w) = {np.round(q, 4).tolist()} has norm "
-            f"{np.sqrt(norm2):.4f}, not 1 (is the order x, y, z, w?)"
-        )
-    return q / np.sqrt(norm2)
-
-
-# Quaternion arithmetic is written out here rather than taken from scipy.spatial.transform:
-# importing scipy.spatial costs ~1 s, which capture and logger would pay at start-up only to
-# turn a few quaternions into matrices (tests check these against scipy).
-def _rotation_matrix(q: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = q
-    return np.array([
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-    ])
-
-
-def _quaternion(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (x, y, z, w), w >= 0, of a (3, 3) rotation (Shepperd's method: the
-    largest of the four candidates' divisors keeps it exact near every rotation)."""
-    trace = r[0, 0] + r[1, 1] + r[2, 2]
-    if trace > 0.0:
-        s = 2.0 * np.sqrt(trace + 1.0)
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, s / 4]
-    elif r[0, 0] > r[1, 1] and r[0, 0] > r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[0, 0] - r[1, 1] - r[2, 2])
-        q = [s / 4, (r[0, 1] + r[1, 0]) / s, (r[0, 2] + r[2, 0]) / s, (r[2, 1] - r[1, 2]) / s]
-    elif r[1, 1] > r[2, 2]:
-        s = 2.0 * np.sqrt(1.0 + r[1, 1] - r[0, 0] - r[2, 2])
-        q = [(r[0, 1] + r[1, 0]) / s, s / 4, (r[1, 2] + r[2, 1]) / s, (r[0, 2] - r[2, 0]) / s]
-    else:
-        s = 2.0 * np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1])
-        q = [(r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, s / 4, (r[1, 0] - r[0, 1]) / s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
-
-
-def _slerp(q0: np.ndarray, q1: np.ndarray, fraction: float) -> np.ndarray:
-    """Spherical-linear interpolation between unit quaternions, along the shorter arc."""
-    dot = float(q0 @ q1)
-    if dot < 0.0:
-        q1, dot = -q1, -dot
-    if dot > 0.9995:  # nearly equal: linear, renormalised (the arc formula loses precision)
-        q = q0 + fraction * (q1 - q0)
-        return q / np.linalg.norm(q)
-    angle = np.arccos(dot)
-    return (np.sin((1.0 - fraction) * angle) * q0 + np.sin(fraction * angle) * q1) / np.sin(angle)
-
-
-def _checked_translation(translation: object, what: str) -> np.ndarray:
-    t = np.asarray(translation, dtype=np.float64).reshape(-1)
-    if t.shape != (3,) or not np.isfinite(t).all():
-        raise TransformError(f"{what}: translation must be 3 finite numbers, got {t}")
-    return t
-
-
-def pose_to_matrix(translation: object, quaternion: object, what: str = "pose") -> np.ndarray:
-    """(4, 4) float64 rigid transform from a translation (3,) and a quaternion (x, y, z, w)."""
-    t = _checked_translation(translation, what)
-    matrix = np.eye(4)
-    matrix[:3, :3] = _rotation_matrix(unit_quaternion(quaternion, what))
-    matrix[:3, 3] = t
-    return matrix
-
-
-def matrix_to_pose(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Translation (3,) and unit quaternion (x, y, z, w), w >= 0, of a (4, 4) rigid transform."""
-    matrix = np.asarray(matrix, dtype=np.float64)
-    return matrix[:3, 3].copy(), _quaternion(matrix[:3, :3])
-
-
-def _inverse(matrix: np.ndarray) -> np.ndarray:
-    inverse = np.eye(4)
-    rotation_t = matrix[:3, :3].T
-    inverse[:3, :3] = rotation_t
-    inverse[:3, 3] = -rotation_t @ matrix[:3, 3]
-    return inverse
 
 
 @dataclass
@@ -186,7 +101,7 @@ class _Link:
         (t0, t1), (v0, v1) = stamps[after - 1: after + 1].tolist(), values[after - 1: after + 1]
         fraction = (stamp_ns - t0) / (t1 - t0) if t1 > t0 else 1.0
         matrix = np.eye(4)
-        matrix[:3, :3] = _rotation_matrix(_slerp(v0[3:], v1[3:], fraction))
+        matrix[:3, :3] = quaternion_to_rotation(slerp(v0[3:], v1[3:], fraction))
         matrix[:3, 3] = v0[:3] + fraction * (v1[:3] - v0[:3])
         return matrix
 
@@ -220,7 +135,7 @@ class TransformTree:
             raise TransformError(f"{what}: frame ids must be two different non-empty names")
         if not INT64_MIN <= stamp_ns <= INT64_MAX:
             raise TransformError(f"{what}: stamp {stamp_ns} ns is beyond 64 bits")
-        t = _checked_translation(translation, what)
+        t = checked_translation(translation, what)
         q = unit_quaternion(quaternion, what)
         link = self._links.get(child)
         if link is None:
@@ -280,4 +195,4 @@ class TransformTree:
                 matrix = link.at(stamp_ns, self.max_extrapolation_ns, child) @ matrix
             return matrix
 
-        return _inverse(common_from(up_from_target)) @ common_from(up_from_source)
+        return rigid_inverse(common_from(up_from_target)) @ common_from(up_from_source)

@@ -27,7 +27,7 @@ from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletio
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 
-from schemas.packing import MessageError, ns_to_timestamp, parse_message, timestamp_to_ns
+from schemas.messages import MessageError, ns_to_timestamp, parse_message, timestamp_to_ns
 
 OBJECT_ID_PREFIX = "object/"
 #: most objects a decoded objects update may hold; more is refused as malformed

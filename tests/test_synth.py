@@ -11,6 +11,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from gngdt_io.frame import Frame
+from gngdt_io.synth.motion import Orbit
+from gngdt_io.synth.primitives import Cylinder, Rectangle, Sphere, box, triangular_prism
 from gngdt_io.synth.render import (
     SCENE_GROUND_TRUTH,
     SCENES,
@@ -21,16 +23,7 @@ from gngdt_io.synth.render import (
     render_frame,
     render_scene,
 )
-from gngdt_io.synth.scenes import (
-    Cylinder,
-    Orbit,
-    Rectangle,
-    Scene,
-    Sphere,
-    box,
-    build_scene,
-    triangular_prism,
-)
+from gngdt_io.synth.scenes import Scene, build_scene
 
 WIDTH, HEIGHT = 160, 120
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gngdt_core.geometry import apply_pose
 from gngdt_io.frame import CameraIntrinsics, CameraPose, Frame
 from gngdt_io.synth.scenes import SCENE_BUILDERS, Scene, build_scene
 
@@ -81,7 +82,7 @@ def _screen_window(
 
     The whole image when the box reaches behind the camera; None when it is off screen.
     """
-    in_camera = corners @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+    in_camera = apply_pose(corners, camera_from_world)
     if np.any(in_camera[:, 2] <= 1e-3):
         return 0, intrinsics.height, 0, intrinsics.width
     u = intrinsics.fx * in_camera[:, 0] / in_camera[:, 2] + intrinsics.cx

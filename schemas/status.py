@@ -1,0 +1,121 @@
+"""Learner status and end-of-stream notices: dataclasses <-> ``gngdt.LearnerStatus`` and
+``gngdt.StreamEnd``, field by field (``timestamp_ns`` for the message's stamp)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any, TypeVar
+
+from google.protobuf.message import Message
+
+import schemas.gngdt_pb2 as gngdt_pb2
+from schemas.messages import MessageT, ns_to_timestamp, parse_message, timestamp_to_ns
+
+__all__ = [
+    "LearnerStatusInfo",
+    "StreamEndInfo",
+    "decode_status",
+    "decode_stream_end",
+    "encode_status",
+    "encode_stream_end",
+]
+
+
+@dataclass
+class LearnerStatusInfo:
+    """One ``gngdt.LearnerStatus``: the message's field names, ``timestamp_ns`` for its stamp."""
+
+    timestamp_ns: int = 0
+    frame_sequence: int = 0
+    frame_id: str = ""
+    steps: int = 0
+    steps_per_second: float = 0.0
+    nodes: int = 0
+    frames_received: int = 0
+    frames_used: int = 0
+    frames_dropped: int = 0
+    malformed_messages: int = 0
+    latency_ms: float = 0.0
+    latency_p50_ms: float = 0.0
+    latency_p99_ms: float = 0.0
+    quantization_error: dict[str, float] = field(default_factory=dict)
+    cluster_counts: dict[str, int] = field(default_factory=dict)
+    #: after the stream ended: how learning on its last frame stopped ("" while streaming)
+    settled: str = ""
+    seen_nodes: int = 0
+    ghost_share: float = 0.0
+    ghost_distance_m: float = 0.0
+    nodes_forgotten: int = 0
+    frames_other_frame: int = 0
+
+
+@dataclass
+class StreamEndInfo:
+    """One ``gngdt.StreamEnd``: a capture finished sending a recording."""
+
+    timestamp_ns: int = 0
+    frames_sent: int = 0
+    last_frame_sequence: int = 0
+    recording: str = ""
+    frame_id: str = ""
+
+
+_InfoT = TypeVar("_InfoT", LearnerStatusInfo, StreamEndInfo)
+
+
+def _info_to_message(
+    info_type: type, message_type: type[MessageT], values: dict[str, Any]
+) -> MessageT:
+    known = {item.name for item in fields(info_type)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(
+            f"{message_type.DESCRIPTOR.full_name} has no field(s) {', '.join(unknown)}"
+        )
+    values = dict(values)
+    timestamp_ns = values.pop("timestamp_ns", 0)
+    maps = {
+        name: values.pop(name)
+        for name in ("quantization_error", "cluster_counts")
+        if name in values
+    }
+    try:
+        message = message_type(**values)
+        for name, mapping in maps.items():
+            getattr(message, name).update(mapping)
+    except (TypeError, ValueError) as error:
+        raise ValueError(f"{message_type.DESCRIPTOR.full_name}: {error}") from error
+    ns_to_timestamp(timestamp_ns, message.timestamp)
+    return message
+
+
+def _message_to_info(info_type: type[_InfoT], message: Message) -> _InfoT:
+    values: dict[str, Any] = {}
+    for item in fields(info_type):
+        if item.name == "timestamp_ns":
+            values[item.name] = timestamp_to_ns(message.timestamp)
+        elif item.name in ("quantization_error", "cluster_counts"):
+            values[item.name] = dict(getattr(message, item.name))
+        else:
+            values[item.name] = getattr(message, item.name)
+    return info_type(**values)
+
+
+def encode_status(**fields_: Any) -> gngdt_pb2.LearnerStatus:
+    """``gngdt.LearnerStatus`` from keyword fields named as in :class:`LearnerStatusInfo`."""
+    return _info_to_message(LearnerStatusInfo, gngdt_pb2.LearnerStatus, fields_)
+
+
+def decode_status(message: gngdt_pb2.LearnerStatus | bytes) -> LearnerStatusInfo:
+    """Decode a ``gngdt.LearnerStatus``."""
+    return _message_to_info(LearnerStatusInfo, parse_message(gngdt_pb2.LearnerStatus, message))
+
+
+def encode_stream_end(**fields_: Any) -> gngdt_pb2.StreamEnd:
+    """``gngdt.StreamEnd`` from keyword fields named as in :class:`StreamEndInfo`."""
+    return _info_to_message(StreamEndInfo, gngdt_pb2.StreamEnd, fields_)
+
+
+def decode_stream_end(message: gngdt_pb2.StreamEnd | bytes) -> StreamEndInfo:
+    """Decode a ``gngdt.StreamEnd``."""
+    return _message_to_info(StreamEndInfo, parse_message(gngdt_pb2.StreamEnd, message))
