@@ -62,7 +62,7 @@ class Interval:
 def _bound(value: float) -> str:
     if math.isinf(value):
         return "inf" if value > 0 else "-inf"
-    return f"{value:g}"
+    return str(int(value)) if value == int(value) else f"{value:g}"
 
 
 @dataclass(frozen=True)

@@ -84,20 +84,28 @@ DEFAULT_CAMERAS: dict[str, CameraParameters] = {
 
 
 def detect_format(directory: str | Path) -> str:
-    """The layout of an image folder: ``tum`` (rgb.txt), ``pcl-tiff`` (``frame_*_rgb.tiff``) or
-    ``redwood`` (color/ and depth/). RecordingError when it is none of them."""
+    """The layout of an image folder: ``tum`` (rgb.txt + depth.txt), ``pcl-tiff``
+    (``frame_*_rgb.tiff`` + ``frame_*_depth.tiff``) or ``redwood`` (color/ + depth/).
+    RecordingError naming the folder when it is none of them, or several (``--format`` decides).
+    """
     directory = Path(directory)
     if not directory.is_dir():
         raise RecordingError(directory, None, "not a directory")
-    if (directory / "rgb.txt").is_file():
-        return "tum"
+    found = []
+    if (directory / "rgb.txt").is_file() and (directory / "depth.txt").is_file():
+        found.append("tum")
     if any(_PCL_NAME.match(path.name) for path in directory.iterdir()):
-        return "pcl-tiff"
+        found.append("pcl-tiff")
     if (directory / "color").is_dir() and (directory / "depth").is_dir():
-        return "redwood"
-    raise RecordingError(
-        directory, None, "no RGB-D layout found (rgb.txt, frame_*_rgb.tiff, or color/ + depth/)"
-    )
+        found.append("redwood")
+    if not found:
+        raise RecordingError(
+            directory, None, "no known image layout (tum: rgb.txt + depth.txt; pcl-tiff: "
+            "frame_*_rgb.tiff + frame_*_depth.tiff; redwood: color/ + depth/)")
+    if len(found) > 1:
+        raise RecordingError(directory, None, f"the layout is ambiguous ({' and '.join(found)} "
+                             "both match); choose one with --format")
+    return found[0]
 
 
 def _check_format(fmt: str) -> None:

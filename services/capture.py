@@ -161,49 +161,8 @@ def read_limits(args: argparse.Namespace) -> ReadLimits:
                       args.max_transforms)
 
 
-@dataclass
-class CloudOptions:
-    """How a depth frame becomes the published point cloud."""
-
-    min_depth_m: float = 0.1
-    max_depth_m: float = 10.0
-    voxel_size_m: float | None = None
-    max_points: int | None = None
-    #: drop pixels whose depth jumps by more than this share from a neighbour's (0: keep all)
-    veil_ratio: float = 0.0
 
 
-class FrameToCloud:
-    """Deprojection, optional voxel downsampling and point cap, with cached rays."""
-
-    def __init__(self, options: CloudOptions, seed: int = 0) -> None:
-        if options.voxel_size_m is not None and options.voxel_size_m <= 0:
-            raise ValueError(f"--voxel must be positive, got {options.voxel_size_m}")
-        if not options.veil_ratio >= 0:
-            raise ValueError(f"--drop-veil must be >= 0, got {options.veil_ratio}")
-        if options.max_points is not None and options.max_points <= 0:
-            raise ValueError(
-                f"--max-points must be positive (0 for all points), got {options.max_points}"
-            )
-        self.options = options
-        self._max_points = min(options.max_points or MAX_CLOUD_POINTS, MAX_CLOUD_POINTS)
-        self._deproject = Deprojector(options.min_depth_m, options.max_depth_m)
-        self._rng = np.random.default_rng(seed)
-
-    def __call__(self, frame: Frame) -> tuple[np.ndarray, np.ndarray]:
-        """positions (N, 3) float32 metres and colors (N, 3) uint8 of one frame."""
-        depth = frame.depth
-        if self.options.veil_ratio > 0:
-            from gngdt_core.frame_segmenter import veil_pixels
-
-            depth = np.where(veil_pixels(depth, self.options.veil_ratio), 0, depth)
-        positions, colors = self._deproject(depth, frame.color, frame.intrinsics)
-        if self.options.voxel_size_m is not None:
-            positions, colors = voxel_downsample(positions, colors, self.options.voxel_size_m)
-        if len(positions) > self._max_points:
-            positions, colors = cap_points(positions, colors, self._max_points, self._rng)
-        assert colors is not None
-        return positions, colors
 
 
 class CapturePublisher:

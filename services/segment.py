@@ -135,11 +135,12 @@ def main(args: argparse.Namespace) -> int:
     """Run ``gngdt segment``; bad input: one error line naming the file, exit code 2."""
     from gngdt_io.errors import RecordingError
     from gngdt_io.profiles import default_sensor_profile, load_profile
-    from gngdt_io.sources import open_source
+    from gngdt_io.sources import SourceOptions, open_source
 
     try:
         profile = load_profile(args.params or default_sensor_profile(), base_model={})
-        source = open_source(args.source, args.source_format, args.camera_json)
+        source = open_source(args.source, args.source_format,
+                             SourceOptions(camera_json=args.camera_json))
         summary = segment_source(source, profile, args.out, independent=args.independent,
                                  seed=args.seed, overwrite=args.overwrite)
     except (RecordingError, ValueError, OSError) as error:

@@ -98,7 +98,7 @@ def _swap_neighbour(nbr):
         ("params", lambda a: np.array("{not json"), "JSON"),
         ("params", lambda a: np.array("7"), "JSON object"),
         ("params", lambda a: np.array(str(a).replace('"max_nodes": ', '"max_nodes": 99999999')),
-         "max_nodes must be <="),
+         r"max_nodes must be in \[2, 10000000\]"),
         ("counters", lambda a: np.array([10_000, 0, 0]), "nodes"),
         ("counters", lambda a: np.array([a[0], a[1], a[2], 1]), "next id"),
         ("ids", lambda a: np.zeros_like(a), "distinct"),

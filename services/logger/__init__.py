@@ -16,6 +16,8 @@ import logging
 from services.logger.cameras import DEFAULT_MAX_CAMERAS
 from services.logger.inbox import DEFAULT_QUEUE_MB
 from services.logger.run import LIVELINESS_KEY
+
+__all__ = ["EXAMPLES", "LIVELINESS_KEY", "add_arguments", "main"]
 from services.plumbing.session import add_zenoh_arguments
 
 log = logging.getLogger(__name__)

@@ -1,0 +1,47 @@
+"""Where frames come from, behind one interface (`base.FrameSource`): recordings (gngdt's MCAP
+and ROS 2 bags), folders of RGB-D images and synthetic scenes.
+
+`open_source` picks the kind from the spec: a ``<scheme>:`` prefix names one (``synth:``), else
+an MCAP file or a folder of images (its layout detected, or ``fmt``). A new kind of source is one
+module with a `FrameSource` subclass and one line in `SOURCE_TYPES`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from gngdt_io.errors import RecordingError
+from gngdt_io.images import FORMATS, detect_format
+from gngdt_io.sources.base import FrameSource, SourceOptions
+from gngdt_io.sources.folder import ImageFolderSource
+from gngdt_io.sources.recording import McapSource
+from gngdt_io.sources.synthetic import SyntheticSource
+
+__all__ = ["SOURCE_FORMATS", "SOURCE_TYPES", "FrameSource", "SourceOptions", "open_source"]
+
+#: every kind of source: a scheme (``synth:``) or a detector of paths, and its constructor
+SOURCE_TYPES: tuple[type[FrameSource], ...] = (SyntheticSource, McapSource, ImageFolderSource)
+#: the names ``--format`` takes: an MCAP recording or an image layout
+SOURCE_FORMATS = ("mcap", *FORMATS)
+
+
+def open_source(spec: str | Path, fmt: str | None = None,
+                options: SourceOptions | None = None) -> FrameSource:
+    """The frame source ``spec`` names (kind detected unless ``fmt`` says). RecordingError
+    naming the path when it is none of them; ValueError for options that do not apply."""
+    options = options or SourceOptions()
+    text = str(spec)
+    if fmt is not None and fmt not in SOURCE_FORMATS:
+        raise ValueError(f"format must be one of {SOURCE_FORMATS}, got {fmt!r}")
+    scheme = text.split(":", 1)[0] if ":" in text else ""
+    for kind in SOURCE_TYPES:
+        if kind.scheme and kind.scheme == scheme:
+            return kind(text)
+    path = Path(spec)
+    if fmt == "mcap" or (fmt is None and McapSource.accepts(path)):
+        return McapSource(path, options)
+    if fmt in FORMATS or (fmt is None and path.is_dir()):
+        return ImageFolderSource(path, fmt or detect_format(path), options)
+    if path.is_file():
+        raise RecordingError(path, None, "not an MCAP recording (no MCAP magic) nor a folder")
+    raise RecordingError(path, None, "no such file or folder")
