@@ -14,6 +14,8 @@ import logging
 import sys
 from pathlib import Path
 
+from gngdt_eval.paper_common import METHOD_NAMES, METHODS, STOP_RULES, PaperSettings
+
 log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
@@ -30,7 +32,7 @@ EXAMPLES = """examples:
   gngdt eval segmentation ../shared/data/labelled/ycbv_0000 --independent --online
 """
 
-METHOD_CHOICES = ("gngdt", "gng", "gngw")  # the keys of paper.METHOD_NAMES (kept light for --help)
+METHOD_CHOICES = tuple(METHOD_NAMES)  # command-line method names: gngdt, gng, gngw
 
 
 def _positive_int(text: str) -> int:
@@ -56,8 +58,6 @@ def _non_negative_float(text: str) -> float:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Register ``paper``, ``recording``, ``rrd`` and ``segmentation`` sub-subcommands."""
-    from gngdt_eval.paper import STOP_RULES, PaperSettings
-
     paper_defaults = PaperSettings(workers=1)
     sub = parser.add_subparsers(dest="eval_command", required=True, metavar="WHAT")
 
@@ -357,7 +357,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _main_paper(args: argparse.Namespace) -> int:
-    from gngdt_eval.paper import PaperSettings, run_paper
+    from gngdt_eval.paper import run_paper
 
     options = {"workers": args.workers} if args.workers else {}
     settings = PaperSettings(
@@ -390,8 +390,6 @@ def _main_paper(args: argparse.Namespace) -> int:
 
 def _in_paper_order(methods: list[str]) -> tuple[str, ...]:
     """Chosen methods named as in the paper, in its column order (GNG, GNG-W, GNG-DT)."""
-    from gngdt_eval.paper import METHOD_NAMES, METHODS
-
     chosen = {METHOD_NAMES[m] for m in methods}
     return tuple(m for m in METHODS if m in chosen)
 

@@ -31,12 +31,8 @@ from gngdt_eval.dynamics import (
     DynamicsTracker,
     scene_changes,
 )
-from gngdt_eval.paper import (
-    METHOD_NAMES,
-    PAPER_PARAMETERS,
-    clusterings_of,
-    make_model,
-)
+from gngdt_eval.paper_common import METHOD_NAMES, PAPER_PARAMETERS
+from gngdt_eval.paper_methods import clusterings_of, make_model
 from gngdt_eval.report import (
     format_mean_std,
     format_number,
