@@ -14,6 +14,8 @@ import logging
 import sys
 from pathlib import Path
 
+from gngdt_eval.paper_common import METHOD_NAMES, METHODS, STOP_RULES, PaperSettings
+
 log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
@@ -30,7 +32,7 @@ EXAMPLES = """examples:
   gngdt eval segmentation ../shared/data/labelled/ycbv_0000 --independent --online
 """
 
-METHOD_CHOICES = ("gngdt", "gng", "gngw")  # the keys of paper.METHOD_NAMES (kept light for --help)
+METHOD_CHOICES = tuple(METHOD_NAMES)  # command-line method names: gngdt, gng, gngw
 
 
 def _positive_int(text: str) -> int:
@@ -56,134 +58,89 @@ def _non_negative_float(text: str) -> float:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Register ``paper``, ``recording``, ``rrd`` and ``segmentation`` sub-subcommands."""
-    from gngdt_eval.paper import STOP_RULES, PaperSettings
-
-    paper_defaults = PaperSettings(workers=1)
     sub = parser.add_subparsers(dest="eval_command", required=True, metavar="WHAT")
+    _add_paper(sub)
+    _add_recording(sub)
+    _add_rrd(sub)
+    _add_segmentation(sub)
 
-    def leaf(name: str, help_text: str, description: str, examples: str):
-        return sub.add_parser(name, help=help_text, description=description,
-                              epilog="examples:\n" + examples,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
 
-    paper = leaf(
-        "paper", "the paper's simulation (Tables 2-4, Figs. 10-11) and RGB-D (Tables 5-6) runs",
+def _leaf(sub: argparse._SubParsersAction, name: str, help_text: str, description: str,
+          examples: str) -> argparse.ArgumentParser:
+    """The parser of one ``gngdt eval`` subcommand: help line, description, examples."""
+    return sub.add_parser(name, help=help_text, description=description,
+                          epilog="examples:\n" + examples,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def _add_method_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--method", dest="methods", nargs="+", choices=METHOD_CHOICES,
+                        default=list(METHOD_CHOICES), help="methods (default: all three)")
+
+
+def _add_no_progress_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+
+
+def _add_paper(sub: argparse._SubParsersAction) -> None:
+    """``gngdt eval paper``: the options of `PaperSettings`, defaults from it."""
+    defaults = PaperSettings(workers=1)
+    paper = _leaf(
+        sub, "paper",
+        "the paper's simulation (Tables 2-4, Figs. 10-11) and RGB-D (Tables 5-6) runs",
         "Run the paper's simulation experiment (Section 3.1): GNG, GNG-W and GNG-DT on Data1 "
         "and Data2 at every scale and every --color-noise level, over --trials seeds each, each "
         "run stopping at the node budget; with --frames also its RGB-D experiment (Section 3.3) "
         "on real frames. Writes paper.md (Tables 2-6, the paper's claims checked), paper.json "
         "and Figures 8-10 into --out.",
         "\n".join(line for line in EXAMPLES.splitlines() if " paper " in line) + "\n")
+    paper.add_argument("--trials", type=_positive_int, default=defaults.trials,
+                       help="trials per cell (default: %(default)s)")
+    paper.add_argument("--out", type=Path, default=Path("report/paper"),
+                       help="output folder (default: %(default)s)")
+    paper.add_argument("--stop", choices=STOP_RULES, default=defaults.stop,
+                       help="budget: a run ends when it has --max-nodes nodes (the paper's Step "
+                       "10); steps: after exactly --steps steps (default: %(default)s)")
+    paper.add_argument("--steps", type=_positive_int, default=defaults.steps,
+                       help="learning steps per run with --stop steps (default: %(default)s)")
+    paper.add_argument("--max-nodes", type=_positive_int, default=defaults.max_nodes,
+                       help="node budget per run (default: %(default)s)")
     paper.add_argument(
-        "--trials",
-        type=_positive_int,
-        default=paper_defaults.trials,
-        help="trials per cell (default: %(default)s)",
-    )
-    paper.add_argument(
-        "--out",
-        type=Path,
-        default=Path("report/paper"),
-        help="output folder (default: %(default)s)",
-    )
-    paper.add_argument(
-        "--stop",
-        choices=STOP_RULES,
-        default=paper_defaults.stop,
-        help="budget: a run ends when it has --max-nodes nodes (the paper's Step 10); "
-        "steps: after exactly --steps steps (default: %(default)s)",
-    )
-    paper.add_argument(
-        "--steps",
-        type=_positive_int,
-        default=paper_defaults.steps,
-        help="learning steps per run with --stop steps (default: %(default)s)",
-    )
-    paper.add_argument(
-        "--max-nodes",
-        type=_positive_int,
-        default=paper_defaults.max_nodes,
-        help="node budget per run (default: %(default)s)",
-    )
-    paper.add_argument(
-        "--color-noise",
-        type=_non_negative_float,
-        nargs="+",
-        default=list(paper_defaults.color_noise),
-        metavar="SIGMA",
+        "--color-noise", type=_non_negative_float, nargs="+",
+        default=list(defaults.color_noise), metavar="SIGMA",
         help="within-region colour noise levels, std per RGB channel on 0-255; the first is the "
-        "main one, the others are reported beside it; 0 = flat colours (default: %(default)s)",
-    )
+        "main one, the others are reported beside it; 0 = flat colours (default: %(default)s)")
     paper.add_argument(
-        "--frames",
-        type=Path,
-        nargs="+",
-        default=[],
-        metavar="DIR",
+        "--frames", type=Path, nargs="+", default=[], metavar="DIR",
         help="real RGB-D image folders (TUM, PCL TIFF or colour/depth layout) for the paper's "
-        "Tables 5-6; the first frame of each (default: none)",
-    )
-    paper.add_argument(
-        "--all-frames", action="store_true", help="every frame of each --frames folder"
-    )
-    paper.add_argument(
-        "--frame-trials",
-        type=_positive_int,
-        default=None,
-        help="trials per real frame and method (default: --trials)",
-    )
-    paper.add_argument(
-        "--data1-points",
-        type=_positive_int,
-        default=paper_defaults.data1_points,
-        help="points in Data1 (default: %(default)s, as in the paper)",
-    )
-    paper.add_argument(
-        "--data2-points",
-        type=_positive_int,
-        default=paper_defaults.data2_points,
-        help="points in Data2 (default: %(default)s, as in the paper)",
-    )
-    paper.add_argument(
-        "--scales",
-        type=_positive_float,
-        nargs="+",
-        default=list(paper_defaults.scales),
-        metavar="SCL",
-        help="scale factors scl (default: 1 10 0.1 0.01)",
-    )
-    paper.add_argument(
-        "--datasets",
-        nargs="+",
-        choices=["Data1", "Data2"],
-        default=["Data1", "Data2"],
-        help="data sets (default: both)",
-    )
-    paper.add_argument(
-        "--method",
-        dest="methods",
-        nargs="+",
-        choices=METHOD_CHOICES,
-        default=list(METHOD_CHOICES),
-        help="methods (default: all three)",
-    )
-    paper.add_argument(
-        "--min-cluster-size",
-        type=_positive_int,
-        default=paper_defaults.min_cluster_size,
-        help="clusters with fewer nodes are not counted (default: %(default)s)",
-    )
-    paper.add_argument(
-        "--workers",
-        type=_positive_int,
-        default=None,
-        help="worker processes (default: one per core)",
-    )
-    paper.add_argument("--no-progress", action="store_true",
-                       help="no progress bar on stderr")
+        "Tables 5-6; the first frame of each (default: none)")
+    paper.add_argument("--all-frames", action="store_true",
+                       help="every frame of each --frames folder")
+    paper.add_argument("--frame-trials", type=_positive_int, default=None,
+                       help="trials per real frame and method (default: --trials)")
+    paper.add_argument("--data1-points", type=_positive_int, default=defaults.data1_points,
+                       help="points in Data1 (default: %(default)s, as in the paper)")
+    paper.add_argument("--data2-points", type=_positive_int, default=defaults.data2_points,
+                       help="points in Data2 (default: %(default)s, as in the paper)")
+    paper.add_argument("--scales", type=_positive_float, nargs="+",
+                       default=list(defaults.scales), metavar="SCL",
+                       help="scale factors scl (default: 1 10 0.1 0.01)")
+    paper.add_argument("--datasets", nargs="+", choices=["Data1", "Data2"],
+                       default=["Data1", "Data2"], help="data sets (default: both)")
+    _add_method_option(paper)
+    paper.add_argument("--min-cluster-size", type=_positive_int,
+                       default=defaults.min_cluster_size,
+                       help="clusters with fewer nodes are not counted (default: %(default)s)")
+    paper.add_argument("--workers", type=_positive_int, default=None,
+                       help="worker processes (default: one per core)")
+    _add_no_progress_option(paper)
 
-    recording = leaf(
-        "recording", "replay a recording offline through each method",
+
+def _add_recording(sub: argparse._SubParsersAction) -> None:
+    """``gngdt eval recording``: the options of `RecordingSettings` (default None: the
+    learner's)."""
+    recording = _leaf(
+        sub, "recording", "replay a recording offline through each method",
         "Replay a recording offline, frame after frame, through each method as the learner "
         "would (no zenoh). Every frame: quantization errors (eq. 17), nodes, clusters per "
         "topology and, where the recording has ground-truth labels, the adjusted Rand index; on "
@@ -193,149 +150,97 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "  gngdt eval recording recordings/data2.mcap --method gngdt --trials 3\n"
         "  gngdt eval recording mybag_0.mcap --max-frames 100 --samples-per-frame 20000\n")
     recording.add_argument("path", type=Path, metavar="PATH", help="MCAP recording")
+    _add_method_option(recording)
+    recording.add_argument("--trials", type=_positive_int, default=1,
+                           help="seeds per method (default: %(default)s)")
+    recording.add_argument("--out", type=Path, default=None,
+                           help="output folder (default: report/<recording name>)")
+    recording.add_argument("--samples-per-frame", type=_positive_int, default=None,
+                           help="learning steps per frame (default: the learner's)")
+    recording.add_argument("--max-nodes", type=_positive_int, default=None,
+                           help="node budget (default: GNGDT's)")
+    recording.add_argument("--max-frames", type=_positive_int, default=None,
+                           help="stop after this many frames")
     recording.add_argument(
-        "--method",
-        dest="methods",
-        nargs="+",
-        choices=METHOD_CHOICES,
-        default=list(METHOD_CHOICES),
-        help="methods (default: all three)",
-    )
+        "--min-cluster-size", type=_positive_int, default=None,
+        help="clusters with fewer nodes are not counted (default: the learner's)")
     recording.add_argument(
-        "--trials", type=_positive_int, default=1, help="seeds per method (default: %(default)s)"
-    )
-    recording.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: report/<recording name>)"
-    )
-    recording.add_argument(
-        "--samples-per-frame",
-        type=_positive_int,
-        default=None,
-        help="learning steps per frame (default: the learner's)",
-    )
-    recording.add_argument(
-        "--max-nodes", type=_positive_int, default=None, help="node budget (default: GNGDT's)"
-    )
-    recording.add_argument(
-        "--max-frames", type=_positive_int, default=None, help="stop after this many frames"
-    )
-    recording.add_argument(
-        "--min-cluster-size",
-        type=_positive_int,
-        default=None,
-        help="clusters with fewer nodes are not counted (default: the learner's)",
-    )
-    recording.add_argument(
-        "--object-confirm-frames",
-        type=_positive_int,
-        default=None,
+        "--object-confirm-frames", type=_positive_int, default=None,
         help="a cluster is an object once seen in this many frames in a row (object identity "
-        "scores; default: the learner's)",
-    )
+        "scores; default: the learner's)")
     recording.add_argument(
-        "--reference-points",
-        type=_positive_int,
-        default=20_000,
-        help="last-frame points used to fit k-means and run DBSCAN (default: %(default)s)",
-    )
+        "--reference-points", type=_positive_int, default=20_000,
+        help="last-frame points used to fit k-means and run DBSCAN (default: %(default)s)")
     recording.add_argument(
-        "--dbscan-eps",
-        type=_positive_float,
-        default=None,
-        help="DBSCAN radius in metres (default: 1.5 x median distance to the 10th neighbour)",
-    )
+        "--dbscan-eps", type=_positive_float, default=None,
+        help="DBSCAN radius in metres (default: 1.5 x median distance to the 10th neighbour)")
     recording.add_argument(
-        "--utility-k",
-        type=float,
-        default=None,
-        help="GNG-DT's forgetting threshold (default: the learner's profile; 0: off, the paper)",
-    )
+        "--utility-k", type=float, default=None,
+        help="GNG-DT's forgetting threshold (default: the learner's profile; 0: off, the paper)")
     recording.add_argument(
-        "--replay-share",
-        type=float,
-        default=None,
+        "--replay-share", type=float, default=None,
         help="GNG-DT's share of each frame's steps rehearsed from earlier frames (default: the "
-        "learner's profile; 0: off, the paper)",
-    )
+        "learner's profile; 0: off, the paper)")
+    recording.add_argument("--camera-frame", action="store_true",
+                           help="ignore the recording's camera poses: learn in the camera frame")
     recording.add_argument(
-        "--camera-frame",
-        action="store_true",
-        help="ignore the recording's camera poses: learn in the camera frame",
-    )
+        "--ghost-distance", type=_positive_float, default=0.05,
+        help="a seen node farther than this (metres) from the frame is a ghost (default 0.05)")
     recording.add_argument(
-        "--ghost-distance",
-        type=_positive_float,
-        default=0.05,
-        help="a seen node farther than this (metres) from the frame is a ghost (default 0.05)",
-    )
-    recording.add_argument(
-        "--world-sample",
-        type=_positive_int,
-        default=40_000,
+        "--world-sample", type=_positive_int, default=40_000,
         help="with poses, points kept of the world seen so far (k-means is fitted on half, "
-        "both errors measured on the other half; default %(default)s)",
-    )
+        "both errors measured on the other half; default %(default)s)")
     recording.add_argument(
-        "--reference-every",
-        type=int,
-        default=10,
+        "--reference-every", type=int, default=10,
         help="with poses, k-means on the world seen so far every N frames and on the last "
-        "(default 10; 0: last frame only)",
-    )
-    recording.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+        "(default 10; 0: last frame only)")
+    _add_no_progress_option(recording)
 
-    rrd = leaf(
-        "rrd", "what a logged run did, read back from its .rrd",
+
+def _add_rrd(sub: argparse._SubParsersAction) -> None:
+    """``gngdt eval rrd``: a logged run read back."""
+    rrd = _leaf(
+        sub, "rrd", "what a logged run did, read back from its .rrd",
         "Read a run logged by `gngdt run` or `gngdt log` back from its .rrd file and report "
         "what it did: every metrics/ scalar over the frames (nodes, steps/s, latency, "
         "quantization error, clusters). Writes rrd.md, rrd.json and plots into --out.",
         "  gngdt eval rrd runs/tabletop-20260101-120000.rrd --out report/run\n"
         "  gngdt run recordings/tabletop.mcap --save run.rrd && gngdt eval rrd run.rrd\n")
     rrd.add_argument("path", type=Path, metavar="RUN.rrd", help="rerun recording written by gngdt")
-    rrd.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: report/<run name>)"
-    )
+    rrd.add_argument("--out", type=Path, default=None,
+                     help="output folder (default: report/<run name>)")
 
 
-    segmentation = sub.add_parser(
-        "segmentation",
-        help="gngdt's segments on labelled real frames, beside the Open3D peer",
-        description="Score gngdt's segmentation on a labelled set (redwood layout + label/: 0 "
-        "= no label, 1 = background, k >= 2 = a segment): per frame and overall mean best IoU, "
-        "recall at IoU >= 0.5 and >= 0.75, segments and time per frame, beside the Open3D peer "
-        "(plane RANSAC + DBSCAN) when open3d is installed (pip install -e '.[peers]').",
-        epilog="examples:\n"
+def _add_segmentation(sub: argparse._SubParsersAction) -> None:
+    """``gngdt eval segmentation``: the options of `SegmentationEvalSettings`."""
+    segmentation = _leaf(
+        sub, "segmentation", "gngdt's segments on labelled real frames, beside the Open3D peer",
+        "Score gngdt's segmentation on a labelled set (redwood layout + label/: 0 = no label, "
+        "1 = background, k >= 2 = a segment): per frame and overall mean best IoU, recall at "
+        "IoU >= 0.5 and >= 0.75, segments and time per frame, beside the Open3D peer (plane "
+        "RANSAC + DBSCAN) when open3d is installed (pip install -e '.[peers]').",
         "  gngdt eval segmentation ../shared/data/labelled/mosd_learn --out report/mosd\n"
         "  gngdt eval segmentation ../shared/data/labelled/ycbv_0000 --independent --online\n"
-        "  gngdt eval segmentation SET --params my_profile.toml --no-peer --max-frames 5\n",
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+        "  gngdt eval segmentation SET --params my_profile.toml --no-peer --max-frames 5\n")
     segmentation.add_argument("set_dir", type=Path, metavar="SET_DIR", help="labelled folder")
-    segmentation.add_argument(
-        "--out", type=Path, default=None, help="output folder (default: report/<set name>)"
-    )
+    segmentation.add_argument("--out", type=Path, default=None,
+                              help="output folder (default: report/<set name>)")
     segmentation.add_argument(
         "--independent", action="store_true",
-        help="gngdt learns every frame from scratch (the default when no mode is given)",
-    )
+        help="gngdt learns every frame from scratch (the default when no mode is given)")
     segmentation.add_argument(
         "--online", action="store_true",
-        help="gngdt carries one network from frame to frame (both flags: both, side by side)",
-    )
-    segmentation.add_argument(
-        "--params", type=Path, metavar="FILE.toml", help="sensor profile (as gngdt segment)"
-    )
+        help="gngdt carries one network from frame to frame (both flags: both, side by side)")
+    segmentation.add_argument("--params", type=Path, metavar="FILE.toml",
+                              help="sensor profile (as gngdt segment)")
     segmentation.add_argument("--no-peer", action="store_true", help="do not run the peer")
     segmentation.add_argument(
         "--figures", type=int, default=4,
-        help="frames drawn side by side, spread over the set (default: %(default)s)",
-    )
-    segmentation.add_argument(
-        "--max-frames", type=_positive_int, default=None, help="only the first N frames"
-    )
+        help="frames drawn side by side, spread over the set (default: %(default)s)")
+    segmentation.add_argument("--max-frames", type=_positive_int, default=None,
+                              help="only the first N frames")
     segmentation.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    segmentation.add_argument("--no-progress", action="store_true",
-                              help="no progress bar on stderr")
+    _add_no_progress_option(segmentation)
 
 
 def main(args: argparse.Namespace) -> int:
@@ -357,7 +262,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _main_paper(args: argparse.Namespace) -> int:
-    from gngdt_eval.paper import PaperSettings, run_paper
+    from gngdt_eval.paper import run_paper
 
     options = {"workers": args.workers} if args.workers else {}
     settings = PaperSettings(
@@ -390,8 +295,6 @@ def _main_paper(args: argparse.Namespace) -> int:
 
 def _in_paper_order(methods: list[str]) -> tuple[str, ...]:
     """Chosen methods named as in the paper, in its column order (GNG, GNG-W, GNG-DT)."""
-    from gngdt_eval.paper import METHOD_NAMES, METHODS
-
     chosen = {METHOD_NAMES[m] for m in methods}
     return tuple(m for m in METHODS if m in chosen)
 

@@ -8,11 +8,14 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper import (
+from gngdt_eval.paper_common import (
     GNGDT_THRESHOLDS,
     GNGW_WEIGHTS,
     PAPER_FIGURE11_CLUSTERS,
     PAPER_PARAMETERS,
+    PAPER_TABLE5,
+    PAPER_TABLE6,
+    PAPER_WINNERS,
     RECTANGLES,
     PaperSettings,
 )
@@ -342,8 +345,6 @@ def _claims_section(levels: dict[float, Any], settings: PaperSettings) -> str:
 
 
 def _real_frames_section(real: dict[str, Any], settings: PaperSettings) -> str:
-    from gngdt_eval.paper_rgbd import PAPER_TABLE5, PAPER_TABLE6, PAPER_WINNERS
-
     tables = real["tables"]
     parts = [
         "## Tables 5 and 6 — real RGB-D frames (Section 3.3)",

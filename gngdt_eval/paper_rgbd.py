@@ -22,41 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper import (
-    METHODS,
-    Cell,
-    PaperSettings,
-    learn,
-    make_model,
-    trial_seed,
-)
+from gngdt_eval.paper_common import METHODS, PAPER_WINNERS, PaperSettings
+from gngdt_eval.paper_methods import learn, make_model, trial_seed
 from gngdt_eval.report import mean_std
 
 MILLIMETRES_PER_METRE = 1000.0
-
-#: The paper's six RGB-D scenes (Figure 12 a-f, Azure Kinect DK), mean ± std over 50 trials.
-PAPER_TABLE5: dict[str, dict[str, Cell]] = {
-    "Figure 12a": {"GNG": (12.796, 0.0011), "GNG-W": (12.341, 0.0018), "GNG-DT": (11.976, 0.0005)},
-    "Figure 12b": {"GNG": (12.754, 0.191), "GNG-W": (12.914, 0.015), "GNG-DT": (12.754, 0.0004)},
-    "Figure 12c": {"GNG": (11.428, 0.001), "GNG-W": (10.857, 0.001), "GNG-DT": (10.014, 0.0005)},
-    "Figure 12d": {"GNG": (8.908, 0.090), "GNG-W": (8.526, 0.088), "GNG-DT": (8.309, 0.109)},
-    "Figure 12e": {"GNG": (10.151, 0.016), "GNG-W": (9.849, 0.023), "GNG-DT": (9.725, 0.043)},
-    "Figure 12f": {"GNG": (9.492, 0.0006), "GNG-W": (9.200, 0.0008), "GNG-DT": (8.998, 0.0005)},
-}
-PAPER_TABLE6: dict[str, dict[str, Cell]] = {
-    "Figure 12a": {"GNG": (33.719, 0.715), "GNG-W": (30.544, 0.650), "GNG-DT": (30.235, 0.221)},
-    "Figure 12b": {"GNG": (14.967, 0.076), "GNG-W": (13.876, 0.077), "GNG-DT": (15.392, 0.047)},
-    "Figure 12c": {"GNG": (61.171, 0.555), "GNG-W": (57.318, 0.343), "GNG-DT": (55.773, 0.271)},
-    "Figure 12d": {"GNG": (27.484, 0.322), "GNG-W": (24.765, 0.232), "GNG-DT": (26.320, 0.353)},
-    "Figure 12e": {"GNG": (18.925, 0.070), "GNG-W": (17.699, 0.053), "GNG-DT": (18.642, 0.076)},
-    "Figure 12f": {"GNG": (24.535, 0.355), "GNG-W": (22.426, 0.229), "GNG-DT": (28.281, 0.268)},
-}
-#: the winner of each row as the paper marks it (bold); Table 5 row b is a tie it gives GNG-DT
-PAPER_WINNERS: dict[str, dict[str, str]] = {
-    "table5": {row: "GNG-DT" for row in PAPER_TABLE5},
-    "table6": {"Figure 12a": "GNG-DT", "Figure 12b": "GNG-W", "Figure 12c": "GNG-DT",
-               "Figure 12d": "GNG-W", "Figure 12e": "GNG-W", "Figure 12f": "GNG-W"},
-}
 
 
 @dataclass(frozen=True)

@@ -10,15 +10,17 @@ import numpy as np
 import pytest
 
 from gngdt_core import GNGDT, make_data1
-from gngdt_eval.paper import (
+from gngdt_eval.paper import separates_regions
+from gngdt_eval.paper_common import (
     PAPER_TABLE2,
     PAPER_TABLE3,
+    PAPER_TABLE5,
+    PAPER_TABLE6,
+    PAPER_WINNERS,
     PaperSettings,
-    colour_fit,
-    learn,
-    separates_regions,
 )
-from gngdt_eval.paper_rgbd import PAPER_TABLE5, PAPER_TABLE6, PAPER_WINNERS
+from gngdt_eval.paper_methods import learn
+from gngdt_eval.paper_summary import colour_fit
 from services.cli import main as gngdt_main
 
 PAPER_TEXT = Path(__file__).resolve().parents[2] / "shared" / "paper" / "gng-dt-paper.md"
