@@ -183,6 +183,11 @@ def _add_recording(sub: argparse._SubParsersAction) -> None:
         "learner's profile; 0: off, the paper)")
     recording.add_argument("--camera-frame", action="store_true",
                            help="ignore the recording's camera poses: learn in the camera frame")
+    recording.add_argument("--settle", action="store_true",
+                           help="GNG-DT: after the last frame, learn it on until settled as `gngdt "
+                           "run` does at a stream's end (a last row, marked settled); without "
+                           "it every row is a frame as learned, so a short recording ends with "
+                           "fewer nodes than `gngdt run` shows")
     recording.add_argument(
         "--ghost-distance", type=_positive_float, default=0.05,
         help="a seen node farther than this (metres) from the frame is a ghost (default 0.05)")
@@ -331,6 +336,7 @@ def _main_recording(args: argparse.Namespace) -> int:
         trials=args.trials,
         reference_points=args.reference_points,
         world_frame=not args.camera_frame,
+        settle=args.settle,
         dynamics=DynamicsSettings(ghost_distance_m=args.ghost_distance,
                                   reference_every=args.reference_every,
                                   world_sample=args.world_sample),

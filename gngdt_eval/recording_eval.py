@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from gngdt_core.frame_learner import FrameLearner, LearnerConfig
+from gngdt_core.geometry import apply_pose
 from gngdt_eval.dynamics import (
     CameraView,
     DynamicsSettings,
@@ -71,6 +73,9 @@ class RecordingSettings:
     replay_share: float = field(default_factory=lambda: _learner_model_default("replay_share"))
     #: learn in the recording's fixed frame when it has camera poses (False: camera frame)
     world_frame: bool = True
+    #: GNG-DT: after the last frame, learn it on until settled as ``gngdt run``'s learner does
+    #: at a stream's end (a last record, marked settled); off: every record is a frame as learned
+    settle: bool = False
     #: the metrics over time (ghost distance, world sample, k-means every N frames)
     dynamics: DynamicsSettings = field(default_factory=DynamicsSettings)
 
@@ -131,13 +136,15 @@ class FramePoints:
     camera_positions: np.ndarray | None = None
     pose: np.ndarray | None = None
     view: CameraView | None = None
+    #: the frame the points are learned in (the pose's fixed frame, else the camera's)
+    frame_id: str = "camera"
 
 
 def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
     """Frames of the recording deprojected like the capture service does (labels with them)."""
     from gngdt_io.deproject import Deprojector
     from gngdt_io.mcap_reader import read_frames
-    from services.capture import DEFAULT_MAX_SKEW_MS
+    from gngdt_io.sources.base import DEFAULT_MAX_SKEW_MS
 
     deproject = Deprojector(settings.min_depth_m, settings.max_depth_m)
     # colour and depth paired as capture pairs them, so a ROS 2 bag replays here as it does live
@@ -156,8 +163,8 @@ def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoint
         pose = frame.pose.matrix
         k = frame.intrinsics
         view = CameraView(frame.depth / 1000.0, k.fx, k.fy, k.cx, k.cy, pose)
-        world = positions.astype(np.float64) @ pose[:3, :3].T + pose[:3, 3]
-        yield FramePoints(frame.index, world, colors, labels, positions, pose, view)
+        yield FramePoints(frame.index, apply_pose(positions, pose), colors, labels, positions,
+                          pose, view, frame.pose.frame_id)
 
 
 def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intrinsics: Any):
@@ -174,15 +181,62 @@ def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intr
     return carried[:, 0].astype(np.int64) | (carried[:, 1].astype(np.int64) << 8)
 
 
+class MethodReplay:
+    """One method learning a recording frame by frame. GNG-DT learns through the learner's own
+    per-frame policy (`FrameLearner`, as ``gngdt learn`` does: its defaults, its clusterings
+    and segments, and at the end its settling on the last frame); the paper's baselines GNG and
+    GNG-W learn ``samples_per_frame`` steps of ``partial_fit`` per frame."""
+
+    def __init__(self, method: str, trial: int, settings: RecordingSettings) -> None:
+        self.method = method
+        self.settings = settings
+        self.learner: FrameLearner | None = None
+        if method == "GNG-DT":
+            self.learner = FrameLearner("eval", learner_config(settings, trial))
+            self.model = self.learner.model
+        else:
+            self.model = make_model(method, settings.max_nodes, random_state=trial)
+
+    def learn(self, points: FramePoints) -> dict[str, np.ndarray]:
+        """Learn one frame; each clustering's node labels after it."""
+        settings = self.settings
+        if self.learner is None:
+            self.model.partial_fit(points.camera_positions, points.colors,
+                                   n_steps=settings.samples_per_frame, camera_pose=points.pose)
+            return {"+".join(props): np.asarray(self.model.clusters(
+                *props, min_size=settings.min_cluster_size))
+                for props in clusterings_of(self.method, 3)}
+        self.learner.learn(points.camera_positions, points.colors, points.frame_id, points.pose)
+        self.model = self.learner.model
+        return self.learner.learned_frame().labels
+
+    def settle(self, last: FramePoints) -> tuple[str, dict[str, np.ndarray]] | None:
+        """GNG-DT: learn the last frame on until settled, as the learner does at a stream's
+        end; how it stopped and each clustering's node labels after it (None: a baseline)."""
+        if self.learner is None:
+            return None
+        reason = self.learner.settle(last.camera_positions, last.colors)
+        return reason, self.learner.learned_frame().labels
+
+
+def learner_config(settings: RecordingSettings, trial: int) -> LearnerConfig:
+    """The learner's configuration a replay of ``settings`` learns with (seed ``trial``)."""
+    from gngdt_core.frame_learner import LearnerConfig, LearnerOptions
+
+    options = LearnerOptions(samples_per_frame=settings.samples_per_frame,
+                             min_cluster_size=settings.min_cluster_size,
+                             object_confirm_frames=settings.object_confirm_frames, seed=trial)
+    model = {"max_nodes": settings.max_nodes, "utility_k": settings.utility_k,
+             "replay_share": settings.replay_share}
+    return LearnerConfig(model=model, options=options)
+
+
 def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> dict[str, Any]:
     """One method, one seed, every frame: per-frame metrics and the final model's topology."""
-    from gngdt_core import adjusted_rand_index, cluster_count
     from gngdt_eval.identity import IdentityScore
     from gngdt_io.mcap_reader import recording_metadata
 
-    forgetting = ({"utility_k": settings.utility_k, "replay_share": settings.replay_share}
-                  if method == "GNG-DT" else {})
-    model = make_model(method, settings.max_nodes, random_state=trial, **forgetting)
+    run = MethodReplay(method, trial, settings)
     identity = IdentityScore(settings.min_cluster_size, settings.object_confirm_frames)
     frames: list[dict[str, Any]] = []
     last: FramePoints | None = None
@@ -196,56 +250,59 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
             tracker = DynamicsTracker(settings.dynamics, changes, posed=points.pose is not None)
         tracker.before_learning(points.index, points.positions, points.labels)
         started = time.perf_counter()
-        model.partial_fit(points.camera_positions, points.colors,
-                          n_steps=settings.samples_per_frame, camera_pose=points.pose)
-        learn_seconds = time.perf_counter() - started
-        error = model.quantization_error(points.positions, points.colors)
-        record: dict[str, Any] = {
-            "frame": points.index,
-            "points": len(points.positions),
-            "nodes": int(model.n_nodes_),
-            "steps": int(model.n_steps_),
-            "learn_seconds": learn_seconds,
-            "qe_pos": float(error["pos"]),
-            "qe_col": float(error["col"]),
-            "clusters": {},
-        }
-        labelled = None if points.labels is None else points.labels != NO_LABEL
-        if labelled is not None:
-            record["ari"] = {}
-            winners = model.predict(points.positions[labelled])
-        for props in clusterings_of(method, 3):
-            name = "+".join(props)
-            node_labels = np.asarray(model.clusters(*props, min_size=settings.min_cluster_size))
-            record["clusters"][name] = cluster_count(node_labels)
-            has_truth = labelled is not None and labelled.any()
-            identity.update(name, model.node_ids_, node_labels,
-                            winners if has_truth else None,
-                            points.labels[labelled] if has_truth else None)
-            if labelled is not None and labelled.any():
-                record["ari"][name] = float(
-                    adjusted_rand_index(points.labels[labelled], node_labels[winners])
-                )
-        if method == "GNG-DT":  # the objects the learner publishes: its segments, tracked
-            has_truth = labelled is not None and labelled.any()
-            identity.update("segments", model.node_ids_, np.asarray(model.segment()),
-                            winners if has_truth else None,
-                            points.labels[labelled] if has_truth else None)
+        labels = run.learn(points)
+        record = _frame_record(run.model, points, labels, identity,
+                               time.perf_counter() - started)
         record["dynamics"] = tracker.after_learning(
-            model, points.index, points.camera_positions, points.positions, points.pose,
+            run.model, points.index, points.camera_positions, points.positions, points.pose,
             points.view)
         every = settings.dynamics.reference_every
         if every > 0 and len(frames) % every == every - 1:
-            record["dynamics"].update(tracker.world_reference(model))
+            record["dynamics"].update(tracker.world_reference(run.model))
         frames.append(record)
         last = points
     if last is None or tracker is None:
         raise ValueError(f"{path}: no frame with valid depth to learn from")
+    settled = run.settle(last) if settings.settle else None
+    if settled is not None:
+        started = time.perf_counter()
+        record = _frame_record(run.model, last, settled[1], identity,
+                               time.perf_counter() - started)
+        record.update(settled=settled[0], dynamics=dict(frames[-1]["dynamics"]))
+        frames.append(record)
     if "world_qe_pos" not in frames[-1]["dynamics"]:  # the last frame is always a reference
-        frames[-1]["dynamics"].update(tracker.world_reference(model))
-    return {"method": method, "trial": trial, "frames": frames, "model": model, "last": last,
+        frames[-1]["dynamics"].update(tracker.world_reference(run.model))
+    return {"method": method, "trial": trial, "frames": frames, "model": run.model, "last": last,
             "changes": tracker.summary(), "posed": last.pose is not None,
             "identity": identity.summary()}
+
+
+def _frame_record(model: Any, points: FramePoints, labels: dict[str, np.ndarray],
+                  identity: Any, learn_seconds: float) -> dict[str, Any]:
+    """The metrics of one learned frame; ``labels``: node labels per clustering (scored against
+    the ground truth where the frame has it, and tracked for object identity)."""
+    from gngdt_core import adjusted_rand_index, cluster_count
+
+    error = model.quantization_error(points.positions, points.colors)
+    record: dict[str, Any] = {
+        "frame": points.index, "points": len(points.positions), "nodes": int(model.n_nodes_),
+        "steps": int(model.n_steps_), "learn_seconds": learn_seconds,
+        "qe_pos": float(error["pos"]), "qe_col": float(error["col"]), "clusters": {},
+    }
+    labelled = None if points.labels is None else points.labels != NO_LABEL
+    has_truth = labelled is not None and bool(labelled.any())
+    winners = model.predict(points.positions[labelled]) if labelled is not None else None
+    if labelled is not None:
+        record["ari"] = {}
+    for name, node_labels in labels.items():
+        if name != "segments":  # segments are scored as objects (identity), not counted
+            record["clusters"][name] = cluster_count(node_labels)
+        identity.update(name, model.node_ids_, node_labels, winners if has_truth else None,
+                        points.labels[labelled] if has_truth else None)
+        if has_truth and name != "segments":
+            record["ari"][name] = float(
+                adjusted_rand_index(points.labels[labelled], node_labels[winners]))
+    return record
 
 
 def references(

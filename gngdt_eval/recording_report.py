@@ -180,12 +180,14 @@ def render_markdown(data: dict[str, Any], plots: list[Path]) -> str:
     settings = data["settings"]
     parts = [
         f"# Recording evaluation — `{Path(data['recording']).name}`",
-        f"Replayed offline frame by frame as the learner does: `partial_fit(points, colors, "
-        f"n_steps={settings['samples_per_frame']:,})` per frame, node budget "
-        f"{settings['max_nodes']}, {settings['trials']} trial(s) per method, paper parameters "
-        "(Table 1). Errors (eq. 17) are measured on each frame's own points after learning it. "
-        "Clusters count topologies' connected components of at least "
+        "Replayed offline frame by frame: GNG-DT through the learner's own per-frame policy "
+        "(`gngdt_core.frame_learner.FrameLearner`, as `gngdt learn` runs it), GNG and GNG-W "
+        f"with `partial_fit(points, colors, n_steps={settings['samples_per_frame']:,})` per "
+        f"frame; node budget {settings['max_nodes']}, {settings['trials']} trial(s) per method, "
+        "paper parameters (Table 1). Errors (eq. 17) are measured on each frame's own points "
+        "after learning it. Clusters count topologies' connected components of at least "
         f"{settings['min_cluster_size']} nodes. Wall time {data['wall_seconds']:.1f} s.",
+        _settling_note(settings),
         "## Last frame, per method (mean ± std over trials)",
         _last_frame_table(data),
         *_identity_section(data["summary"], settings),
@@ -198,6 +200,16 @@ def render_markdown(data: dict[str, Any], plots: list[Path]) -> str:
         *(f"![{p.stem}]({p.name})" for p in plots),
     ]
     return "\n\n".join(parts)
+
+
+def _settling_note(settings: dict[str, Any]) -> str:
+    """Why the last row may differ from what `gngdt run` shows at the end of a stream."""
+    if settings.get("settle"):
+        return ("GNG-DT's last row is the network after settling on the last frame, as `gngdt "
+                "run`'s learner does at the end of a stream (marked *settled*).")
+    return ("`gngdt run`'s learner also learns the stream's last frame on until the network "
+            "settles (node budget reached, error steady); this replay does not (`--settle` "
+            "does), so on a short recording it ends with fewer nodes than `gngdt run`.")
 
 
 def _last_frame_table(data: dict[str, Any]) -> str:

@@ -1,9 +1,11 @@
-"""Replay a recording as a camera on zenoh: colour, depth, calibration and point cloud per frame.
+"""Replay a source as a camera on zenoh: colour, depth, calibration and point cloud per frame.
 
-Each frame is stamped with a monotonically increasing sequence number and the wall-clock time
-at which it is replayed (its "capture time" as a live camera would give it), so latency downstream
-is measured against the moment the frame entered the pipeline. After the last frame an
-end-of-stream message (``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
+The source is a recording (gngdt's MCAP, a ROS 2 bag), a folder of RGB-D images or a synthetic
+scene (``synth:<scene>[:<frames>]``): anything `gngdt_io.sources` opens. Each frame is stamped
+with a monotonically increasing sequence number and the wall-clock time at which it is replayed
+(its "capture time" as a live camera would give it), so latency downstream is measured against
+the moment the frame entered the pipeline. After the last frame an end-of-stream message
+(``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
 
 When the recording has camera poses (``/tf``, see ``gngdt_io.mcap_reader``), each cloud is
 published with its pose: points in the camera frame, ``frame_id`` the fixed frame
@@ -19,15 +21,15 @@ import logging
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gngdt_io.deproject import Deprojector, cap_points, voxel_downsample
-from gngdt_io.mcap_reader import ReadLimits
-from schemas.packing import MAX_CLOUD_POINTS
+from gngdt_io.deproject import CloudOptions, FrameToCloud
+from gngdt_io.mcap_limits import ReadLimits
+from gngdt_io.sources.base import DEFAULT_MAX_SKEW_MS, SourceOptions
+from schemas.clouds import MAX_CLOUD_POINTS
 from schemas.wire import (
     DEFAULT_CAMERA,
     ENCODING_CALIBRATION,
@@ -50,6 +52,7 @@ if TYPE_CHECKING:
     import zenoh
 
     from gngdt_io.frame import CameraIntrinsics, Frame
+    from gngdt_io.sources import FrameSource
 
 log = logging.getLogger(__name__)
 
@@ -58,17 +61,25 @@ EXAMPLES = """examples:
   gngdt capture recordings/tabletop.mcap --fast --voxel 0.01 --max-points 50000
   gngdt capture recordings/tabletop.mcap --loop --cam left --zenoh-connect tcp/10.0.0.2:7447
   gngdt capture mybag_0.mcap --topics /camera --max-skew-ms 20   # a ROS 2 bag, unsynchronised
+  gngdt capture ../shared/data/rgbd/tum_fr1_xyz_dvo_examples     # a folder of RGB-D images
+  gngdt capture synth:tabletop_walk:120 --fast                   # a synthetic scene
 """
 
-#: colour and depth of one frame may differ by this much in a ROS 2 bag (half a 60 Hz period;
-#: gngdt's own recordings stamp both identically)
-DEFAULT_MAX_SKEW_MS = 8.0
 #: longest wait between two frames at the recorded rate
 DEFAULT_MAX_GAP_S = 5.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", type=Path, metavar="RECORDING", help="MCAP recording")
+    parser.add_argument("recording", metavar="SOURCE",
+                        help="a recording (MCAP, ROS 2 bag), a folder of RGB-D images or "
+                        "synth:<scene>[:<frames>]")
+    _add_replay_arguments(parser)
+    _add_cloud_arguments(parser)
+    _add_limit_arguments(parser)
+    add_zenoh_arguments(parser)
+
+
+def _add_replay_arguments(parser: argparse.ArgumentParser) -> None:
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument(
         "--rate", type=float, default=1.0, help="replay speed factor (default 1.0 = recorded rate)"
@@ -76,63 +87,47 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
     parser.add_argument("--loop", action="store_true", help="replay forever (no end-of-stream)")
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
+    parser.add_argument(
+        "--wait-subscribers", type=float, default=10.0, metavar="SECONDS",
+        help="wait this long for a points subscriber before the first frame (default 10)")
+    parser.add_argument(
+        "--topics", metavar="PREFIX",
+        help="read only the recording's topics under PREFIX (a bag with several cameras)")
+    parser.add_argument(
+        "--fixed-frame", default="auto", metavar="FRAME",
+        help="frame the camera poses are given in (e.g. map, odom); 'auto' (default): world, "
+        "map or odom, whichever the recording's transforms connect to the images; 'none': "
+        "ignore the poses, publish camera-frame clouds")
+    parser.add_argument(
+        "--max-skew-ms", type=float, default=DEFAULT_MAX_SKEW_MS,
+        help="largest stamp difference between a frame's colour and depth images "
+        f"(default {DEFAULT_MAX_SKEW_MS:g})")
+    parser.add_argument(
+        "--max-gap", type=float, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
+        help="longest wait between two frames: a longer gap in the recorded stamps is "
+        f"shortened to this, with a warning (default {DEFAULT_MAX_GAP_S:g})")
+    parser.add_argument("--camera-json", type=Path, metavar="FILE",
+                        help="camera parameters of an image folder (default: DIR/camera.json)")
+
+
+def _add_cloud_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-depth", type=float, default=0.1, help="metres (default 0.1)")
     parser.add_argument("--max-depth", type=float, default=10.0, help="metres (default 10)")
     parser.add_argument(
-        "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres"
-    )
+        "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres")
     parser.add_argument(
-        "--drop-veil",
-        type=float,
-        default=0.0,
-        metavar="RATIO",
+        "--drop-veil", type=float, default=0.0, metavar="RATIO",
         help="drop veil points: pixels whose depth jumps from a neighbour's by more than RATIO "
         "of the nearer depth (mixed pixels along depth edges; 0.03 for a Kinect, see "
-        "config/kinect.toml); default 0: keep every pixel",
-    )
+        "config/kinect.toml); default 0: keep every pixel")
     parser.add_argument(
-        "--max-points",
-        type=int,
-        default=0,
+        "--max-points", type=int, default=0,
         help="publish a random subset of at most this many points per frame (default 0: all, "
-        f"up to {MAX_CLOUD_POINTS:,}, what a learner accepts and a zenoh message holds)",
-    )
-    parser.add_argument(
-        "--wait-subscribers",
-        type=float,
-        default=10.0,
-        metavar="SECONDS",
-        help="wait this long for a points subscriber before the first frame (default 10)",
-    )
+        f"up to {MAX_CLOUD_POINTS:,}, what a learner accepts and a zenoh message holds)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the point-cap sampling")
-    parser.add_argument(
-        "--topics",
-        metavar="PREFIX",
-        help="read only the recording's topics under PREFIX (a bag with several cameras)",
-    )
-    parser.add_argument(
-        "--fixed-frame",
-        default="auto",
-        metavar="FRAME",
-        help="frame the camera poses are given in (e.g. map, odom); 'auto' (default): world, "
-        "map or odom, whichever the recording's transforms connect to the images; 'none': "
-        "ignore the poses, publish camera-frame clouds",
-    )
-    parser.add_argument(
-        "--max-skew-ms",
-        type=float,
-        default=DEFAULT_MAX_SKEW_MS,
-        help="largest stamp difference between a frame's colour and depth images "
-        f"(default {DEFAULT_MAX_SKEW_MS:g})",
-    )
-    parser.add_argument(
-        "--max-gap",
-        type=float,
-        default=DEFAULT_MAX_GAP_S,
-        metavar="SECONDS",
-        help="longest wait between two frames: a longer gap in the recorded stamps is "
-        f"shortened to this, with a warning (default {DEFAULT_MAX_GAP_S:g})",
-    )
+
+
+def _add_limit_arguments(parser: argparse.ArgumentParser) -> None:
     limits = parser.add_argument_group(
         "limits (a recording beyond them is refused, naming the file and the frame)")
     defaults = ReadLimits()
@@ -152,17 +147,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-transforms", type=int, default=defaults.max_transform_samples, metavar="N",
         help="transform samples (/tf) read for camera poses, 64 bytes each, ~40 s a million "
         f"(default {defaults.max_transform_samples:,}); the rest are not read, with a warning")
-    add_zenoh_arguments(parser)
 
 
-def read_limits(args: argparse.Namespace) -> ReadLimits:
-    """The reading limits of the command line (``ValueError`` for a non-positive one)."""
-    return ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20, args.max_pending_mb << 20,
-                      args.max_transforms)
-
-
-
-
+def source_options(args: argparse.Namespace) -> SourceOptions:
+    """How to read the source, from the command line (``ValueError`` for a wrong value)."""
+    if args.max_skew_ms < 0:
+        raise ValueError(f"--max-skew-ms must be >= 0, got {args.max_skew_ms}")
+    limits = ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20,
+                        args.max_pending_mb << 20, args.max_transforms)
+    fixed_frame = None if args.fixed_frame.lower() == "none" else args.fixed_frame
+    return SourceOptions(camera_json=args.camera_json, topic_prefix=args.topics,
+                         max_skew_ms=args.max_skew_ms, fixed_frame=fixed_frame, limits=limits,
+                         on_bad_frame=log_bad_frame)
 
 
 class CapturePublisher:
@@ -229,37 +225,26 @@ def log_bad_frame(error: Exception) -> None:
 
 
 class Replay:
-    """Frames of a recording (forever with ``loop``), and what went wrong reading it.
+    """Frames of a source (forever with ``loop``), and what went wrong reading it.
 
     A bad frame is logged and skipped; damage to the file itself ends a pass, logged, and is
     kept in ``error``: with not a single frame read, the capture fails (exit 2).
     """
 
-    def __init__(self, path: Path, loop: bool, stop: threading.Event,
-                 topic_prefix: str | None = None,
-                 max_skew_ms: float = DEFAULT_MAX_SKEW_MS,
-                 limits: ReadLimits | None = None,
-                 fixed_frame: str | None = "auto") -> None:
-        self.path = path
-        self.limits = limits
-        self.fixed_frame = fixed_frame
+    def __init__(self, source: FrameSource, loop: bool, stop: threading.Event) -> None:
+        self.source = source
         self.loop = loop
         self.stop = stop
-        self.topic_prefix = topic_prefix
-        self.max_skew_ns = round(max_skew_ms * 1e6)
         self.error: Exception | None = None
         self.frames_read = 0
 
     def __iter__(self) -> Iterator[Frame]:
-        from gngdt_io.mcap_reader import RecordingError, read_frames
+        from gngdt_io.errors import RecordingError
 
         while not self.stop.is_set():
             yielded = 0
             try:
-                frames = read_frames(self.path, self.topic_prefix, max_skew_ns=self.max_skew_ns,
-                                     on_bad_frame=log_bad_frame, limits=self.limits,
-                                     fixed_frame=self.fixed_frame)
-                for frame in frames:
+                for _, frame in self.source.frames():
                     yielded += 1
                     self.frames_read += 1
                     yield frame
@@ -309,67 +294,59 @@ class ReplayClock:
             delay = self._due - time.monotonic()
 
 
-def describe_recording(path: Path, rate: float | None, loop: bool) -> str:
-    """One line saying what is replayed, from the recording's index when it has one."""
-    from gngdt_io.mcap_reader import RecordingError, recording_info
-
-    speed = "as fast as possible" if rate is None else f"at {rate:g}x the recorded rate"
-    how = f"{speed}{', looping' if loop else ''}"
-    try:
-        info = recording_info(path)
-    except RecordingError:
-        return f"replaying {path} {how} (no index: a damaged or unfinished file?)"
-    return (f"replaying {path}: {info['frames']} frames over {info['duration_s']:.1f} s, "
-            f"{info['size_bytes'] / 1e6:.1f} MB, {how}")
-
-
 def main(args: argparse.Namespace) -> int:
-    from gngdt_io.mcap_reader import RecordingError, check_recording
+    from gngdt_io.errors import RecordingError
+    from gngdt_io.sources import open_source
 
     try:
-        check_recording(args.recording)
+        source = open_source(args.recording, options=source_options(args))
         to_cloud = FrameToCloud(
             CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None,
                          args.drop_veil),
             args.seed,
         )
         clock = ReplayClock(None if args.fast else args.rate, args.max_gap)
-        limits = read_limits(args)
-        if args.max_skew_ms < 0:
-            raise ValueError(f"--max-skew-ms must be >= 0, got {args.max_skew_ms}")
     except (ValueError, RecordingError) as error:
         log.error("%s", error)
         return 2
-
     try:
         session = open_session(args)
     except ZenohSetupError as error:
         log.error("%s", error)
         return 1
     try:
-        publisher = CapturePublisher(session, args.cam)
-        token = session.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive")
-        with lifecycle.graceful() as stop:
-            fixed_frame = None if args.fixed_frame.lower() == "none" else args.fixed_frame
-            replay = Replay(args.recording, args.loop, stop, args.topics, args.max_skew_ms,
-                            limits, fixed_frame)
-            if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
-                log.warning("no subscriber on %s after %.1f s; publishing anyway",
-                            topic(args.cam, "points"), args.wait_subscribers)
-            log.info("%s", describe_recording(args.recording, clock.rate, args.loop))
-            frames_sent = publish(args, replay, clock, to_cloud, publisher, stop)
-            if not stop.is_set() or not args.loop:
-                # with nothing sent, frame 0 is named and frames_sent = 0 says it never came
-                publisher.publish_end(frames_sent, max(frames_sent - 1, 0), args.recording.name)
-                log.info("sent %d frames of %s, end of stream", frames_sent, args.recording)
-        time.sleep(0.2)  # let BLOCK puts drain to the router before the session closes
-        token.undeclare()
+        replay = capture(args, source, clock, to_cloud, session)
     finally:
         session.close()
     if replay.frames_read == 0 and replay.error is not None:
         log.error("%s", replay.error)
         return 2
     return 0
+
+
+def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
+            to_cloud: FrameToCloud, session: zenoh.Session) -> Replay:
+    """Publish the source's frames on ``session`` until it ends or a stop signal, then the end
+    of stream; the replay (what was read, what went wrong)."""
+    publisher = CapturePublisher(session, args.cam)
+    token = session.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive")
+    with lifecycle.graceful() as stop:
+        replay = Replay(source, args.loop, stop)
+        if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
+            log.warning("no subscriber on %s after %.1f s; publishing anyway",
+                        topic(args.cam, "points"), args.wait_subscribers)
+        speed = ("as fast as possible" if clock.rate is None
+                 else f"at {clock.rate:g}x the recorded rate")
+        log.info("replaying %s %s%s", source.describe(), speed, ", looping" if args.loop else "")
+        frames_sent = publish(args, replay, clock, to_cloud, publisher, stop)
+        if not stop.is_set() or not args.loop:
+            # with nothing sent, frame 0 is named and frames_sent = 0 says it never came
+            publisher.publish_end(frames_sent, max(frames_sent - 1, 0), source.path.name)
+            log.info("sent %d frames of %s, end of stream", frames_sent, args.recording)
+    time.sleep(0.2)  # let BLOCK puts drain to the router before the session closes
+    token.undeclare()
+    source.close()
+    return replay
 
 
 def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_cloud: FrameToCloud,

@@ -389,9 +389,9 @@ class RunPlan:
 def plan_run(args: argparse.Namespace) -> RunPlan:
     """The run's outputs, named (the logger never overwrites a file: the names it will really
     write); ValueError or RecordingError for anything wrong, before any process starts."""
-    from gngdt_io.mcap_reader import check_recording
+    from gngdt_io.sources import open_source
 
-    check_recording(args.recording)
+    open_source(args.recording)  # a source capture can read (RecordingError says why not)
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
     veil_ratio = sensor_veil_ratio(args.params)  # a wrong params file: said before starting

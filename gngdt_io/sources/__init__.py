@@ -12,6 +12,7 @@ from pathlib import Path
 
 from gngdt_io.errors import RecordingError
 from gngdt_io.images import FORMATS, detect_format
+from gngdt_io.mcap_reader import check_recording
 from gngdt_io.sources.base import FrameSource, SourceOptions
 from gngdt_io.sources.folder import ImageFolderSource
 from gngdt_io.sources.recording import McapSource
@@ -38,10 +39,19 @@ def open_source(spec: str | Path, fmt: str | None = None,
         if kind.scheme and kind.scheme == scheme:
             return kind(text)
     path = Path(spec)
-    if fmt == "mcap" or (fmt is None and McapSource.accepts(path)):
-        return McapSource(path, options)
     if fmt in FORMATS or (fmt is None and path.is_dir()):
-        return ImageFolderSource(path, fmt or detect_format(path), options)
-    if path.is_file():
-        raise RecordingError(path, None, "not an MCAP recording (no MCAP magic) nor a folder")
-    raise RecordingError(path, None, "no such file or folder")
+        return ImageFolderSource(path, fmt or _folder_layout(path), options)
+    check_recording(path)  # says why it is no recording: missing, empty, another kind of file
+    return McapSource(path, options)
+
+
+def _folder_layout(path: Path) -> str:
+    """The image layout of a folder, or a RecordingError that also names recordings in it."""
+    try:
+        return detect_format(path)
+    except RecordingError as error:
+        inside = sorted(item.name for item in path.glob("*.mcap"))[:5]
+        if not inside:
+            raise
+        raise RecordingError(path, None, f"{error.reason}; recordings inside: "
+                             f"{', '.join(inside)}") from None

@@ -17,6 +17,9 @@ from gngdt_io.errors import RecordingError
 from gngdt_io.frame import Frame
 from gngdt_io.mcap_limits import ReadLimits
 
+#: colour and depth of one frame may differ by this much in a ROS 2 bag (half a 60 Hz period;
+#: gngdt's own recordings stamp both identically)
+DEFAULT_MAX_SKEW_MS = 8.0
 #: what a source does with a frame it cannot read (log it, and the source goes on); None: raise
 BadFrameHandler = Callable[[Exception], None]
 
@@ -31,7 +34,7 @@ class SourceOptions:
     #: recordings: read only the topics under this prefix (a bag with several cameras)
     topic_prefix: str | None = None
     #: recordings: largest stamp difference between a frame's colour and depth images
-    max_skew_ms: float = 8.0
+    max_skew_ms: float = DEFAULT_MAX_SKEW_MS
     #: recordings: fixed frame of the camera poses ("auto": world, map or odom; None: ignore)
     fixed_frame: str | None = None
     #: recordings: reading limits (image size, chunk size, pending bytes, transforms)
