@@ -28,8 +28,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from gngdt_core import _kernels as K
-from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels
+from gngdt_core.kernels import segmentation as SK
 from gngdt_core.memory import SampleMemory
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
