@@ -1,7 +1,7 @@
 """scikit-learn style online estimators: GNG-DT and the paper's baselines GNG and GNG-W.
 
-All three share one numba learning loop (`_kernels.learn`); they differ in the winner distance
-and in which topologies they keep:
+All three share one numba learning loop (`kernels.learning.learn`); they differ in the winner
+distance and in which topologies they keep:
 
 - `GNGDT`: winner and error by position only (eqs. 2-3); one topology per property: "pos",
   "col" (when colours are learned) and "nor" (3-D positions). Normals (eq. 16) are oriented toward
@@ -27,9 +27,11 @@ from typing import Any, ClassVar, Self
 import numpy as np
 from scipy.spatial import cKDTree
 
-from gngdt_core import _kernels as K
 from gngdt_core.clustering import connected_component_labels
+from gngdt_core.kernels import layout as K
 from gngdt_core.kernels import segmentation as SK
+from gngdt_core.kernels.graph import add_edge
+from gngdt_core.kernels.learning import learn
 from gngdt_core.memory import SampleMemory
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
@@ -236,12 +238,12 @@ class _GrowingGas:
             iparams[K.Q_FRAME_ROWS] = len(batch_samples[0])
             kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
             for part in self._refresh_parts(order):
-                K.learn(samples, kernel_colors, part,
-                        a["pos"], a["col"], a["nor"], a["err"],
-                        a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                        a["util"], a["judged"],
-                        a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                        self._istate, self._fstate, fparams, iparams)
+                learn(samples, kernel_colors, part,
+                      a["pos"], a["col"], a["nor"], a["err"],
+                      a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
+                      a["util"], a["judged"],
+                      a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                      self._istate, self._fstate, fparams, iparams)
                 if self._params.get("normal_refresh_steps"):
                     self.refresh_normals()
             if memory is not None and (whole_batch is None or chunk == 0):
@@ -349,7 +351,7 @@ class _GrowingGas:
             if sample_colors is not None:
                 a["col"][node] = sample_colors[node]
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
-        K.add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
+        add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
         a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
         self._istate[K.I_NEXT_ID] += 2
         self._istate[K.I_NODES] = 2

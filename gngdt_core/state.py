@@ -7,7 +7,8 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from gngdt_core import _kernels as K
+from gngdt_core.kernels import layout as K
+from gngdt_core.kernels.grid import grid_rebuild
 
 Model = TypeVar("Model")
 
@@ -122,8 +123,8 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         _restore_memory(model._memory, state)
     if counters[K.I_GRID]:
         a = model._arrays
-        K.grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                       float(scalars[K.F_CELL]))
+        grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                     float(scalars[K.F_CELL]))
     return model
 
 
