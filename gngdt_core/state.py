@@ -94,6 +94,27 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     if counters[K.I_GRID] and scalars[K.F_CELL] <= 0.0:
         raise ValueError("state has an active grid with a non-positive cell size")
 
+    arrays = _node_arrays(state, n, dim, counters)
+    model._allocate(dim, bool(has_col))
+    for key, value in arrays.items():
+        model._arrays[key][:n] = value
+    model._istate[:] = counters
+    model._fstate[:] = scalars
+    if "camera_pose" in state:  # states saved before camera poses: the camera frame
+        model._camera_pose = model._checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
+    if model._memory is not None:  # states saved before rehearsal: an empty memory
+        _restore_memory(model._memory, state)
+    if counters[K.I_GRID]:
+        a = model._arrays
+        grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                     float(scalars[K.F_CELL]))
+    return model
+
+
+def _node_arrays(state: dict[str, np.ndarray], n: int, dim: int,
+                 counters: np.ndarray) -> dict[str, np.ndarray]:
+    """The ``n`` nodes' arrays of ``state``, checked (shapes, finite, a symmetric adjacency);
+    sets ``counters[I_NEXT_ID]`` when the state predates node ids (see `_node_ids`)."""
     shapes = {"pos": (n, dim), "col": (n, 3), "nor": (n, 3), "err": (n,), "deg": (n,)}
     for key in _FLOAT_ARRAYS + _INT_ARRAYS:
         if key not in state:
@@ -111,21 +132,7 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         arrays["util"] = _array(state, "util", (n,), "f").astype(np.float64)
         if not np.isfinite(arrays["util"]).all() or (arrays["util"] < 0).any():
             raise ValueError("state['util'] must be finite and non-negative")
-
-    model._allocate(dim, bool(has_col))
-    for key, value in arrays.items():
-        model._arrays[key][:n] = value
-    model._istate[:] = counters
-    model._fstate[:] = scalars
-    if "camera_pose" in state:  # states saved before camera poses: the camera frame
-        model._camera_pose = model._checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
-    if model._memory is not None:  # states saved before rehearsal: an empty memory
-        _restore_memory(model._memory, state)
-    if counters[K.I_GRID]:
-        a = model._arrays
-        grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                     float(scalars[K.F_CELL]))
-    return model
+    return arrays
 
 
 def _restore_memory(memory: Any, state: dict[str, np.ndarray]) -> None:
