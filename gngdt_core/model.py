@@ -1,16 +1,13 @@
-"""scikit-learn style online estimators: GNG-DT and the paper's baselines GNG and GNG-W.
+"""scikit-learn style online estimator GNG-DT, and the machinery it shares with the paper's
+baselines GNG and GNG-W (`gngdt_core.baselines`).
 
 All three share one numba learning loop (`kernels.learning.learn`); they differ in the winner
-distance and in which topologies they keep:
-
-- `GNGDT`: winner and error by position only (eqs. 2-3); one topology per property: "pos",
-  "col" (when colours are learned) and "nor" (3-D positions). Normals (eq. 16) are oriented toward
-  ``viewpoint`` (the sensor origin by default; ``None`` leaves the sign as computed) and compared
-  sign-invariantly in eqs. 4 and 9 (``min(||n_i - n_j||, ||n_i + n_j||) < tau_nor``), so the
-  normal topology never depends on the orientation.
-- `GNG`: one topology; Euclidean distance over the concatenated vector (position, colour).
-- `GNGW`: one topology; weighted distance ``w_pos ||dpos|| + w_col ||dcol||`` (eq. 13) and error
-  ``w_pos ||dpos||^2 + w_col ||dcol||^2`` (eq. 14).
+distance and in which topologies they keep. `GNGDT`: winner and error by position only (eqs.
+2-3); one topology per property: "pos", "col" (when colours are learned) and "nor" (3-D
+positions). Normals (eq. 16) are oriented toward ``viewpoint`` (the sensor origin by default;
+``None`` leaves the sign as computed) and compared sign-invariantly in eqs. 4 and 9
+(``min(||n_i - n_j||, ||n_i + n_j||) < tau_nor``), so the normal topology never depends on the
+orientation. The baselines keep one topology and pick the winner by position and colour.
 
 Step 0 places the two initial nodes on two random input samples. Growth stops at ``max_nodes``
 (Step 8 is then skipped entirely); adaptation goes on.
@@ -20,13 +17,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
 import numpy as np
-from scipy.spatial import cKDTree
 
+from gngdt_core import queries
 from gngdt_core.clustering import connected_component_labels
 from gngdt_core.kernels import layout as K
 from gngdt_core.kernels import segmentation as SK
@@ -42,20 +37,8 @@ from gngdt_core.view import SensorView, rigid_inverse
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 _STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
 # a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
-#: a nearest-node batch is split over the CPUs when each part gets at least this many points
-#: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
-PARALLEL_MIN_POINTS = 15_000
-#: `label_pixels` searches the nearest node at every LABEL_ANCHOR_STRIDE-th pixel of every
-#: LABEL_ANCHOR_STRIDE-th row, and fills the pixels between anchors that agree
-LABEL_ANCHOR_STRIDE = 4
 #: largest deviation of a camera pose's rotation from orthonormal (and of its last row)
 POSE_TOLERANCE = 1e-6
-
-
-def split_range(n: int, min_part: int) -> list[int]:
-    """Bounds of up to one part per usable CPU over ``range(n)``, each part >= ``min_part``."""
-    parts = max(1, min(len(os.sched_getaffinity(0)), n // max(min_part, 1)))
-    return [n * k // parts for k in range(parts + 1)]
 
 
 def _to_model(camera_samples: np.ndarray, camera_pose: np.ndarray | None) -> np.ndarray:
@@ -70,7 +53,7 @@ def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
     return indices if finite_rows is None else finite_rows[indices]
 
 
-class _GrowingGas:
+class GrowingGas:
     """Shared machinery; see `GNGDT` for the public API."""
 
     _MODE: ClassVar[int]
@@ -425,15 +408,10 @@ class _GrowingGas:
         return mask
 
     def _edges_with(self, mask: int) -> np.ndarray:
-        n = self.n_nodes_
-        if n == 0:
+        if self.n_nodes_ == 0:
             return np.zeros((0, 2), dtype=np.int64)
         a = self._arrays
-        nbr = a["nbr"][:n]
-        used = np.arange(K.MAX_DEGREE) < a["deg"][:n, None]
-        rows = np.broadcast_to(np.arange(n)[:, None], nbr.shape)
-        keep = used & ((a["emask"][:n] & mask) == mask) & (nbr > rows)
-        return np.stack([rows[keep], nbr[keep]], axis=1).astype(np.int64)
+        return queries.edge_pairs(a["nbr"], a["emask"], a["deg"], self.n_nodes_, mask)
 
     def clusters(self, *props: str, min_size: int = 1) -> np.ndarray:
         """(n_nodes,) int32 connected-component labels of the named topologies combined.
@@ -453,20 +431,10 @@ class _GrowingGas:
         """
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        query = np.asarray(positions)
-        if query.ndim != 2 or query.shape[1] != self._dim:
-            raise ValueError(f"positions must have shape (N, {self._dim}), got {query.shape}")
-        if query.dtype not in (np.float32, np.float64):
-            query = query.astype(np.float64)
-        if not np.isfinite(query).all():
-            raise ValueError("positions contain NaN or inf")
-        if self._dim != 3 or self._MODE != K.MODE_GNGDT:
-            distances, winners = cKDTree(self.positions_).query(query, k=1)
-        else:
-            winners, sq_distances = self._nearest_nodes(np.ascontiguousarray(query))
-            distances = np.sqrt(sq_distances)
-        winners = np.asarray(winners, dtype=np.int64)
-        return (winners, np.asarray(distances, dtype=np.float64)) if return_distance else winners
+        query = queries.checked_query(positions, self._dim)
+        use_grid = self._dim == 3 and self._MODE == K.MODE_GNGDT
+        winners, distances = queries.nearest_winners(query, self._grid_arrays(), use_grid)
+        return (winners, distances) if return_distance else winners
 
     def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
         """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1; 0 where the
@@ -475,7 +443,7 @@ class _GrowingGas:
         points: (H, W, 3) float32/float64 metres, an organized cloud: one point per pixel, in
         the network's frame, x and y finite wherever z is (as deprojection gives them);
         node_labels: (n_nodes,) int, e.g. ``segment()``. The nearest node is searched at every
-        ``LABEL_ANCHOR_STRIDE``-th pixel of every such row (every 4th); a pixel between such
+        ``queries.LABEL_ANCHOR_STRIDE``-th pixel of every such row (every 4th); a pixel between such
         pixels that all agree takes their label without a search (a label region narrower than
         the stride can be missed there), every other pixel is searched exactly. On the real
         640x480 Kinect frames of ../shared/data/labelled 0.03-0.06 % of the pixels (at most
@@ -485,54 +453,13 @@ class _GrowingGas:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
         if self._dim != 3 or self._MODE != K.MODE_GNGDT:
             raise ValueError("label_pixels needs a GNG-DT network of 3D positions")
-        if points.ndim != 3 or points.shape[2] != 3:
-            raise ValueError(f"points must have shape (H, W, 3), got {points.shape}")
-        node_labels = np.asarray(node_labels, dtype=np.int32)
-        if node_labels.shape != (self.n_nodes_,):
-            raise ValueError(f"node_labels must have shape ({self.n_nodes_},), got "
-                             f"{node_labels.shape}")
-        if points.dtype not in (np.float32, np.float64):
-            points = points.astype(np.float64)
-        points = np.ascontiguousarray(points)
-        valid = np.isfinite(points[..., 2])
-        out = np.empty(valid.shape, dtype=np.int32)
-        grid = self._grid_arrays()
-        # the work is mostly the searches, about one pixel in stride^2 (the anchors): a
-        # 640x480 frame is one thread's work, which two threads did no faster on 2 cores
-        min_rows = PARALLEL_MIN_POINTS * LABEL_ANCHOR_STRIDE**2 // max(points.shape[1], 1)
-        for anchors in (True, False):  # every anchor first: the second pass reads them
-            self._in_parallel(points.shape[0], min_rows,
-                              lambda start, stop, anchors=anchors: SK.label_pixels(
-                                  points, valid, node_labels, LABEL_ANCHOR_STRIDE, anchors,
-                                  start, stop, *grid, out))
-        return out
+        return queries.label_pixels(points, node_labels, self._grid_arrays())
 
-    def _grid_arrays(self) -> tuple:
+    def _grid_arrays(self) -> queries.NodeGrid:
         """Node positions, count and spatial grid, as the nearest-node kernels take them."""
         a = self._arrays
         return (a["pos"], self.n_nodes_, a["ghead"], a["gnext"],
                 bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL])
-
-    @staticmethod
-    def _in_parallel(n_items: int, min_part: int, work: Any) -> None:
-        """``work(start, stop)`` over ``range(n_items)``, split over the CPUs when large (the
-        kernels release the GIL)."""
-        bounds = split_range(n_items, min_part)
-        if len(bounds) == 2:
-            work(0, n_items)
-            return
-        with ThreadPoolExecutor(len(bounds) - 1) as pool:
-            list(pool.map(work, bounds[:-1], bounds[1:]))
-
-    def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
-        large batches are split over the CPUs."""
-        winners = np.empty(points.shape[0], dtype=np.int32)
-        sq_distances = np.empty(points.shape[0])
-        grid = (*self._grid_arrays(), winners, sq_distances)
-        self._in_parallel(points.shape[0], PARALLEL_MIN_POINTS,
-                          lambda start, stop: SK.nearest_nodes(points, start, stop, *grid))
-        return winners, sq_distances
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
         """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
@@ -584,7 +511,7 @@ class _GrowingGas:
         return restore(cls, state)
 
 
-class GNGDT(_GrowingGas):
+class GNGDT(GrowingGas):
     """Growing Neural Gas with Different Topologies (Toda et al., Steps 0-10).
 
     Defaults are the paper's Table 1 plus a node budget. ``normal_mu=None`` (default) uses, per
@@ -628,7 +555,7 @@ class GNGDT(_GrowingGas):
 
     _MODE = K.MODE_GNGDT
     _PARAM_NAMES = (
-        *_GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
+        *GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
         "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
         "view_depth_margin", "replay_share", "replay_points",
     )
@@ -715,29 +642,3 @@ class GNGDT(_GrowingGas):
         ``labels[model.predict(points)]``, an organized frame's pixels with `label_pixels`."""
         return self.segmentation(params).labels
 
-
-class GNG(_GrowingGas):
-    """Plain GNG on the concatenated (position, colour) vector; one topology ("pos")."""
-
-    _MODE = K.MODE_GNG
-
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, random_state=random_state)
-
-
-class GNGW(_GrowingGas):
-    """GNG with the weighted distance of eqs. 13-14 (paper defaults w_pos=0.8, w_col=0.2)."""
-
-    _MODE = K.MODE_GNGW
-    _PARAM_NAMES = (*_GrowingGas._PARAM_NAMES, "w_pos", "w_col")
-
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, w_pos: float = 0.8, w_col: float = 0.2,
-                 random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, w_pos=w_pos, w_col=w_col,
-                         random_state=random_state)

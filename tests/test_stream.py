@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from gngdt_core import model as model_module
+from gngdt_core import queries as model_module
 from gngdt_core.frame_segmenter import FrameSegmenter, veil_pixels
 from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_io.deproject import Deprojector
