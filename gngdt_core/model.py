@@ -15,7 +15,6 @@ Step 0 places the two initial nodes on two random input samples. Growth stops at
 
 from __future__ import annotations
 
-import json
 import math
 from typing import Any, ClassVar, Self
 
@@ -30,27 +29,22 @@ from gngdt_core.kernels.learning import learn
 from gngdt_core.memory import SampleMemory
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
-from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
+from gngdt_core.sampling import (
+    as_samples,
+    batch_rows,
+    check_batch,
+    check_n_steps,
+    checked_pose,
+    gather,
+    initial_indices,
+    sample_orders,
+    to_model_frame,
+)
 from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_network
+from gngdt_core.state import restore, snapshot
 from gngdt_core.view import SensorView, rigid_inverse
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
-_STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
-# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
-#: largest deviation of a camera pose's rotation from orthonormal (and of its last row)
-POSE_TOLERANCE = 1e-6
-
-
-def _to_model(camera_samples: np.ndarray, camera_pose: np.ndarray | None) -> np.ndarray:
-    """Samples (M, 3) float64 in the model's frame: the pose applied, when there is one."""
-    if camera_pose is None:
-        return camera_samples
-    return camera_samples @ camera_pose[:3, :3].T + camera_pose[:3, 3]
-
-
-def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
-    """Batch rows of ``indices`` into the finite rows (all rows are finite when None)."""
-    return indices if finite_rows is None else finite_rows[indices]
 
 
 class GrowingGas:
@@ -169,12 +163,8 @@ class GrowingGas:
         batch, batch_colors, finite_rows, n_invalid = check_batch(positions, colors)
         # rehearsal needs a fixed frame: without a pose, what was seen before is elsewhere now
         memory = self._memory if camera_pose is not None else None
-        camera_pose = self._checked_pose(camera_pose, batch.shape[1])
-        if n_steps is not None:
-            if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)):
-                raise ValueError(f"n_steps must be an integer or None, got {n_steps!r}")
-            if n_steps < 0:
-                raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+        camera_pose = checked_pose(camera_pose, batch.shape[1])
+        check_n_steps(n_steps)
         has_col = batch_colors is not None
         if self._dim == 0:
             self._allocate(batch.shape[1], has_col)
@@ -188,12 +178,11 @@ class GrowingGas:
         replay_steps = self._replay_steps(steps, memory)
         steps -= replay_steps  # the batch's own
         if self.n_nodes_ == 0:
-            first_two = initial_indices(self._rng, n_samples)
-            initial, initial_colors = gather(batch, batch_colors, _rows(finite_rows, first_two))
-            self._initialise(_to_model(initial, camera_pose), initial_colors)
+            first_two = batch_rows(finite_rows, initial_indices(self._rng, n_samples))
+            initial, initial_colors = gather(batch, batch_colors, first_two)
+            self._initialise(to_model_frame(initial, camera_pose), initial_colors)
         self._camera_pose = camera_pose
         fparams, iparams = self._kernel_parameters()
-        a = self._arrays
         # Fewer steps than samples (a large frame): convert only the sampled rows, so a frame
         # costs what its steps cost. A pass or more: convert the batch once, visit it by index.
         whole_batch = None
@@ -201,14 +190,14 @@ class GrowingGas:
         if steps >= n_samples:
             camera_samples, sample_colors = gather(batch, batch_colors, finite_rows)
             self._see(camera_samples, camera_pose, memory)
-            whole_batch = _to_model(camera_samples, camera_pose), sample_colors
+            whole_batch = to_model_frame(camera_samples, camera_pose), sample_colors
         learned = replayed = 0
         for chunk, order in enumerate(sample_orders(self._rng, n_samples, steps)):
             if whole_batch is None:
-                samples, sample_colors = gather(batch, batch_colors, _rows(finite_rows, order))
+                samples, sample_colors = gather(batch, batch_colors, batch_rows(finite_rows, order))
                 if chunk == 0:
                     self._see(samples, camera_pose, memory)
-                samples = _to_model(samples, camera_pose)
+                samples = to_model_frame(samples, camera_pose)
                 order = np.arange(order.size)
             else:
                 samples, sample_colors = whole_batch
@@ -219,19 +208,26 @@ class GrowingGas:
                 samples, sample_colors, order = self._with_rehearsal(
                     samples, sample_colors, order, replayed - done)
             iparams[K.Q_FRAME_ROWS] = len(batch_samples[0])
-            kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
-            for part in self._refresh_parts(order):
-                learn(samples, kernel_colors, part,
-                      a["pos"], a["col"], a["nor"], a["err"],
-                      a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                      a["util"], a["judged"],
-                      a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                      self._istate, self._fstate, fparams, iparams)
-                if self._params.get("normal_refresh_steps"):
-                    self.refresh_normals()
+            self._learn(samples, sample_colors, order, fparams, iparams)
             if memory is not None and (whole_batch is None or chunk == 0):
                 memory.offer(*batch_samples, self._rng)  # each learned sample once
         return self
+
+    def _learn(self, samples: np.ndarray, sample_colors: np.ndarray | None, order: np.ndarray,
+               fparams: np.ndarray, iparams: np.ndarray) -> None:
+        """Steps 1-9 for the rows ``order`` of ``samples`` (model frame), with eq. 16 and eqs.
+        4/9 refreshed every ``normal_refresh_steps`` steps when that is set."""
+        a = self._arrays
+        kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
+        for part in self._refresh_parts(order):
+            learn(samples, kernel_colors, part,
+                  a["pos"], a["col"], a["nor"], a["err"],
+                  a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
+                  a["util"], a["judged"],
+                  a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                  self._istate, self._fstate, fparams, iparams)
+            if self._params.get("normal_refresh_steps"):
+                self.refresh_normals()
 
     def _replay_steps(self, steps: int, memory: SampleMemory | None) -> int:
         """Steps of this batch drawn from ``memory`` (none without one, or before it holds
@@ -275,23 +271,6 @@ class GrowingGas:
                                  bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
                                  fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
         self._normals_fresh = bool(iparams[K.Q_HAS_NOR])
-
-    def _checked_pose(self, camera_pose: Any, dim: int) -> np.ndarray | None:
-        """(4, 4) float64 rigid camera-to-world transform, or None; ValueError otherwise."""
-        if camera_pose is None:
-            return None
-        pose = np.asarray(camera_pose, dtype=np.float64)
-        if dim != 3:
-            raise ValueError(f"camera_pose needs 3-D positions, got {dim}-D")
-        if pose.shape != (4, 4) or not np.isfinite(pose).all():
-            raise ValueError(f"camera_pose must be a finite (4, 4) matrix, got {pose.shape}")
-        rotation = pose[:3, :3]
-        if (np.abs(rotation @ rotation.T - np.eye(3)).max() > POSE_TOLERANCE
-                or np.abs(pose[3] - (0.0, 0.0, 0.0, 1.0)).max() > POSE_TOLERANCE
-                or np.linalg.det(rotation) < 0):
-            raise ValueError("camera_pose must be rigid: an orthonormal rotation with det +1 and "
-                             "a last row of (0, 0, 0, 1)")
-        return None if np.array_equal(pose, np.eye(4)) else pose
 
     def _see(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None,
              memory: SampleMemory | None) -> None:
@@ -478,36 +457,11 @@ class GrowingGas:
 
     def get_state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue exactly, as numpy arrays only (np.savez-safe)."""
-        n = self.n_nodes_
-        a = self._arrays
-        state: dict[str, np.ndarray] = {
-            "model": np.array(type(self).__name__),
-            "version": np.array(_STATE_VERSION, dtype=np.int64),
-            "params": np.array(json.dumps(self._params)),
-            "rng_state": np.array(json.dumps(self._rng.bit_generator.state)),
-            "dim": np.array(self._dim, dtype=np.int64),
-            "has_colors": np.array(int(self._has_col), dtype=np.int64),
-            "n_invalid": np.array(self.n_invalid_, dtype=np.int64),
-            "counters": self._istate.copy(),
-            "scalars": self._fstate.copy(),
-        }
-        if self._camera_pose is not None:  # the last batch's pose places the viewpoint
-            state["camera_pose"] = self._camera_pose.copy()
-        if self._memory is not None:
-            state["memory_positions"] = self._memory.positions.copy()
-            state["memory_colors"] = self._memory.colors.copy()
-            state["memory_offered"] = np.array(self._memory.offered, dtype=np.int64)
-        for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
-                     "util"):
-            if a:
-                state[name] = a[name][:n].copy()
-        return state
+        return snapshot(self)
 
     @classmethod
     def from_state(cls, state: dict[str, np.ndarray]) -> Self:
         """Rebuild a model saved by `get_state`; ValueError on anything inconsistent."""
-        from gngdt_core.state import restore
-
         return restore(cls, state)
 
 
@@ -641,4 +595,3 @@ class GNGDT(GrowingGas):
         `gngdt_core.segmentation`). Label points with
         ``labels[model.predict(points)]``, an organized frame's pixels with `label_pixels`."""
         return self.segmentation(params).labels
-
