@@ -3,9 +3,10 @@
 Pure computation: numpy, numba and scipy only; no I/O, no transport.
 """
 
+from gngdt_core.baselines import GNG, GNGW
 from gngdt_core.clustering import cluster_count, connected_component_labels
 from gngdt_core.metrics import adjusted_rand_index, cluster_centre_errors, quantization_error
-from gngdt_core.model import GNG, GNGDT, GNGW
+from gngdt_core.model import GNGDT
 from gngdt_core.synthetic import DATA1_CENTRES, make_data1, make_data2
 
 __all__ = [

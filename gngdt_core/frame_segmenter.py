@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core import _segment_kernels as SK
+from gngdt_core.kernels import segmentation as SK
 from gngdt_core.model import GNGDT
 from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_core.segmentation import SegmentationParams

@@ -1,16 +1,13 @@
-"""scikit-learn style online estimators: GNG-DT and the paper's baselines GNG and GNG-W.
+"""scikit-learn style online estimator GNG-DT, and the machinery it shares with the paper's
+baselines GNG and GNG-W (`gngdt_core.baselines`).
 
-All three share one numba learning loop (`_kernels.learn`); they differ in the winner distance
-and in which topologies they keep:
-
-- `GNGDT`: winner and error by position only (eqs. 2-3); one topology per property: "pos",
-  "col" (when colours are learned) and "nor" (3-D positions). Normals (eq. 16) are oriented toward
-  ``viewpoint`` (the sensor origin by default; ``None`` leaves the sign as computed) and compared
-  sign-invariantly in eqs. 4 and 9 (``min(||n_i - n_j||, ||n_i + n_j||) < tau_nor``), so the
-  normal topology never depends on the orientation.
-- `GNG`: one topology; Euclidean distance over the concatenated vector (position, colour).
-- `GNGW`: one topology; weighted distance ``w_pos ||dpos|| + w_col ||dcol||`` (eq. 13) and error
-  ``w_pos ||dpos||^2 + w_col ||dcol||^2`` (eq. 14).
+All three share one numba learning loop (`kernels.learning.learn`); they differ in the winner
+distance and in which topologies they keep. `GNGDT`: winner and error by position only (eqs.
+2-3); one topology per property: "pos", "col" (when colours are learned) and "nor" (3-D
+positions). Normals (eq. 16) are oriented toward ``viewpoint`` (the sensor origin by default;
+``None`` leaves the sign as computed) and compared sign-invariantly in eqs. 4 and 9
+(``min(||n_i - n_j||, ||n_i + n_j||) < tau_nor``), so the normal topology never depends on the
+orientation. The baselines keep one topology and pick the winner by position and colour.
 
 Step 0 places the two initial nodes on two random input samples. Growth stops at ``max_nodes``
 (Step 8 is then skipped entirely); adaptation goes on.
@@ -18,57 +15,39 @@ Step 0 places the two initial nodes on two random input samples. Growth stops at
 
 from __future__ import annotations
 
-import json
 import math
-import os
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any, ClassVar, Self
 
 import numpy as np
-from scipy.spatial import cKDTree
 
-from gngdt_core import _kernels as K
-from gngdt_core import _segment_kernels as SK
+from gngdt_core import queries
 from gngdt_core.clustering import connected_component_labels
+from gngdt_core.kernels import layout as K
+from gngdt_core.kernels import segmentation as SK
+from gngdt_core.kernels.graph import add_edge
+from gngdt_core.kernels.learning import learn
 from gngdt_core.memory import SampleMemory
 from gngdt_core.metrics import quantization_error as _rms_error
 from gngdt_core.parameters import validate_parameters
-from gngdt_core.sampling import as_samples, check_batch, gather, initial_indices, sample_orders
+from gngdt_core.sampling import (
+    as_samples,
+    batch_rows,
+    check_batch,
+    check_n_steps,
+    checked_pose,
+    gather,
+    initial_indices,
+    sample_orders,
+    to_model_frame,
+)
 from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_network
+from gngdt_core.state import restore, snapshot
 from gngdt_core.view import SensorView, rigid_inverse
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
-_STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
-# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
-#: a nearest-node batch is split over the CPUs when each part gets at least this many points
-#: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
-PARALLEL_MIN_POINTS = 15_000
-#: `label_pixels` searches the nearest node at every LABEL_ANCHOR_STRIDE-th pixel of every
-#: LABEL_ANCHOR_STRIDE-th row, and fills the pixels between anchors that agree
-LABEL_ANCHOR_STRIDE = 4
-#: largest deviation of a camera pose's rotation from orthonormal (and of its last row)
-POSE_TOLERANCE = 1e-6
 
 
-def split_range(n: int, min_part: int) -> list[int]:
-    """Bounds of up to one part per usable CPU over ``range(n)``, each part >= ``min_part``."""
-    parts = max(1, min(len(os.sched_getaffinity(0)), n // max(min_part, 1)))
-    return [n * k // parts for k in range(parts + 1)]
-
-
-def _to_model(camera_samples: np.ndarray, camera_pose: np.ndarray | None) -> np.ndarray:
-    """Samples (M, 3) float64 in the model's frame: the pose applied, when there is one."""
-    if camera_pose is None:
-        return camera_samples
-    return camera_samples @ camera_pose[:3, :3].T + camera_pose[:3, 3]
-
-
-def _rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
-    """Batch rows of ``indices`` into the finite rows (all rows are finite when None)."""
-    return indices if finite_rows is None else finite_rows[indices]
-
-
-class _GrowingGas:
+class GrowingGas:
     """Shared machinery; see `GNGDT` for the public API."""
 
     _MODE: ClassVar[int]
@@ -184,12 +163,8 @@ class _GrowingGas:
         batch, batch_colors, finite_rows, n_invalid = check_batch(positions, colors)
         # rehearsal needs a fixed frame: without a pose, what was seen before is elsewhere now
         memory = self._memory if camera_pose is not None else None
-        camera_pose = self._checked_pose(camera_pose, batch.shape[1])
-        if n_steps is not None:
-            if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)):
-                raise ValueError(f"n_steps must be an integer or None, got {n_steps!r}")
-            if n_steps < 0:
-                raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+        camera_pose = checked_pose(camera_pose, batch.shape[1])
+        check_n_steps(n_steps)
         has_col = batch_colors is not None
         if self._dim == 0:
             self._allocate(batch.shape[1], has_col)
@@ -203,12 +178,11 @@ class _GrowingGas:
         replay_steps = self._replay_steps(steps, memory)
         steps -= replay_steps  # the batch's own
         if self.n_nodes_ == 0:
-            first_two = initial_indices(self._rng, n_samples)
-            initial, initial_colors = gather(batch, batch_colors, _rows(finite_rows, first_two))
-            self._initialise(_to_model(initial, camera_pose), initial_colors)
+            first_two = batch_rows(finite_rows, initial_indices(self._rng, n_samples))
+            initial, initial_colors = gather(batch, batch_colors, first_two)
+            self._initialise(to_model_frame(initial, camera_pose), initial_colors)
         self._camera_pose = camera_pose
         fparams, iparams = self._kernel_parameters()
-        a = self._arrays
         # Fewer steps than samples (a large frame): convert only the sampled rows, so a frame
         # costs what its steps cost. A pass or more: convert the batch once, visit it by index.
         whole_batch = None
@@ -216,14 +190,14 @@ class _GrowingGas:
         if steps >= n_samples:
             camera_samples, sample_colors = gather(batch, batch_colors, finite_rows)
             self._see(camera_samples, camera_pose, memory)
-            whole_batch = _to_model(camera_samples, camera_pose), sample_colors
+            whole_batch = to_model_frame(camera_samples, camera_pose), sample_colors
         learned = replayed = 0
         for chunk, order in enumerate(sample_orders(self._rng, n_samples, steps)):
             if whole_batch is None:
-                samples, sample_colors = gather(batch, batch_colors, _rows(finite_rows, order))
+                samples, sample_colors = gather(batch, batch_colors, batch_rows(finite_rows, order))
                 if chunk == 0:
                     self._see(samples, camera_pose, memory)
-                samples = _to_model(samples, camera_pose)
+                samples = to_model_frame(samples, camera_pose)
                 order = np.arange(order.size)
             else:
                 samples, sample_colors = whole_batch
@@ -234,19 +208,26 @@ class _GrowingGas:
                 samples, sample_colors, order = self._with_rehearsal(
                     samples, sample_colors, order, replayed - done)
             iparams[K.Q_FRAME_ROWS] = len(batch_samples[0])
-            kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
-            for part in self._refresh_parts(order):
-                K.learn(samples, kernel_colors, part,
-                        a["pos"], a["col"], a["nor"], a["err"],
-                        a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                        a["util"], a["judged"],
-                        a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                        self._istate, self._fstate, fparams, iparams)
-                if self._params.get("normal_refresh_steps"):
-                    self.refresh_normals()
+            self._learn(samples, sample_colors, order, fparams, iparams)
             if memory is not None and (whole_batch is None or chunk == 0):
                 memory.offer(*batch_samples, self._rng)  # each learned sample once
         return self
+
+    def _learn(self, samples: np.ndarray, sample_colors: np.ndarray | None, order: np.ndarray,
+               fparams: np.ndarray, iparams: np.ndarray) -> None:
+        """Steps 1-9 for the rows ``order`` of ``samples`` (model frame), with eq. 16 and eqs.
+        4/9 refreshed every ``normal_refresh_steps`` steps when that is set."""
+        a = self._arrays
+        kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
+        for part in self._refresh_parts(order):
+            learn(samples, kernel_colors, part,
+                  a["pos"], a["col"], a["nor"], a["err"],
+                  a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
+                  a["util"], a["judged"],
+                  a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                  self._istate, self._fstate, fparams, iparams)
+            if self._params.get("normal_refresh_steps"):
+                self.refresh_normals()
 
     def _replay_steps(self, steps: int, memory: SampleMemory | None) -> int:
         """Steps of this batch drawn from ``memory`` (none without one, or before it holds
@@ -291,23 +272,6 @@ class _GrowingGas:
                                  fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
         self._normals_fresh = bool(iparams[K.Q_HAS_NOR])
 
-    def _checked_pose(self, camera_pose: Any, dim: int) -> np.ndarray | None:
-        """(4, 4) float64 rigid camera-to-world transform, or None; ValueError otherwise."""
-        if camera_pose is None:
-            return None
-        pose = np.asarray(camera_pose, dtype=np.float64)
-        if dim != 3:
-            raise ValueError(f"camera_pose needs 3-D positions, got {dim}-D")
-        if pose.shape != (4, 4) or not np.isfinite(pose).all():
-            raise ValueError(f"camera_pose must be a finite (4, 4) matrix, got {pose.shape}")
-        rotation = pose[:3, :3]
-        if (np.abs(rotation @ rotation.T - np.eye(3)).max() > POSE_TOLERANCE
-                or np.abs(pose[3] - (0.0, 0.0, 0.0, 1.0)).max() > POSE_TOLERANCE
-                or np.linalg.det(rotation) < 0):
-            raise ValueError("camera_pose must be rigid: an orthonormal rotation with det +1 and "
-                             "a last row of (0, 0, 0, 1)")
-        return None if np.array_equal(pose, np.eye(4)) else pose
-
     def _see(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None,
              memory: SampleMemory | None) -> None:
         """What this batch's sensor saw: mark the nodes it judges (forgetting): in 3-D, those
@@ -349,7 +313,7 @@ class _GrowingGas:
             if sample_colors is not None:
                 a["col"][node] = sample_colors[node]
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
-        K.add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
+        add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
         a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
         self._istate[K.I_NEXT_ID] += 2
         self._istate[K.I_NODES] = 2
@@ -423,15 +387,10 @@ class _GrowingGas:
         return mask
 
     def _edges_with(self, mask: int) -> np.ndarray:
-        n = self.n_nodes_
-        if n == 0:
+        if self.n_nodes_ == 0:
             return np.zeros((0, 2), dtype=np.int64)
         a = self._arrays
-        nbr = a["nbr"][:n]
-        used = np.arange(K.MAX_DEGREE) < a["deg"][:n, None]
-        rows = np.broadcast_to(np.arange(n)[:, None], nbr.shape)
-        keep = used & ((a["emask"][:n] & mask) == mask) & (nbr > rows)
-        return np.stack([rows[keep], nbr[keep]], axis=1).astype(np.int64)
+        return queries.edge_pairs(a["nbr"], a["emask"], a["deg"], self.n_nodes_, mask)
 
     def clusters(self, *props: str, min_size: int = 1) -> np.ndarray:
         """(n_nodes,) int32 connected-component labels of the named topologies combined.
@@ -451,20 +410,10 @@ class _GrowingGas:
         """
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        query = np.asarray(positions)
-        if query.ndim != 2 or query.shape[1] != self._dim:
-            raise ValueError(f"positions must have shape (N, {self._dim}), got {query.shape}")
-        if query.dtype not in (np.float32, np.float64):
-            query = query.astype(np.float64)
-        if not np.isfinite(query).all():
-            raise ValueError("positions contain NaN or inf")
-        if self._dim != 3 or self._MODE != K.MODE_GNGDT:
-            distances, winners = cKDTree(self.positions_).query(query, k=1)
-        else:
-            winners, sq_distances = self._nearest_nodes(np.ascontiguousarray(query))
-            distances = np.sqrt(sq_distances)
-        winners = np.asarray(winners, dtype=np.int64)
-        return (winners, np.asarray(distances, dtype=np.float64)) if return_distance else winners
+        query = queries.checked_query(positions, self._dim)
+        use_grid = self._dim == 3 and self._MODE == K.MODE_GNGDT
+        winners, distances = queries.nearest_winners(query, self._grid_arrays(), use_grid)
+        return (winners, distances) if return_distance else winners
 
     def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
         """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1; 0 where the
@@ -473,7 +422,7 @@ class _GrowingGas:
         points: (H, W, 3) float32/float64 metres, an organized cloud: one point per pixel, in
         the network's frame, x and y finite wherever z is (as deprojection gives them);
         node_labels: (n_nodes,) int, e.g. ``segment()``. The nearest node is searched at every
-        ``LABEL_ANCHOR_STRIDE``-th pixel of every such row (every 4th); a pixel between such
+        ``queries.LABEL_ANCHOR_STRIDE``-th pixel of every such row (every 4th); a pixel between such
         pixels that all agree takes their label without a search (a label region narrower than
         the stride can be missed there), every other pixel is searched exactly. On the real
         640x480 Kinect frames of ../shared/data/labelled 0.03-0.06 % of the pixels (at most
@@ -483,54 +432,13 @@ class _GrowingGas:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
         if self._dim != 3 or self._MODE != K.MODE_GNGDT:
             raise ValueError("label_pixels needs a GNG-DT network of 3D positions")
-        if points.ndim != 3 or points.shape[2] != 3:
-            raise ValueError(f"points must have shape (H, W, 3), got {points.shape}")
-        node_labels = np.asarray(node_labels, dtype=np.int32)
-        if node_labels.shape != (self.n_nodes_,):
-            raise ValueError(f"node_labels must have shape ({self.n_nodes_},), got "
-                             f"{node_labels.shape}")
-        if points.dtype not in (np.float32, np.float64):
-            points = points.astype(np.float64)
-        points = np.ascontiguousarray(points)
-        valid = np.isfinite(points[..., 2])
-        out = np.empty(valid.shape, dtype=np.int32)
-        grid = self._grid_arrays()
-        # the work is mostly the searches, about one pixel in stride^2 (the anchors): a
-        # 640x480 frame is one thread's work, which two threads did no faster on 2 cores
-        min_rows = PARALLEL_MIN_POINTS * LABEL_ANCHOR_STRIDE**2 // max(points.shape[1], 1)
-        for anchors in (True, False):  # every anchor first: the second pass reads them
-            self._in_parallel(points.shape[0], min_rows,
-                              lambda start, stop, anchors=anchors: SK.label_pixels(
-                                  points, valid, node_labels, LABEL_ANCHOR_STRIDE, anchors,
-                                  start, stop, *grid, out))
-        return out
+        return queries.label_pixels(points, node_labels, self._grid_arrays())
 
-    def _grid_arrays(self) -> tuple:
+    def _grid_arrays(self) -> queries.NodeGrid:
         """Node positions, count and spatial grid, as the nearest-node kernels take them."""
         a = self._arrays
         return (a["pos"], self.n_nodes_, a["ghead"], a["gnext"],
                 bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL])
-
-    @staticmethod
-    def _in_parallel(n_items: int, min_part: int, work: Any) -> None:
-        """``work(start, stop)`` over ``range(n_items)``, split over the CPUs when large (the
-        kernels release the GIL)."""
-        bounds = split_range(n_items, min_part)
-        if len(bounds) == 2:
-            work(0, n_items)
-            return
-        with ThreadPoolExecutor(len(bounds) - 1) as pool:
-            list(pool.map(work, bounds[:-1], bounds[1:]))
-
-    def _nearest_nodes(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Winners (N,) int32 and squared distances (N,) of (N, 3) points, through the grid;
-        large batches are split over the CPUs."""
-        winners = np.empty(points.shape[0], dtype=np.int32)
-        sq_distances = np.empty(points.shape[0])
-        grid = (*self._grid_arrays(), winners, sq_distances)
-        self._in_parallel(points.shape[0], PARALLEL_MIN_POINTS,
-                          lambda start, stop: SK.nearest_nodes(points, start, stop, *grid))
-        return winners, sq_distances
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
         """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
@@ -549,40 +457,15 @@ class _GrowingGas:
 
     def get_state(self) -> dict[str, np.ndarray]:
         """Everything needed to continue exactly, as numpy arrays only (np.savez-safe)."""
-        n = self.n_nodes_
-        a = self._arrays
-        state: dict[str, np.ndarray] = {
-            "model": np.array(type(self).__name__),
-            "version": np.array(_STATE_VERSION, dtype=np.int64),
-            "params": np.array(json.dumps(self._params)),
-            "rng_state": np.array(json.dumps(self._rng.bit_generator.state)),
-            "dim": np.array(self._dim, dtype=np.int64),
-            "has_colors": np.array(int(self._has_col), dtype=np.int64),
-            "n_invalid": np.array(self.n_invalid_, dtype=np.int64),
-            "counters": self._istate.copy(),
-            "scalars": self._fstate.copy(),
-        }
-        if self._camera_pose is not None:  # the last batch's pose places the viewpoint
-            state["camera_pose"] = self._camera_pose.copy()
-        if self._memory is not None:
-            state["memory_positions"] = self._memory.positions.copy()
-            state["memory_colors"] = self._memory.colors.copy()
-            state["memory_offered"] = np.array(self._memory.offered, dtype=np.int64)
-        for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
-                     "util"):
-            if a:
-                state[name] = a[name][:n].copy()
-        return state
+        return snapshot(self)
 
     @classmethod
     def from_state(cls, state: dict[str, np.ndarray]) -> Self:
         """Rebuild a model saved by `get_state`; ValueError on anything inconsistent."""
-        from gngdt_core.state import restore
-
         return restore(cls, state)
 
 
-class GNGDT(_GrowingGas):
+class GNGDT(GrowingGas):
     """Growing Neural Gas with Different Topologies (Toda et al., Steps 0-10).
 
     Defaults are the paper's Table 1 plus a node budget. ``normal_mu=None`` (default) uses, per
@@ -626,7 +509,7 @@ class GNGDT(_GrowingGas):
 
     _MODE = K.MODE_GNGDT
     _PARAM_NAMES = (
-        *_GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
+        *GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
         "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
         "view_depth_margin", "replay_share", "replay_points",
     )
@@ -712,30 +595,3 @@ class GNGDT(_GrowingGas):
         `gngdt_core.segmentation`). Label points with
         ``labels[model.predict(points)]``, an organized frame's pixels with `label_pixels`."""
         return self.segmentation(params).labels
-
-
-class GNG(_GrowingGas):
-    """Plain GNG on the concatenated (position, colour) vector; one topology ("pos")."""
-
-    _MODE = K.MODE_GNG
-
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, random_state=random_state)
-
-
-class GNGW(_GrowingGas):
-    """GNG with the weighted distance of eqs. 13-14 (paper defaults w_pos=0.8, w_col=0.2)."""
-
-    _MODE = K.MODE_GNGW
-    _PARAM_NAMES = (*_GrowingGas._PARAM_NAMES, "w_pos", "w_col")
-
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, w_pos: float = 0.8, w_col: float = 0.2,
-                 random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, w_pos=w_pos, w_col=w_col,
-                         random_state=random_state)

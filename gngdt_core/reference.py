@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gngdt_core._kernels import COL_BIT, I_NEXT_ID, MAX_DEGREE, NOR_BIT
+from gngdt_core.kernels.layout import COL_BIT, I_NEXT_ID, MAX_DEGREE, NOR_BIT
 from gngdt_core.model import GNGDT
 from gngdt_core.sampling import as_samples, initial_indices, sample_orders
 

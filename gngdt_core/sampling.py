@@ -1,4 +1,5 @@
-"""Input validation and the random sampling order shared by the fast learner and the reference."""
+"""Input validation (batches, step counts, camera poses) and the random sampling order shared
+by the fast learner and the reference."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ import numpy as np
 
 # learning steps handed to the kernel per call (bounds the memory of the order array)
 MAX_CHUNK_STEPS = 1 << 20
+#: largest deviation of a camera pose's rotation from orthonormal (and of its last row)
+POSE_TOLERANCE = 1e-6
 
 
 def check_batch(
@@ -82,6 +85,46 @@ def as_samples(
     pos, col, finite_rows, n_invalid = check_batch(positions, colors)
     pos, col = gather(pos, col, finite_rows)
     return pos, col, n_invalid
+
+
+def batch_rows(finite_rows: np.ndarray | None, indices: np.ndarray) -> np.ndarray:
+    """Batch rows of ``indices`` into the finite rows (all rows are finite when None)."""
+    return indices if finite_rows is None else finite_rows[indices]
+
+
+def check_n_steps(n_steps: object) -> None:
+    """ValueError unless ``n_steps`` is None or a non-negative integer (not a bool)."""
+    if n_steps is not None:
+        if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)):
+            raise ValueError(f"n_steps must be an integer or None, got {n_steps!r}")
+        if n_steps < 0:
+            raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+
+
+def checked_pose(camera_pose: object, dim: int) -> np.ndarray | None:
+    """(4, 4) float64 rigid camera-to-world transform, or None (also for the identity);
+    ValueError otherwise. ``dim``: the batch's position columns (a pose needs 3)."""
+    if camera_pose is None:
+        return None
+    pose = np.asarray(camera_pose, dtype=np.float64)
+    if dim != 3:
+        raise ValueError(f"camera_pose needs 3-D positions, got {dim}-D")
+    if pose.shape != (4, 4) or not np.isfinite(pose).all():
+        raise ValueError(f"camera_pose must be a finite (4, 4) matrix, got {pose.shape}")
+    rotation = pose[:3, :3]
+    if (np.abs(rotation @ rotation.T - np.eye(3)).max() > POSE_TOLERANCE
+            or np.abs(pose[3] - (0.0, 0.0, 0.0, 1.0)).max() > POSE_TOLERANCE
+            or np.linalg.det(rotation) < 0):
+        raise ValueError("camera_pose must be rigid: an orthonormal rotation with det +1 and "
+                         "a last row of (0, 0, 0, 1)")
+    return None if np.array_equal(pose, np.eye(4)) else pose
+
+
+def to_model_frame(camera_samples: np.ndarray, camera_pose: np.ndarray | None) -> np.ndarray:
+    """Samples (M, 3) float64 in the model's frame: the pose applied, when there is one."""
+    if camera_pose is None:
+        return camera_samples
+    return camera_samples @ camera_pose[:3, :3].T + camera_pose[:3, 3]
 
 
 def _as_numeric_matrix(values: object, name: str) -> np.ndarray:

@@ -49,8 +49,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels, rank_by_size
+from gngdt_core.kernels import segmentation as SK
 from gngdt_core.parameters import Interval, check_fields, from_mapping, param
 from gngdt_core.view import SensorView
 

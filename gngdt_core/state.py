@@ -1,4 +1,5 @@
-"""Restoring a learner from `get_state()` arrays, with every consistency check in one place."""
+"""A learner's state as numpy arrays (`snapshot`, behind `get_state()`) and a learner rebuilt
+from them (`restore`, behind `from_state()`), with every consistency check in one place."""
 
 from __future__ import annotations
 
@@ -7,12 +8,46 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from gngdt_core import _kernels as K
+from gngdt_core.kernels import layout as K
+from gngdt_core.kernels.grid import grid_rebuild
+from gngdt_core.sampling import checked_pose
 
 Model = TypeVar("Model")
 
+STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
+# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
+
 _FLOAT_ARRAYS = ("pos", "col", "nor", "err")
 _INT_ARRAYS = ("nbr", "age", "emask", "rev", "deg")
+
+
+def snapshot(model: Any) -> dict[str, np.ndarray]:
+    """Everything needed to continue ``model`` (a `GrowingGas`) exactly, as numpy arrays only
+    (np.savez-safe)."""
+    n = model.n_nodes_
+    a = model._arrays
+    state: dict[str, np.ndarray] = {
+        "model": np.array(type(model).__name__),
+        "version": np.array(STATE_VERSION, dtype=np.int64),
+        "params": np.array(json.dumps(model._params)),
+        "rng_state": np.array(json.dumps(model._rng.bit_generator.state)),
+        "dim": np.array(model._dim, dtype=np.int64),
+        "has_colors": np.array(int(model._has_col), dtype=np.int64),
+        "n_invalid": np.array(model.n_invalid_, dtype=np.int64),
+        "counters": model._istate.copy(),
+        "scalars": model._fstate.copy(),
+    }
+    if model._camera_pose is not None:  # the last batch's pose places the viewpoint
+        state["camera_pose"] = model._camera_pose.copy()
+    if model._memory is not None:
+        state["memory_positions"] = model._memory.positions.copy()
+        state["memory_colors"] = model._memory.colors.copy()
+        state["memory_offered"] = np.array(model._memory.offered, dtype=np.int64)
+    for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
+                 "util"):
+        if a:
+            state[name] = a[name][:n].copy()
+    return state
 
 
 def _scalar_text(state: dict[str, np.ndarray], key: str) -> str:
@@ -93,6 +128,27 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     if counters[K.I_GRID] and scalars[K.F_CELL] <= 0.0:
         raise ValueError("state has an active grid with a non-positive cell size")
 
+    arrays = _node_arrays(state, n, dim, counters)
+    model._allocate(dim, bool(has_col))
+    for key, value in arrays.items():
+        model._arrays[key][:n] = value
+    model._istate[:] = counters
+    model._fstate[:] = scalars
+    if "camera_pose" in state:  # states saved before camera poses: the camera frame
+        model._camera_pose = checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
+    if model._memory is not None:  # states saved before rehearsal: an empty memory
+        _restore_memory(model._memory, state)
+    if counters[K.I_GRID]:
+        a = model._arrays
+        grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+                     float(scalars[K.F_CELL]))
+    return model
+
+
+def _node_arrays(state: dict[str, np.ndarray], n: int, dim: int,
+                 counters: np.ndarray) -> dict[str, np.ndarray]:
+    """The ``n`` nodes' arrays of ``state``, checked (shapes, finite, a symmetric adjacency);
+    sets ``counters[I_NEXT_ID]`` when the state predates node ids (see `_node_ids`)."""
     shapes = {"pos": (n, dim), "col": (n, 3), "nor": (n, 3), "err": (n,), "deg": (n,)}
     for key in _FLOAT_ARRAYS + _INT_ARRAYS:
         if key not in state:
@@ -110,21 +166,7 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         arrays["util"] = _array(state, "util", (n,), "f").astype(np.float64)
         if not np.isfinite(arrays["util"]).all() or (arrays["util"] < 0).any():
             raise ValueError("state['util'] must be finite and non-negative")
-
-    model._allocate(dim, bool(has_col))
-    for key, value in arrays.items():
-        model._arrays[key][:n] = value
-    model._istate[:] = counters
-    model._fstate[:] = scalars
-    if "camera_pose" in state:  # states saved before camera poses: the camera frame
-        model._camera_pose = model._checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
-    if model._memory is not None:  # states saved before rehearsal: an empty memory
-        _restore_memory(model._memory, state)
-    if counters[K.I_GRID]:
-        a = model._arrays
-        K.grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                       float(scalars[K.F_CELL]))
-    return model
+    return arrays
 
 
 def _restore_memory(memory: Any, state: dict[str, np.ndarray]) -> None:

@@ -1,4 +1,5 @@
-"""Deprecated: `gngdt_core.stream` moved to `gngdt_core.schedule` (gngdt 0.2); this path goes in the next release."""
+"""Deprecated: `gngdt_core.stream` moved to `gngdt_core.schedule`
+(gngdt 0.2); this path goes in the next release."""
 
 from gngdt_core._compat import forward_to
 

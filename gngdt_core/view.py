@@ -1,4 +1,4 @@
-"""What the sensor saw in one batch, and which nodes it could have seen (see `_view_kernels`).
+"""What the sensor saw in one batch, and which nodes it could have seen (see `kernels.view`).
 
 Used by `GNGDT` to judge only those nodes when forgetting, and by the metrics over time (ghost
 share). Pure computation on arrays.
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_core import _view_kernels as V
+from gngdt_core.kernels import view as V
 
 #: cells are sized so that a batch puts about this many points in each (fewer points: coarser);
 #: at 8 a cell is empty by chance once in ~3,000, so a node's neighbourhood rarely looks holed
@@ -33,7 +33,7 @@ class SensorView:
     u_min: float
     v_min: float
     inv_cell: float
-    #: `_view_kernels.measured_counts` of zmax
+    #: `kernels.view.measured_counts` of zmax
     measured: np.ndarray
 
     @classmethod

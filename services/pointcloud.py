@@ -1,4 +1,5 @@
-"""Deprecated: `services.pointcloud` moved to `gngdt_io.deproject` (gngdt 0.2); this path goes in the next release."""
+"""Deprecated: `services.pointcloud` moved to `gngdt_io.deproject`
+(gngdt 0.2); this path goes in the next release."""
 
 from gngdt_core._compat import forward_to
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from gngdt_core import GNG, GNGDT, GNGW, make_data1, make_data2
-from gngdt_core import _kernels as K
+from gngdt_core.kernels import layout as K
 from gngdt_core.reference import ReferenceGNGDT
 
 # Table 1's rates and ages with a small budget: 60 nodes, more than the grid search's threshold

@@ -106,7 +106,7 @@ def test_topologies_beyond_what_a_learner_sends_are_refused(payload: bytes, matc
 
 
 def test_the_edge_limit_is_what_the_kernel_can_hold() -> None:
-    from gngdt_core import _kernels
+    from gngdt_core.kernels import layout as _kernels
     from schemas.packing import MAX_EDGES_PER_NODE, decode_topology
 
     assert MAX_EDGES_PER_NODE == _kernels.MAX_DEGREE // 2

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from gngdt_core import model as model_module
+from gngdt_core import queries
 from gngdt_core.frame_learner import FrameLearner
 from gngdt_core.frame_segmenter import FrameSegmenter, veil_pixels
 from gngdt_core.schedule import FrameSchedule, StreamLearner
@@ -115,7 +115,7 @@ def test_pixel_labels_are_the_nearest_nodes_labels_but_where_a_region_is_a_pixel
     stream.learn_frame(points[valid], frame.color[valid])
     model = stream.model_
     anchors = np.zeros_like(valid)
-    stride = model_module.LABEL_ANCHOR_STRIDE
+    stride = queries.LABEL_ANCHOR_STRIDE
     anchors[::stride, ::stride] = True
 
     def labels_and_exact(node_labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,4 +1,5 @@
-"""Deprecated: `services.recording.frame` moved to `gngdt_io.frame` (gngdt 0.2); this path goes in the next release."""
+"""Deprecated: `services.recording.frame` moved to `gngdt_io.frame`
+(gngdt 0.2); this path goes in the next release."""
 
 from gngdt_core._compat import forward_to
 

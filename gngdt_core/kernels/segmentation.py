@@ -12,15 +12,9 @@ import math
 import numpy as np
 from numba import njit
 
-from gngdt_core._kernels import (
-    BOUND_SLACK,
-    _axis_gap,
-    _bucket,
-    _sq_dist,
-    compute_normal,
-    inlined,
-    property_bits,
-)
+from gngdt_core.kernels._numba import inlined
+from gngdt_core.kernels.grid import BOUND_SLACK, _axis_gap, _bucket, _sq_dist
+from gngdt_core.kernels.normals import compute_normal, property_bits
 
 
 @njit(cache=True)

@@ -1,0 +1,383 @@
+"""The learning loop of the growing-gas learners: one loop for GNG-DT, GNG and GNG-W.
+
+Steps 1-9 per sample (`learn`), node insertion (Step 8) and forgetting (GNG-U's utility); the
+arrays and the indices into the state and parameter vectors are described in `layout`.
+
+Speed notes: a step takes well under a microsecond, so the per-step loop (`_learn_steps`) runs
+without numba's reference counting, its helpers are inlined at the numba IR level
+(``inline="always"``), and samples and nodes are read by index, never through array views.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from gngdt_core.kernels.graph import add_edge, delete_node, find_slot, remove_edge
+from gngdt_core.kernels.grid import (
+    GRID_CELL_SPACINGS,
+    GRID_CELL_TOLERANCE,
+    GRID_MIN_NODES,
+    _grid_insert_new,
+    _move_toward,
+    _node_sq_dist,
+    grid_rebuild,
+    nearest_two_brute,
+    nearest_two_grid,
+    nearest_two_weighted,
+)
+from gngdt_core.kernels.layout import (
+    COL_BIT,
+    F_CELL,
+    F_ERROR_SCALE,
+    F_SPACING,
+    F_UTIL_SCALE,
+    I_FORGOTTEN,
+    I_GRID,
+    I_NEXT_ID,
+    I_NODES,
+    I_STEPS,
+    MODE_GNGDT,
+    P_ALPHA,
+    P_BETA,
+    P_ETA1,
+    P_ETA2,
+    P_MU,
+    P_TAU_COL,
+    P_TAU_NOR,
+    P_UTILITY_DECAY,
+    P_UTILITY_K,
+    P_VX,
+    P_VY,
+    P_VZ,
+    P_W_COL,
+    P_W_POS,
+    POS_BIT,
+    Q_AGE_MAX,
+    Q_FORGET,
+    Q_FRAME_ROWS,
+    Q_HAS_COL,
+    Q_HAS_NOR,
+    Q_LAMBDA,
+    Q_MAX_NODES,
+    Q_MODE,
+    Q_ORIENT,
+)
+from gngdt_core.kernels.normals import _interpolate_normal, compute_normal, property_bits
+
+# Renormalise stored errors when the global decay factor falls below this.
+ERROR_SCALE_FLOOR = 1e-60
+
+
+@njit(cache=True)
+def learn(samples, sample_colors, order,
+          pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
+          ghead, gnext, gprev, gbucket, gcell,
+          istate, fstate, fparams, iparams):
+    """Run one learning step (Steps 1-9) per index in ``order`` (rows of ``samples``).
+
+    samples: (N, D) float64 positions; sample_colors: (N, 3) float64, or any (1, 3) placeholder
+    without colour (then never read). With forgetting on, ``judged`` marks the nodes the sensor
+    could see in this call (see the module docstring); nodes inserted during it are judged.
+    """
+    # scratch for Step 7 (the neighbours whose edge to s1 just expired) and for forgetting (a
+    # node and its neighbours)
+    candidates = np.empty(nbr.shape[1] + 1, dtype=np.int64)
+    forget = iparams[Q_FORGET] != 0
+    if forget:  # utilities of the nodes not judged now: frozen, in true units, for this call
+        _rescale_unjudged(util, judged, istate[I_NODES], fstate[F_UTIL_SCALE])
+    _learn_steps(samples, sample_colors, order,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
+                 ghead, gnext, gprev, gbucket, gcell,
+                 istate, fstate, fparams, iparams, candidates)
+    if forget:
+        _rescale_unjudged(util, judged, istate[I_NODES], 1.0 / fstate[F_UTIL_SCALE])
+
+
+@njit(cache=True)
+def _rescale_unjudged(util, judged, n, factor):
+    for i in range(n):
+        if judged[i] == 0:
+            util[i] *= factor
+
+
+@njit(cache=True)
+def forget_least_useful(n, err, util, judged, error_scale, util_scale, utility_k, candidates,
+                        pos, col, nor, nbr, age, emask, rev, deg, ids,
+                        ghead, gnext, gprev, gbucket, gcell):
+    """GNG-U's removal among the judged nodes: the judged node ``l`` of least utility goes, with
+    its edges and any neighbour left without one, when ``max error > utility_k * U_l`` (true,
+    unscaled values). Returns (new n, nodes removed).
+    """
+    max_err = 0.0
+    least = -1
+    least_util = np.inf
+    for i in range(n):
+        if err[i] > max_err:
+            max_err = err[i]
+        if judged[i] != 0 and util[i] < least_util:
+            least_util = util[i]
+            least = i
+    if least < 0 or n <= 2 or not max_err * error_scale > utility_k * least_util * util_scale:
+        return n, 0
+    n_candidates = 0
+    while deg[least] > 0:
+        k = deg[least] - 1
+        candidates[n_candidates] = nbr[least, k]
+        n_candidates += 1
+        remove_edge(nbr, age, emask, rev, deg, least, k)
+    candidates[n_candidates] = least
+    n_candidates += 1
+    removed = 0
+    for q in range(n_candidates):
+        j = candidates[q]
+        if deg[j] == 0 and n > 2:
+            last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util,
+                               judged, ghead, gnext, gprev, gbucket, gcell)
+            n -= 1
+            removed += 1
+            for q2 in range(q + 1, n_candidates):
+                if candidates[q2] == last:
+                    candidates[q2] = j
+    return n, removed
+
+
+# Compiled without the numba runtime (``_nrt=False``, the option numba uses for its own hot
+# helpers): every array here is owned by the caller, so the atomic reference counting that numba
+# would otherwise emit around each inlined helper is pure overhead (it cost ~40% of a step).
+# Without the runtime the function cannot allocate; numba refuses to compile it if it tries.
+@njit(cache=True, _nrt=False)
+def _learn_steps(samples, sample_colors, order,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
+                 ghead, gnext, gprev, gbucket, gcell,
+                 istate, fstate, fparams, iparams, candidates):
+    """The body of `learn`; ``candidates`` (MAX_DEGREE + 1,) int64 scratch."""
+    eta1 = fparams[P_ETA1]
+    eta2 = fparams[P_ETA2]
+    alpha = fparams[P_ALPHA]
+    beta = fparams[P_BETA]
+    tau_col = fparams[P_TAU_COL]
+    tau_nor = fparams[P_TAU_NOR]
+    mu = fparams[P_MU]
+    vx = fparams[P_VX]
+    vy = fparams[P_VY]
+    vz = fparams[P_VZ]
+    w_pos = fparams[P_W_POS]
+    w_col = fparams[P_W_COL]
+    lam = iparams[Q_LAMBDA]
+    age_max = iparams[Q_AGE_MAX]
+    max_nodes = iparams[Q_MAX_NODES]
+    mode = iparams[Q_MODE]
+    has_col = iparams[Q_HAS_COL] != 0
+    has_nor = iparams[Q_HAS_NOR] != 0
+    orient = iparams[Q_ORIENT] != 0
+    forget = iparams[Q_FORGET] != 0
+    frame_rows = iparams[Q_FRAME_ROWS]
+    utility_k = fparams[P_UTILITY_K]
+    utility_decay = fparams[P_UTILITY_DECAY]
+    # in GNG / GNG-W colour is part of the input vector and follows the single topology
+    col_follows_pos = mode != MODE_GNGDT
+
+    n = istate[I_NODES]
+    t = istate[I_STEPS]
+    next_id = istate[I_NEXT_ID]
+    forgotten = istate[I_FORGOTTEN]
+    grid_on = istate[I_GRID] != 0
+    error_scale = fstate[F_ERROR_SCALE]
+    util_scale = fstate[F_UTIL_SCALE]
+    cell_size = fstate[F_CELL]
+    inv_cell = 1.0 / cell_size if grid_on else 0.0
+    spacing = fstate[F_SPACING]
+    dim = pos.shape[1]
+    # steps since the last Step 8 (t % lam, counted instead of divided each step)
+    phase = t % lam
+
+    for idx in order:
+        x0 = samples[idx, 0]
+        x1 = samples[idx, 1]
+        x2 = samples[idx, 2] if dim > 2 else 0.0
+        c0 = 0.0
+        c1 = 0.0
+        c2 = 0.0
+        if has_col:  # without colour, sample_colors is a (1, 3) placeholder: never index it
+            c0 = sample_colors[idx, 0]
+            c1 = sample_colors[idx, 1]
+            c2 = sample_colors[idx, 2]
+        t += 1
+        phase += 1
+        if phase == lam:
+            phase = 0
+        # Step 2 (and the error of Step 3)
+        if mode == MODE_GNGDT:
+            if grid_on:
+                s1, s2, err_add, second = nearest_two_grid(pos, n, x0, x1, x2, dim, ghead,
+                                                           gnext, cell_size, inv_cell)
+            else:
+                s1, s2, err_add, second = nearest_two_brute(pos, n, x0, x1, x2, dim)
+        else:
+            s1, s2, err_add = nearest_two_weighted(pos, col, n, x0, x1, x2, dim, c0, c1, c2,
+                                                   mode, has_col, w_pos, w_col)
+            second = err_add
+        if s2 < 0:  # every distance overflowed (|x| ~ 1e154): no winner, learn nothing
+            continue
+        # Step 3
+        err[s1] += err_add / error_scale
+        # GNG-U: what the network would lose without s1, by what the sensor sees now
+        if forget and judged[s1] != 0 and idx < frame_rows:
+            util[s1] += (second - err_add) / util_scale
+        # running node spacing (distance between winners) sizes the grid cells
+        d12 = math.sqrt(_node_sq_dist(pos, s1, s2))
+        if spacing <= 0.0:
+            spacing = d12
+        else:
+            spacing += 0.01 * (d12 - spacing)
+        # Step 4
+        k12 = find_slot(nbr, deg, s1, s2)
+        if k12 < 0:
+            if add_edge(nbr, age, emask, rev, deg, s1, s2, POS_BIT):
+                k12 = deg[s1] - 1
+        if k12 >= 0:
+            mask = property_bits(col, nor, s1, s2, has_col, has_nor, tau_col, tau_nor)
+            age[s1, k12] = 0
+            emask[s1, k12] = mask
+            k21 = rev[s1, k12]
+            age[s2, k21] = 0
+            emask[s2, k21] = mask
+        # Step 5: the winner moves in every input property ...
+        _move_toward(pos, s1, x0, x1, x2, dim, eta1, grid_on, ghead, gnext, gprev, gbucket,
+                     gcell, inv_cell)
+        if has_col:
+            col[s1, 0] += eta1 * (c0 - col[s1, 0])
+            col[s1, 1] += eta1 * (c1 - col[s1, 1])
+            col[s1, 2] += eta1 * (c2 - col[s1, 2])
+        # ... each neighbour in property o only along an edge of o. Step 6: ages.
+        for k in range(deg[s1]):
+            j = nbr[s1, k]
+            _move_toward(pos, j, x0, x1, x2, dim, eta2, grid_on, ghead, gnext, gprev, gbucket,
+                         gcell, inv_cell)
+            if has_col and (col_follows_pos or (emask[s1, k] & COL_BIT) != 0):
+                col[j, 0] += eta2 * (c0 - col[j, 0])
+                col[j, 1] += eta2 * (c1 - col[j, 1])
+                col[j, 2] += eta2 * (c2 - col[j, 2])
+            age[s1, k] += 1
+            age[j, rev[s1, k]] += 1
+        # Step 7: delete old edges of s1, then nodes left without position edges
+        n_candidates = 0
+        k = 0
+        while k < deg[s1]:
+            if age[s1, k] > age_max:
+                candidates[n_candidates] = nbr[s1, k]
+                n_candidates += 1
+                remove_edge(nbr, age, emask, rev, deg, s1, k)
+            else:
+                k += 1
+        for q in range(n_candidates):
+            j = candidates[q]
+            if deg[j] == 0:
+                last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
+                                   util, judged, ghead, gnext, gprev, gbucket, gcell)
+                n -= 1
+                if s1 == last:
+                    s1 = j
+                for q2 in range(q + 1, n_candidates):
+                    if candidates[q2] == last:
+                        candidates[q2] = j
+        if deg[s1] == 0:
+            delete_node(s1, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
+                        util, judged, ghead, gnext, gprev, gbucket, gcell)
+            n -= 1
+        elif has_nor:
+            compute_normal(s1, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
+        # Step 8: insertion every lambda steps, until max_nodes
+        if phase == 0:
+            if forget:
+                n, removed = forget_least_useful(n, err, util, judged, error_scale, util_scale,
+                                                 utility_k, candidates, pos, col, nor, nbr, age,
+                                                 emask, rev, deg, ids, ghead, gnext, gprev,
+                                                 gbucket, gcell)
+                forgotten += removed
+            if n < max_nodes:
+                n = _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
+                                 forget, util, judged, util_scale)
+                ids[n - 1] = next_id
+                next_id += 1
+                if grid_on:
+                    _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, inv_cell)
+            # keep grid cells about GRID_CELL_SPACINGS node spacings wide (amortised O(n) per
+            # lambda steps); the cell size only affects speed, never the winners found
+            target_cell = GRID_CELL_SPACINGS * spacing
+            if mode == MODE_GNGDT and n >= GRID_MIN_NODES and spacing > 0.0 and (
+                not grid_on
+                or cell_size > GRID_CELL_TOLERANCE * target_cell
+                or target_cell > GRID_CELL_TOLERANCE * cell_size
+            ):
+                cell_size = target_cell
+                inv_cell = 1.0 / cell_size
+                grid_rebuild(pos, n, ghead, gnext, gprev, gbucket, gcell, cell_size)
+                grid_on = True
+        # Step 9, lazily: true error = stored error * error_scale
+        error_scale *= 1.0 - beta
+        if error_scale < ERROR_SCALE_FLOOR:
+            for i in range(n):
+                err[i] *= error_scale
+            error_scale = 1.0
+        if forget:  # the judged nodes' utilities decay (the others are frozen, in true units)
+            util_scale *= 1.0 - utility_decay
+            if util_scale < ERROR_SCALE_FLOOR:
+                for i in range(n):
+                    if judged[i] != 0:
+                        util[i] *= util_scale
+                util_scale = 1.0
+
+    istate[I_NODES] = n
+    istate[I_STEPS] = t
+    istate[I_GRID] = 1 if grid_on else 0
+    istate[I_NEXT_ID] = next_id
+    istate[I_FORGOTTEN] = forgotten
+    fstate[F_ERROR_SCALE] = error_scale
+    fstate[F_UTIL_SCALE] = util_scale
+    fstate[F_CELL] = cell_size
+    fstate[F_SPACING] = spacing
+
+
+@njit(cache=True)
+def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
+                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
+                 forget, util, judged, util_scale):
+    """Step 8 i-vi: new node halfway between the max-error node and its max-error neighbour.
+
+    With forgetting, the new node is judged and takes the mean utility of the two (GNG-U).
+    """
+    u = 0
+    for i in range(1, n):
+        if err[i] > err[u]:
+            u = i
+    ku = 0
+    for k in range(1, deg[u]):
+        if err[nbr[u, k]] > err[nbr[u, ku]]:
+            ku = k
+    f = nbr[u, ku]
+    r = n
+    for a in range(pos.shape[1]):
+        pos[r, a] = 0.5 * (pos[u, a] + pos[f, a])
+    for a in range(3):
+        col[r, a] = 0.5 * (col[u, a] + col[f, a])
+    _interpolate_normal(nor, pos, u, f, r, orient, vx, vy, vz)
+    deg[r] = 0
+    remove_edge(nbr, age, emask, rev, deg, u, ku)
+    add_edge(nbr, age, emask, rev, deg, u, r,
+             property_bits(col, nor, u, r, has_col, has_nor, tau_col, tau_nor))
+    add_edge(nbr, age, emask, rev, deg, r, f,
+             property_bits(col, nor, r, f, has_col, has_nor, tau_col, tau_nor))
+    err[u] -= alpha * err[u]
+    err[f] -= alpha * err[f]
+    err[r] = 0.5 * (err[u] + err[f])
+    if forget:
+        scaled_u = util[u] if judged[u] != 0 else util[u] / util_scale
+        scaled_f = util[f] if judged[f] != 0 else util[f] / util_scale
+        util[r] = 0.5 * (scaled_u + scaled_f)
+        judged[r] = 1
+    return n + 1
