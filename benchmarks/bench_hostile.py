@@ -37,21 +37,17 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
-sys.path.insert(0, str(REPO_ROOT / "tests"))
-
-from hostile_recordings import (  # noqa: E402  (tests/: the tests make the same files)
+from hostile_recordings import (  # noqa: E402  (benchmarks/, beside this script)
     lz4_chunk_hiding_its_size,
     overlapping_chunks,
     zstd_bomb,
 )
 from procstat import gngdt, status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
-from schemas.packing import (  # noqa: E402
-    cloud_to_msg,
-    decode_status,
-    encode_topology,
-    image_to_raw,
-)
+from schemas.clouds import cloud_to_msg  # noqa: E402
+from schemas.images import image_to_raw  # noqa: E402
+from schemas.status import decode_status  # noqa: E402
+from schemas.topology import encode_topology  # noqa: E402
 from schemas.wire import FrameStamp  # noqa: E402
 from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 
@@ -155,7 +151,7 @@ def hostile_recordings(folder: Path) -> dict[str, Path]:
     from mcap_protobuf.writer import Writer as ProtobufWriter
 
     from gngdt_io.frame import CameraIntrinsics
-    from schemas.packing import intrinsics_to_calibration
+    from schemas.images import intrinsics_to_calibration
 
     def images(path: Path, shape: tuple[int, int], frames: int, calibrated: bool) -> Path:
         with open(path, "wb") as file, ProtobufWriter(file) as writer:
@@ -196,7 +192,7 @@ def transform_flood(path: Path) -> Path:
     from mcap.writer import CompressionType, IndexType, Writer
 
     from gngdt_io.frame import CameraIntrinsics
-    from schemas.packing import intrinsics_to_calibration
+    from schemas.images import intrinsics_to_calibration
 
     ns = 1_000_000_000
     transform = FrameTransform(parent_frame_id="world", child_frame_id="camera")

@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from gngdt_io.frame import CameraIntrinsics, Frame
 from gngdt_io.mcap_reader import read_frames
 from gngdt_io.mcap_writer import RecordingWriter
-from schemas.packing import cloud_to_msg, msg_to_cloud
+from schemas.clouds import cloud_to_msg, msg_to_cloud
 
 WIDTH, HEIGHT, FRAMES, POINTS = 640, 480, 30, 300_000
 

@@ -116,7 +116,7 @@ def queueing_baseline(recording: Path, samples_per_frame: int, fps: float) -> di
 def run_pipeline(
     recording: Path, samples_per_frame: int, workdir: Path, capture_options: list[str]
 ) -> dict[str, object]:
-    from schemas.packing import decode_topology
+    from schemas.topology import decode_topology
 
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     router = open_config(router_config([endpoint]), what="router")

@@ -32,7 +32,8 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from procstat import gngdt  # noqa: E402  (benchmarks/, beside this script)
 
-from schemas.packing import decode_status, decode_topology  # noqa: E402
+from schemas.status import decode_status  # noqa: E402
+from schemas.topology import decode_topology  # noqa: E402
 from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 from services.run import DEFAULT_MAX_POINTS  # noqa: E402
 

@@ -32,7 +32,7 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from procstat import status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
-from schemas.packing import LearnerStatusInfo, decode_status  # noqa: E402
+from schemas.status import LearnerStatusInfo, decode_status  # noqa: E402
 from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 from services.run import DEFAULT_MAX_POINTS  # noqa: E402
 

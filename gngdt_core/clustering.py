@@ -6,8 +6,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse import coo_array
-from scipy.sparse.csgraph import connected_components
 
 
 def cluster_count(labels: np.ndarray) -> int:
@@ -26,6 +24,9 @@ def connected_component_labels(n_nodes: int, edges: np.ndarray, min_size: int = 
         raise ValueError(f"min_size must be an integer >= 1, got {min_size!r}")
     if n_nodes == 0:
         return np.zeros(0, dtype=np.int32)
+    from scipy.sparse import coo_array  # here: the registry below is read by light processes
+    from scipy.sparse.csgraph import connected_components
+
     edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     graph = coo_array(
         (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])), shape=(n_nodes, n_nodes)

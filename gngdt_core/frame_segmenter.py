@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core.kernels import segmentation as SK
+from gngdt_core.depth import veil_pixels
 from gngdt_core.model import GNGDT
 from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_core.segmentation import SegmentationParams
@@ -35,20 +35,6 @@ class FrameResult:
     #: learned from scratch (independent mode, the first frame, or a scene change)
     from_scratch: bool
     milliseconds: dict[str, float] = field(default_factory=dict)
-
-
-def veil_pixels(depth: np.ndarray, ratio: float) -> np.ndarray:
-    """(H, W) bool: pixels whose depth jumps from a 4-neighbour's by more than ``ratio`` of the
-    nearer depth — the mixed foreground/background measurements along depth edges ("veil"
-    points), which would otherwise bridge an object and what lies behind it.
-
-    depth: (H, W) float or integer depth, any unit; 0 or NaN = no measurement (never a veil).
-    """
-    veil = np.empty(depth.shape, dtype=bool)
-    if depth.dtype not in (np.float32, np.float64):
-        depth = depth.astype(np.float32)
-    SK.veil_pixels(depth, float(ratio), veil)
-    return veil
 
 
 class FrameSegmenter:

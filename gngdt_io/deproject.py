@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_core.frame_segmenter import veil_pixels
+from gngdt_core.depth import veil_pixels
 from gngdt_io.frame import CameraIntrinsics, Frame
 from schemas.clouds import MAX_CLOUD_POINTS
 

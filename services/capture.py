@@ -181,7 +181,8 @@ class CapturePublisher:
         colors: np.ndarray | None
     ) -> None:
         """Calibration (when new), colour, depth, and the cloud unless ``positions`` is None."""
-        from schemas.packing import cloud_to_msg, image_to_raw, intrinsics_to_calibration
+        from schemas.clouds import cloud_to_msg
+        from schemas.images import image_to_raw, intrinsics_to_calibration
 
         attachment = stamp.to_attachment()
         time_ns = stamp.capture_time_ns
@@ -204,7 +205,7 @@ class CapturePublisher:
         self.points.put(cloud.SerializeToString(), attachment=attachment)
 
     def publish_end(self, frames_sent: int, last_sequence: int, recording: str) -> None:
-        from schemas.packing import encode_stream_end
+        from schemas.status import encode_stream_end
 
         now = time.time_ns()
         message = encode_stream_end(

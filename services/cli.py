@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     # is configured), and one escaping main() made Python kill itself with SIGINT (exit -2).
     try:
         lifecycle.install()  # first: a signal during the imports below must stop us too
-        from schemas.packing import MAX_IMAGE_PIXELS
+        from schemas.images import MAX_IMAGE_PIXELS
 
         # before OpenCV loads: the largest image it may decode, rather than its own 2**30
         # pixels (3 GB for a few kilobytes of PNG)

@@ -51,7 +51,7 @@ if TYPE_CHECKING:
     import zenoh
 
     from gngdt_io.outputs.rerun_log import DisplayRates
-    from schemas.packing import LearnerStatusInfo, StreamEndInfo
+    from schemas.status import LearnerStatusInfo, StreamEndInfo
 
 log = logging.getLogger(__name__)
 
@@ -156,7 +156,8 @@ class Observed:
                 self.alive.discard(key)
 
     def on_status(self, sample: zenoh.Sample) -> None:
-        from schemas.packing import MessageError, decode_status
+        from schemas.messages import MessageError
+        from schemas.status import decode_status
 
         try:
             status = decode_status(sample.payload.to_bytes())
@@ -166,7 +167,8 @@ class Observed:
             self.status = status
 
     def on_eos(self, sample: zenoh.Sample) -> None:
-        from schemas.packing import MessageError, decode_stream_end
+        from schemas.messages import MessageError
+        from schemas.status import decode_stream_end
 
         try:
             end = decode_stream_end(sample.payload.to_bytes())

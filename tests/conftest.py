@@ -18,6 +18,9 @@ from hypothesis import HealthCheck, settings
 from services.plumbing.session import client_config, free_tcp_port, open_config, router_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
+# the benchmarks' own helpers (hostile recordings) are the tests' too: tests may import
+# benchmarks/, never the other way round
+sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 
 # One Hypothesis profile everywhere: with CI=true Hypothesis would otherwise switch to its "ci"
 # profile (derandomised, no database) while developers ran randomised tests whose failures the
@@ -131,7 +134,8 @@ def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureO
     published on the default camera."""
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-    from schemas.packing import cloud_pose, decode_stream_end, msg_to_cloud
+    from schemas.clouds import cloud_pose, msg_to_cloud
+    from schemas.status import decode_stream_end
 
     def on_points(output: CaptureOutput, payload: bytes) -> None:
         message = PointCloud.FromString(payload)

@@ -31,7 +31,7 @@ def test_a_subscriber_that_never_reads_stalls_neither_capture_nor_other_subscrib
     router_endpoint: str, tabletop_recording: Path
 ) -> None:
     from gngdt_io.mcap_reader import read_frames
-    from schemas.packing import decode_stream_end
+    from schemas.status import decode_stream_end
     from schemas.wire import FrameStamp
     from services.capture import CapturePublisher, CloudOptions, FrameToCloud
     from services.plumbing.session import client_config, open_config

@@ -16,7 +16,7 @@ from mcap_protobuf.writer import register_schema
 
 from gngdt_io.frame import CameraIntrinsics
 from gngdt_io.mcap_reader import RecordingError, read_frames
-from schemas.packing import image_to_raw, intrinsics_to_calibration
+from schemas.images import image_to_raw, intrinsics_to_calibration
 from services.capture import CloudOptions, FrameToCloud
 
 WIDTH, HEIGHT = 40, 30

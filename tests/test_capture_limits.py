@@ -77,7 +77,7 @@ def _write_images(path: Path, images: list[tuple[str, object]], calibrated: bool
     from mcap_protobuf.writer import Writer
 
     from gngdt_io.frame import CameraIntrinsics
-    from schemas.packing import image_to_raw, intrinsics_to_calibration
+    from schemas.images import image_to_raw, intrinsics_to_calibration
 
     with open(path, "wb") as file, Writer(file) as writer:
         for index, (role, image) in enumerate(images):
@@ -172,7 +172,7 @@ def test_a_cloud_never_exceeds_what_a_learner_accepts_and_a_message_holds() -> N
     import numpy as np
 
     from gngdt_io.frame import CameraIntrinsics, Frame
-    from schemas.packing import CLOUD_POINT_STRIDE, MAX_CLOUD_POINTS
+    from schemas.clouds import CLOUD_POINT_STRIDE, MAX_CLOUD_POINTS
     from services.capture import CloudOptions, FrameToCloud
     from services.plumbing.session import MAX_MESSAGE_BYTES
 

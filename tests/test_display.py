@@ -68,7 +68,7 @@ def test_the_rrd_holds_nodes_once_with_each_clusterings_colours_and_views_pick_t
     from gngdt_io.outputs.rerun_blueprint import CLUSTERING_VIEWS, EntityPaths, blueprint
     from gngdt_io.outputs.rerun_log import RerunLog
     from schemas.cluster_colors import UNCLUSTERED_RGB, clustering_edges
-    from schemas.packing import TopologySnapshot
+    from schemas.topology import TopologySnapshot
     from schemas.wire import FrameStamp
 
     rng = np.random.default_rng(1)

@@ -150,7 +150,7 @@ def test_cli_rejects_a_folder_without_frames(tmp_path, capsys) -> None:
     argv = ["eval", "paper", "--trials", "1", "--frames", str(tmp_path), "--out",
             str(tmp_path / "out"), "--no-progress"]
     assert gngdt_main(argv) == 2
-    assert f"{tmp_path}: no RGB-D layout found" in capsys.readouterr().err
+    assert f"{tmp_path}: no known image layout" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
 
 

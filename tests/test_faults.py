@@ -16,7 +16,7 @@ import pytest
 from processes import log_text, wait_for
 
 from gngdt_io.outputs.rerun_output import RRD_FLUSH_SECONDS
-from schemas.packing import decode_topology
+from schemas.topology import decode_topology
 from services.plumbing.session import ZenohSetupError, client_config, open_config
 
 

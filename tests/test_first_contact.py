@@ -25,7 +25,7 @@ GNGDT = [sys.executable, "-m", "services.cli"]
 def test_services_started_before_their_router_wait_for_it(
     free_port: int, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    from schemas.packing import decode_status
+    from schemas.status import decode_status
 
     endpoint = f"tcp/127.0.0.1:{free_port}"
     connect = ("--zenoh-connect", endpoint)
@@ -105,7 +105,9 @@ def test_the_router_stops_on_the_first_signal_even_while_starting(
 # ------------------------------------------------------------------------------ gngdt run
 @pytest.mark.parametrize(("target", "reason"), [
     ("README.md", "is not an MCAP file"),
-    ("recordings", "is a folder, not an MCAP file; inside: data2.mcap"),
+    ("recordings", "no known image layout (tum: rgb.txt + depth.txt; pcl-tiff: "
+                   "frame_*_rgb.tiff + frame_*_depth.tiff; redwood: color/ + depth/); "
+                   "recordings inside: data2.mcap"),
     ("empty.mcap", "is empty (0 bytes)"),
     ("missing.mcap", "no such file"),
 ])

@@ -119,7 +119,7 @@ def test_mcap_holds_every_stream_with_foxglove_schemas(recorded_run) -> None:
 
 @pytest.mark.timeout(200)
 def test_topologies_carry_persistent_node_and_cluster_ids(recorded_run) -> None:
-    from schemas.packing import decode_topology
+    from schemas.topology import decode_topology
 
     # the MCAP's own schema decodes them; our decoder then validates the same bytes
     topologies = [decode_topology(entry[1].SerializeToString())
@@ -299,7 +299,7 @@ WATCH_SECONDS = 12.0
 def test_a_scene_consumer_that_never_reads_stalls_nothing(
     free_port: int, spawn: Callable, tabletop_recording: Path, tmp_path: Path
 ) -> None:
-    from schemas.packing import decode_status
+    from schemas.status import decode_status
     from services.plumbing.session import client_config, open_config
 
     endpoint = f"tcp/127.0.0.1:{free_port}"

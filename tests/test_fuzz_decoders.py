@@ -25,16 +25,11 @@ from hypothesis import strategies as st
 from processes import wait_for
 
 from schemas import gngdt_pb2
-from schemas.packing import (
-    MAX_IMAGE_PIXELS,
-    MessageError,
-    calibration_to_intrinsics,
-    cloud_to_msg,
-    decode_topology,
-    encode_stream_end,
-    encode_topology,
-    raw_to_image,
-)
+from schemas.clouds import cloud_to_msg
+from schemas.images import MAX_IMAGE_PIXELS, calibration_to_intrinsics, raw_to_image
+from schemas.messages import MessageError
+from schemas.status import encode_stream_end
+from schemas.topology import decode_topology, encode_topology
 from schemas.wire import FrameStamp
 from services.learner.messages import decode_points
 
@@ -253,6 +248,8 @@ def dispatcher():
     import rerun as rr
 
     from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
+    from gngdt_io.outputs.rerun_output import RerunOutput
+    from services.logger.cameras import Cameras
     from services.logger.dispatch import Dispatcher
 
     recording = rr.RecordingStream("gngdt-fuzz")
@@ -260,7 +257,7 @@ def dispatcher():
     # every frame of every stream, so that every payload reaches its decoder
     rates = DisplayRates(image_every=1, depth_every=1, topology_every=1, cloud_every=1,
                          max_cloud_points=100)
-    yield Dispatcher(RerunLog(recording, rates))
+    yield Dispatcher([RerunOutput(RerunLog(recording, rates))], Cameras())
     recording.disconnect()
 
 
@@ -291,7 +288,7 @@ def test_flooded_learner_and_logger_count_garbage_and_keep_working(
     import zenoh
     from rerun.chunk import RrdReader
 
-    from schemas.packing import decode_status
+    from schemas.status import decode_status
     from services.plumbing.session import client_config, open_config
 
     rrd_path = tmp_path / "flood.rrd"
@@ -389,7 +386,7 @@ def test_a_capture_time_a_day_away_from_this_clock_is_refused_by_the_learner() -
 
 def test_learner_counters_saturate_and_always_encode() -> None:
     from gngdt_core.frame_learner import MAX_COUNTER, Counters
-    from schemas.packing import encode_status
+    from schemas.status import encode_status
 
     counters = Counters()
     for sequence in (0, 2**63 - 1, 0, 2**63 - 1, 5, 2**40, 2**40 + 3):

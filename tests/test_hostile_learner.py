@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from processes import log_text, wait_for
 
-from schemas.packing import cloud_to_msg, decode_status
+from schemas.clouds import cloud_to_msg
+from schemas.status import decode_status
 from services.plumbing.session import client_config, open_config
 
 

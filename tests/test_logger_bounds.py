@@ -8,7 +8,7 @@ import time
 import pytest
 from processes import wait_for
 
-from schemas.packing import encode_stream_end
+from schemas.status import encode_stream_end
 from schemas.wire import FrameStamp
 
 
@@ -18,11 +18,14 @@ def dispatcher():
     import rerun as rr
 
     from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
+    from gngdt_io.outputs.rerun_output import RerunOutput
+    from services.logger.cameras import Cameras
     from services.logger.dispatch import Dispatcher
 
     recording = rr.RecordingStream("gngdt-test")
     recording.memory_recording()
-    yield Dispatcher(RerunLog(recording, DisplayRates(max_cloud_points=100)))
+    yield Dispatcher([RerunOutput(RerunLog(recording, DisplayRates(max_cloud_points=100)))],
+                     Cameras())
     recording.disconnect()
 
 
@@ -38,18 +41,18 @@ def test_a_camera_whose_capture_started_is_waited_for_before_its_first_message(
 ) -> None:
     dispatcher.capture_seen("right", alive=True)  # its capture is up, nothing sent yet
     _eos(dispatcher, "left")
-    assert not dispatcher.all_finished(drain_seconds=0.0)
+    assert not dispatcher.cameras.all_finished(drain_seconds=0.0)
     _eos(dispatcher, "right")
-    assert dispatcher.all_finished(drain_seconds=0.0)
+    assert dispatcher.cameras.all_finished(drain_seconds=0.0)
 
 
 def test_a_capture_that_leaves_without_an_end_of_stream_ends_its_camera(dispatcher) -> None:
     dispatcher.capture_seen("lost", alive=True)
-    assert not dispatcher.all_finished(drain_seconds=0.0)
+    assert not dispatcher.cameras.all_finished(drain_seconds=0.0)
     dispatcher.capture_seen("lost", alive=False)
     time.sleep(0.01)
-    assert dispatcher.all_finished(drain_seconds=0.0)
-    assert not dispatcher.all_finished(drain_seconds=60.0)  # after the drain, not at once
+    assert dispatcher.cameras.all_finished(drain_seconds=0.0)
+    assert not dispatcher.cameras.all_finished(drain_seconds=60.0)  # after the drain, not at once
 
 
 # ------------------------------------------------------------------------- cameras
@@ -57,23 +60,31 @@ def test_garbage_on_new_camera_names_makes_no_camera_and_cameras_are_bounded() -
     import rerun as rr
 
     from gngdt_io.outputs.rerun_log import RerunLog
-    from schemas.packing import encode_status
+    from gngdt_io.outputs.rerun_output import RerunOutput
+    from schemas.status import encode_status
+    from services.logger.cameras import Cameras
     from services.logger.dispatch import Dispatcher
+
+    class CamerasSeen(RerunOutput):
+        """The real rerun output, noting every time the logger tells it of its cameras."""
+
+        def cameras_changed(self, cameras: list[str]) -> None:
+            blueprints.append(cameras)
+            super().cameras_changed(cameras)
 
     recording = rr.RecordingStream("gngdt-test")
     recording.memory_recording()
     blueprints: list[list[str]] = []
-    dispatcher = Dispatcher(RerunLog(recording), on_new_camera=blueprints.append,
-                            max_cameras=3)
+    dispatcher = Dispatcher([CamerasSeen(RerunLog(recording))], Cameras(max_cameras=3))
     stamp = FrameStamp(1, time.time_ns()).to_attachment()
     for index in range(50):  # a valid attachment, a payload no decoder accepts
         dispatcher.handle(f"gngdt/fake{index}/calibration", b"\x0a\xff\xff\x03", stamp)
-    assert dispatcher.cameras == {} and blueprints == [] and dispatcher.malformed == 50
+    assert dispatcher.cameras.names() == [] and blueprints == [] and dispatcher.malformed == 50
     status = encode_status(frame_sequence=1).SerializeToString()
     for index in range(5):
         dispatcher.handle(f"gngdt/cam{index}/learner/status", status, stamp)
-    assert sorted(dispatcher.cameras) == ["cam0", "cam1", "cam2"]
-    assert dispatcher.refused == 2
+    assert sorted(dispatcher.cameras.names()) == ["cam0", "cam1", "cam2"]
+    assert dispatcher.cameras.refused == 2
     assert len(blueprints) == 3  # one blueprint per real camera, not one per message
     recording.disconnect()
 
@@ -82,7 +93,7 @@ def test_garbage_on_new_camera_names_makes_no_camera_and_cameras_are_bounded() -
 def _topology(nodes: int, edges_per_node: int = 2, clusterings: int = 2, name: str = "pos"):
     import numpy as np
 
-    from schemas.packing import encode_topology
+    from schemas.topology import encode_topology
 
     rng = np.random.default_rng(0)
     pairs = rng.integers(0, nodes, (nodes * edges_per_node, 2))
@@ -99,7 +110,8 @@ def _topology(nodes: int, edges_per_node: int = 2, clusterings: int = 2, name: s
     (_topology(10, name="x" * 65), "longer than 64"),
 ])
 def test_topologies_beyond_what_a_learner_sends_are_refused(payload: bytes, match: str) -> None:
-    from schemas.packing import MessageError, decode_topology
+    from schemas.messages import MessageError
+    from schemas.topology import decode_topology
 
     with pytest.raises(MessageError, match=match):
         decode_topology(payload)
@@ -107,7 +119,7 @@ def test_topologies_beyond_what_a_learner_sends_are_refused(payload: bytes, matc
 
 def test_the_edge_limit_is_what_the_kernel_can_hold() -> None:
     from gngdt_core.kernels import layout as _kernels
-    from schemas.packing import MAX_EDGES_PER_NODE, decode_topology
+    from schemas.topology import MAX_EDGES_PER_NODE, decode_topology
 
     assert MAX_EDGES_PER_NODE == _kernels.MAX_DEGREE // 2
     assert decode_topology(_topology(100, edges_per_node=8)).node_count == 100
@@ -158,7 +170,7 @@ class ImageFlood:
         import numpy as np
         import zenoh
 
-        from schemas.packing import image_to_raw
+        from schemas.images import image_to_raw
 
         rng = np.random.default_rng(0)
         deadline = time.monotonic() + seconds

@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from schemas.packing import cloud_to_msg, decode_status, decode_topology
+from schemas.clouds import cloud_to_msg
+from schemas.status import decode_status
+from schemas.topology import decode_topology
 from schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
 from services.plumbing.session import client_config, open_config
 
@@ -301,30 +303,34 @@ def test_run_fails_clearly_on_a_missing_recording(tmp_path: Path) -> None:
 def test_run_reports_a_failed_service_with_its_error(
     tabletop_recording: Path, tmp_path: Path
 ) -> None:
-    params = tmp_path / "bad.toml"
-    params.write_text("max_nodes = 1\n")  # a known key: only the learner's model refuses it
+    checkpoint = tmp_path / "broken.npz"
+    checkpoint.write_bytes(b"not a checkpoint")  # only the learner, once started, reads it
     completed = subprocess.run(
         [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
-         str(tmp_path / "x.rrd"), "--params", str(params)],
+         str(tmp_path / "x.rrd"), "--checkpoint", str(checkpoint)],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=100,
     )
     assert completed.returncode == 1, completed.stdout + completed.stderr
     assert "learn failed" in completed.stderr
-    assert "max_nodes must be >= 2" in completed.stderr
+    assert "not a gngdt checkpoint" in completed.stderr
 
 
+@pytest.mark.parametrize(("content", "reason"), [
+    ("max_nodez = 10\n", "unknown key 'max_nodez'"),
+    ("max_nodes = 1\n", "max_nodes must be in [2, 10000000], got 1"),  # a value, not a key
+])
 def test_run_refuses_a_wrong_params_file_before_starting(
-    tabletop_recording: Path, tmp_path: Path
+    tabletop_recording: Path, tmp_path: Path, content: str, reason: str
 ) -> None:
     params = tmp_path / "bad.toml"
-    params.write_text("max_nodez = 10\n")
+    params.write_text(content)
     completed = subprocess.run(
         [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
          str(tmp_path / "x.rrd"), "--params", str(params)],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=100,
     )
     assert completed.returncode == 2, completed.stdout + completed.stderr
-    assert "unknown key 'max_nodez'" in completed.stderr
+    assert reason in completed.stderr
     assert "learn failed" not in completed.stderr  # nothing was started
 
 
@@ -378,7 +384,8 @@ def test_logger_skips_malformed_messages_and_stops_after_eos(
     import zenoh
 
     from gngdt_io.frame import CameraIntrinsics
-    from schemas.packing import encode_stream_end, intrinsics_to_calibration
+    from schemas.images import intrinsics_to_calibration
+    from schemas.status import encode_stream_end
 
     rrd_path = tmp_path / "logger.rrd"
     logger = spawn("log", "--save", str(rrd_path), "--eos-drain", "1",
@@ -415,7 +422,7 @@ def test_logger_skips_malformed_messages_and_stops_after_eos(
 def test_capture_sends_the_good_frames_of_a_damaged_recording(
     router_endpoint: str, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    from schemas.packing import decode_stream_end
+    from schemas.status import decode_stream_end
 
     damaged = tmp_path / "damaged.mcap"
     data = tabletop_recording.read_bytes()

@@ -20,9 +20,9 @@ def test_example_params_file_builds_a_model() -> None:
     from gngdt_core import GNGDT
 
     config = load_profile(REPO_ROOT / "config" / "learner.toml").config
-    assert config.model["lambda_"] == 500
+    assert config == load_profile(None).config  # the example only documents: it sets nothing
+    assert GNGDT(**config.model).lambda_ == 500
     assert config.options.samples_per_frame == 10000
-    GNGDT(**config.model)
 
 
 def test_params_accept_flat_keys_and_learner_options(tmp_path: Path) -> None:
@@ -122,3 +122,60 @@ def test_logger_viewer_options_are_reruns_own() -> None:
                              if option[0] != ("--headless",)]
     with pytest.raises(SystemExit):
         ours.parse_args(["--headless"])
+
+
+def test_the_example_params_file_documents_every_key_with_its_default() -> None:
+    """config/learner.toml shows every key with the value used when no file sets it (commented
+    out: a file only overrides), so the documentation cannot drift from the declarations."""
+    import re
+    import tomllib
+
+    from gngdt_io.profiles import load_profile, model_parameter_names
+
+    text = (REPO_ROOT / "config" / "learner.toml").read_text()
+    documented = {}
+    for match in re.finditer(r"^# ([a-z_0-9]+) = ([^#\n]+?)\s*(?:#.*)?$", text, re.MULTILINE):
+        documented[match.group(1)] = tomllib.loads(f"v = {match.group(2)}")["v"]
+    mentioned = set(re.findall(r"^# ([a-z_0-9]+)\b", text, re.MULTILINE))
+    config = load_profile(None).config
+    defaults = {**{("lambda" if k == "lambda_" else k): v for k, v in config.model.items()},
+                **vars(config.options)}
+    import inspect
+
+    from gngdt_core import GNGDT
+
+    for name, parameter in inspect.signature(GNGDT.__init__).parameters.items():
+        if name in model_parameter_names():
+            defaults.setdefault("lambda" if name == "lambda_" else name, parameter.default)
+    assert mentioned >= set(defaults), f"undocumented: {sorted(set(defaults) - mentioned)}"
+    for name, value in documented.items():
+        expected = defaults[name]
+        expected = list(expected) if isinstance(expected, tuple) else expected
+        assert value == expected, f"{name}: documented {value!r}, used {expected!r}"
+
+
+def test_print_params_names_where_every_value_comes_from(tmp_path: Path, capsys) -> None:
+    from services.cli import main as gngdt_main
+
+    params = tmp_path / "p.toml"
+    params.write_text("[gngdt]\nmax_nodes = 300\n[learner]\nseed = 4\n")
+    assert gngdt_main(["learn", "--params", str(params), "--samples-per-frame", "777",
+                       "--print-params"]) == 0
+    printed = capsys.readouterr().out
+    lines = {line.split("=")[0].strip(): line for line in printed.splitlines() if "=" in line}
+    assert lines["max_nodes"].endswith(f"# {params}")
+    assert lines["seed"].endswith(f"# {params}")
+    assert "777" in lines["samples_per_frame"] and lines["samples_per_frame"].endswith(
+        "# command line")
+    assert lines["replay_share"].endswith("# the learner's default")  # declared once, in core
+    assert lines["eta1"].startswith("eta1 = 0.025") and lines["eta1"].endswith("# default")
+
+
+def test_a_profile_setting_the_steps_per_frame_twice_differently_is_refused(tmp_path: Path):
+    path = tmp_path / "twice.toml"
+    path.write_text("[learner]\nsamples_per_frame = 5000\n[frames]\nsteps_per_frame = 4000\n")
+    with pytest.raises(ValueError, match="contradicts samples_per_frame = 5000"):
+        load_profile(path)
+    path.write_text("[frames]\nsteps_per_frame = 4000\n")  # the other name alone: the same key
+    config = load_profile(path).config
+    assert config.options.samples_per_frame == config.schedule.steps_per_frame == 4000

@@ -151,7 +151,8 @@ def test_a_bad_transform_is_skipped_with_a_warning_and_the_rest_is_used(tmp_path
     from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
     from mcap_protobuf.writer import Writer
 
-    from schemas.packing import image_to_raw, intrinsics_to_calibration, pose_to_transform
+    from schemas.clouds import pose_to_transform
+    from schemas.images import image_to_raw, intrinsics_to_calibration
 
     frames = make_frames(2)
     path = tmp_path / "bad_quaternion.mcap"

@@ -13,7 +13,7 @@ from mcap_ros2.writer import Writer as Ros2Writer
 from gngdt_io.frame import CameraIntrinsics, Frame
 from gngdt_io.mcap_reader import RecordingError, read_frames, recording_info
 from gngdt_io.mcap_writer import RecordingWriter
-from schemas.packing import image_to_raw, intrinsics_to_calibration
+from schemas.images import image_to_raw, intrinsics_to_calibration
 
 WIDTH, HEIGHT = 64, 48
 START_NS = 1_700_000_000_000_000_000

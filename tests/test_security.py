@@ -270,6 +270,6 @@ def test_params_values_are_type_checked_never_evaluated(tmp_path: Path) -> None:
     params = tmp_path / "evil.toml"
     params.write_text(f'samples_per_frame = "__import__(\'pathlib\').Path(\'{marker}\').touch()"\n')
     with pytest.raises(ValueError, match=r"evil\.toml: learner option samples_per_frame must be "
-                                         r"int"):
+                                         r"an integer"):
         load_profile(params)
     assert not marker.exists()

@@ -30,10 +30,9 @@ min_segment_nodes = 3
 
 [frames]
 steps_first_frame = 20000
-steps_per_frame = 4000
 
-[learner]  # gngdt learn's; gngdt segment ignores it
-samples_per_frame = 5000
+[learner]  # the steps of each later frame: one setting for gngdt learn and gngdt segment
+samples_per_frame = 4000
 """
 
 

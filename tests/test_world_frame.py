@@ -16,7 +16,9 @@ from test_pipeline import Watcher, log_text, points_publisher, wait_exit
 from gngdt_core.frame_learner import FrameLearner, Ghosts, LearnerConfig, OtherFrameError
 from gngdt_io.mcap_writer import RecordingWriter
 from gngdt_io.synth.render import render_scene
-from schemas.packing import MessageError, cloud_to_msg, decode_topology
+from schemas.clouds import cloud_to_msg
+from schemas.messages import MessageError
+from schemas.topology import decode_topology
 from schemas.wire import FrameStamp
 from services.learner import checkpoints
 from services.learner.messages import decode_points, status_message, topology_message

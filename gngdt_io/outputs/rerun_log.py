@@ -17,10 +17,11 @@ from schemas.wire import FrameStamp
 
 if TYPE_CHECKING:
     import rerun as rr
-    from gngdt_core.geometry import CameraIntrinsics
 
-    from schemas.packing import LearnerStatusInfo, TopologySnapshot
+    from gngdt_core.geometry import CameraIntrinsics
     from schemas.scene import ObjectBoxes
+    from schemas.status import LearnerStatusInfo
+    from schemas.topology import TopologySnapshot
 
 #: clusters (segments) of fewer nodes are drawn grey, as the learner's own minimum cluster size
 DISPLAY_MIN_NODES = 5

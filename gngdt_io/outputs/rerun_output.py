@@ -253,8 +253,10 @@ class RerunOutput(Output):
         return "" if self.to_stdout else f"logging to {self.destination}"
 
     def write(self, sample: StreamSample) -> None:
-        from schemas import packing
+        from schemas.images import calibration_to_intrinsics, raw_to_image
         from schemas.scene import decode_object_boxes
+        from schemas.status import decode_status, decode_stream_end
+        from schemas.topology import decode_topology
 
         rerun_log, paths, payload = self.rerun_log, EntityPaths(sample.camera), sample.payload
         stream, stamp = sample.stream, sample.stamp
@@ -263,36 +265,37 @@ class RerunOutput(Output):
             return
         rerun_log.set_time(stamp)
         if stream == "calibration":
-            rerun_log.calibration(paths, packing.calibration_to_intrinsics(payload))
+            rerun_log.calibration(paths, calibration_to_intrinsics(payload))
         elif stream == "color":
-            rerun_log.color(paths, packing.raw_to_image(payload))
+            rerun_log.color(paths, raw_to_image(payload))
         elif stream == "depth":
-            rerun_log.depth(paths, packing.raw_to_image(payload))
+            rerun_log.depth(paths, raw_to_image(payload))
         elif stream == "points":
             self._points(paths, payload, stamp.sequence)
         elif stream == "topology":
-            self._topology(sample.camera, paths, packing.decode_topology(
+            self._topology(sample.camera, paths, decode_topology(
                 payload, max_nodes=self.max_topology_nodes), stamp.sequence)
         elif stream == "objects":
             rerun_log.objects(paths, decode_object_boxes(payload))
         elif stream == "learner/status":
-            rerun_log.status(paths, packing.decode_status(payload))
+            rerun_log.status(paths, decode_status(payload))
         elif stream == "eos":
-            self._last_sequence[sample.camera] = packing.decode_stream_end(
+            self._last_sequence[sample.camera] = decode_stream_end(
                 payload).last_frame_sequence
 
     def _points(self, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-        from schemas import packing
+        from schemas.clouds import cloud_pose, msg_to_cloud
+        from schemas.messages import parse_message
 
         rerun_log = self.rerun_log
-        message = packing.parse_message(PointCloud, payload)
-        pose = packing.cloud_pose(message)
+        message = parse_message(PointCloud, payload)
+        pose = cloud_pose(message)
         moving = not np.array_equal(pose, np.eye(4))
         if rerun_log.due(paths, "points", sequence, rerun_log.rates.cloud_every):
             # views: the logger decimates, so only the logged points are copied
-            positions, colors = packing.msg_to_cloud(message, copy=False)
+            positions, colors = msg_to_cloud(message, copy=False)
             rerun_log.points(paths, positions, colors, pose if moving else None)
         elif moving:  # the camera's pose: every frame, whether its cloud is logged or not
             rerun_log.camera_pose(paths, pose)

@@ -17,7 +17,7 @@ from schemas.wire import FrameStamp
 def topology_message(learner: FrameLearner, stamp: FrameStamp,
                      quantization_error: dict[str, float], learned: LearnedFrame) -> Any:
     """The current ``gngdt.Topology``."""
-    from schemas.packing import encode_topology
+    from schemas.topology import encode_topology
 
     model = learner.model
     return encode_topology(
@@ -70,7 +70,7 @@ def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
     """The ``gngdt.LearnerStatus`` after publishing ``topology``; ``latency_percentiles``: p50
     and p99 of the recent frames (ms); ``settled``: how learning on the stream's last frame
     stopped."""
-    from schemas.packing import encode_status
+    from schemas.status import encode_status
 
     counters = learner.counters
     seconds = counters.learning_seconds
@@ -135,7 +135,8 @@ def decode_points(payload: bytes, attachment: bytes | None, max_points: int = DE
     """
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-    from schemas.packing import MessageError, cloud_pose, msg_to_cloud, parse_message
+    from schemas.clouds import cloud_pose, msg_to_cloud
+    from schemas.messages import MessageError, parse_message
 
     stamp = FrameStamp.from_attachment(attachment)
     stamp.check_clock(time.time_ns() if now_ns is None else now_ns)

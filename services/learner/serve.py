@@ -148,7 +148,7 @@ class LearnerInstances:
 
 def payload_bytes(sample: zenoh.Sample, limit: int) -> bytes:
     """The sample's payload, refused (``MessageError``) before any copy when over ``limit``."""
-    from schemas.packing import MessageError
+    from schemas.messages import MessageError
 
     size = len(sample.payload)
     if size > limit:
@@ -207,7 +207,8 @@ class LearnerService:
         self._last_checkpoint = time.monotonic()
 
     def _on_eos(self, sample: zenoh.Sample) -> None:
-        from schemas.packing import MessageError, decode_stream_end
+        from schemas.messages import MessageError
+        from schemas.status import decode_stream_end
 
         try:
             end = decode_stream_end(payload_bytes(sample, MAX_EOS_BYTES))

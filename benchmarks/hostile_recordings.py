@@ -1,6 +1,7 @@
-"""Small MCAP files that would cost a reader far more than their size: made by the tests of the
-reader's bounds and by ``benchmarks/bench_hostile.py``. Each message is on a
-``foxglove.RawImage`` channel but holds zeros, so no frame comes out of any of them."""
+"""Small MCAP files that would cost a reader far more than their size: made by
+``bench_hostile.py`` and by the tests of the reader's bounds (``tests/conftest.py`` puts
+benchmarks/ on their path). Each message is on a ``foxglove.RawImage`` channel but holds zeros,
+so no frame comes out of any of them."""
 
 from __future__ import annotations
 
