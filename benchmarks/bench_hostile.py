@@ -26,10 +26,12 @@ from __future__ import annotations
 import re
 import signal
 import struct
+import subprocess
 import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -225,11 +227,29 @@ def transform_flood(path: Path) -> Path:
     return path
 
 
-def main() -> None:
-    folder = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+@dataclass
+class ServiceRun:
+    """What feeding the services left behind."""
+
+    #: learner status messages received, in order
+    statuses: list
+    #: refusals each service should have counted (``feed``'s keys)
+    expected: dict[str, int]
+    #: seconds from the first hostile input to the good frame's status (plus the logger's drain)
+    fed_s: float
+    #: per service, whether it was still running once fed
+    alive: dict[str, bool]
+    #: per service, its exit code after SIGINT
+    codes: dict[str, int] = field(default_factory=dict)
+
+
+#: one row per hostile recording: (label, file size in bytes, exit code, seconds, reason)
+CaptureRow = tuple[str, int, int, float, str]
+
+
+def start_services(folder: Path, endpoint: str, peaks: Peaks) -> dict[str, subprocess.Popen]:
+    """Start the router, learner and logger (a .rrd capped at 200 MB), their peaks watched."""
     connect = ("--zenoh-connect", endpoint)
-    peaks = Peaks()
     processes = {
         "router": gngdt("router", "--listen", endpoint, log=folder / "router.log"),
         "learner": gngdt("learn", "--samples-per-frame", "2000", *connect,
@@ -239,6 +259,13 @@ def main() -> None:
     }
     for name, process in processes.items():
         peaks.watch(name, process.pid)
+    return processes
+
+
+def feed_services(folder: Path, endpoint: str,
+                  processes: dict[str, subprocess.Popen]) -> ServiceRun:
+    """Once the services are up, feed them every hostile input and wait for the good frame's
+    status; which services survived."""
     session = open_config(client_config([endpoint]), wait_s=30)
     statuses: list = []
     session.declare_subscriber("gngdt/camera/learner/status",
@@ -255,11 +282,30 @@ def main() -> None:
     fed_s = time.monotonic() - started
     alive = {name: process.poll() is None for name, process in processes.items()}
     session.close()
+    return ServiceRun(statuses, expected, fed_s, alive)
+
+
+def stop_services(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
+    """SIGINT every service; their exit codes."""
     for process in processes.values():
         process.send_signal(signal.SIGINT)
-    codes = {name: process.wait(60) for name, process in processes.items()}
+    return {name: process.wait(60) for name, process in processes.items()}
 
+
+def capture_reason(log: Path) -> str:
+    """Why capture refused a recording (its ERROR line), else the limit it warned of, else ""."""
+    lines = log.read_text().splitlines()
+    reason = next((line.split("ERROR services.capture: ", 1)[1] for line in lines
+                   if "ERROR services.capture: " in line), "")
+    return reason or next((line.split(": ", 2)[-1] for line in lines
+                           if "WARNING" in line and "(--max-" in line), "")
+
+
+def replay_recordings(folder: Path, endpoint: str, peaks: Peaks) -> list[CaptureRow]:
+    """``gngdt capture`` replays each hostile recording through a fresh router, its peak
+    watched; a row per recording."""
     print("\ncapture replaying hostile recordings:", flush=True)
+    connect = ("--zenoh-connect", endpoint)
     capture_rows = []
     for label, path in hostile_recordings(folder).items():
         log = folder / f"capture-{path.stem}.log"
@@ -274,30 +320,41 @@ def main() -> None:
         seconds = time.monotonic() - began
         router.send_signal(signal.SIGINT)
         router.wait(30)
-        lines = log.read_text().splitlines()
-        reason = next((line.split("ERROR services.capture: ", 1)[1] for line in lines
-                       if "ERROR services.capture: " in line), "")
-        reason = reason or next((line.split(": ", 2)[-1] for line in lines
-                                 if "WARNING" in line and "(--max-" in line), "")
-        capture_rows.append((label, path.stat().st_size, code, seconds, reason))
-    time.sleep(0.2)
-    peaks.stop()
+        capture_rows.append((label, path.stat().st_size, code, seconds, capture_reason(log)))
+    return capture_rows
 
-    status = next(s for s in statuses if s.frame_sequence == 2)
-    logged = (folder / "logger.log").read_text()
+
+def logger_counts(logged: str) -> tuple[int, int, int, int]:
+    """(malformed, dropped, oversized, refused) from the logger's closing line."""
     done = re.search(r"logger done: (\d+) malformed, (\d+) dropped, (\d+) oversized, (\d+) refused",
                      logged)
     malformed, dropped, oversized, refused = (int(value) for value in done.groups())
-    print(f"\nservices, fed for {fed_s:.1f} s (shared 2-core machine):")
+    return malformed, dropped, oversized, refused
+
+
+def print_tables(run: ServiceRun, capture_rows: list[CaptureRow],
+                 peaks: dict[str, float]) -> None:
+    """Print the services' table (peak RSS, alive, exit) and the captures' table."""
+    print(f"\nservices, fed for {run.fed_s:.1f} s (shared 2-core machine):")
     print(f"{'process':<34}{'peak RSS':>10}  alive after  exit")
-    for name in processes:
-        print(f"{name:<34}{peaks.peaks.get(name, 0):>7.0f} MB  {alive[name]!s:>11}  "
-              f"{codes[name]:>4}")
+    for name in run.codes:
+        print(f"{name:<34}{peaks.get(name, 0):>7.0f} MB  {run.alive[name]!s:>11}  "
+              f"{run.codes[name]:>4}")
     print(f"\n{'capture of a hostile recording':<34}{'size':>9}{'peak RSS':>11}  exit  "
           "seconds  reason")
     for label, size, code, seconds, reason in capture_rows:
-        print(f"{label:<34}{size / 1e3:>6.0f} kB{peaks.peaks.get('capture: ' + label, 0):>8.0f} MB"
+        print(f"{label:<34}{size / 1e3:>6.0f} kB{peaks.get('capture: ' + label, 0):>8.0f} MB"
               f"  {code:>4}  {seconds:>7.1f}  {reason[:110]}")
+
+
+def print_report(folder: Path, run: ServiceRun, capture_rows: list[CaptureRow],
+                 peaks: dict[str, float]) -> None:
+    """Print the tables, the refusals counted against those expected, and the targets."""
+    status = next(s for s in run.statuses if s.frame_sequence == 2)
+    logged = (folder / "logger.log").read_text()
+    malformed, dropped, oversized, refused = logger_counts(logged)
+    expected = run.expected
+    print_tables(run, capture_rows, peaks)
     rrd_mb = (folder / "hostile.rrd").stat().st_size / 1e6
     print("\nrefusals counted:")
     print(f"  learner status: {status.malformed_messages} malformed "
@@ -307,15 +364,28 @@ def main() -> None:
           f"dropped, {refused} cameras refused")
     print(f"  .rrd: {rrd_mb:.0f} MB (capped at 200 MB)"
           + ("; the logger said it stopped writing" if "stopped writing" in logged else ""))
-    worst = max(peaks.peaks.values())
+    worst = max(peaks.values())
     counted = (status.malformed_messages >= expected["learner malformed"]
                and oversized >= expected["logger oversized"]
                and malformed >= expected["logger malformed"])
     print(f"\ntarget: peak RSS <= 1024 MB: {worst:.0f} MB "
           f"({'met' if worst <= 1024 else 'MISSED'}); services exit 0: "
-          f"{'met' if not any(codes.values()) else 'MISSED'}; refusals counted: "
+          f"{'met' if not any(run.codes.values()) else 'MISSED'}; refusals counted: "
           f"{'met' if counted else 'MISSED'}")
     print(f"logs: {folder}")
+
+
+def main() -> None:
+    folder = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    peaks = Peaks()
+    processes = start_services(folder, endpoint, peaks)
+    run = feed_services(folder, endpoint, processes)
+    run.codes = stop_services(processes)
+    capture_rows = replay_recordings(folder, endpoint, peaks)
+    time.sleep(0.2)
+    peaks.stop()
+    print_report(folder, run, capture_rows, peaks.peaks)
 
 
 if __name__ == "__main__":

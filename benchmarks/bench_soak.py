@@ -91,7 +91,20 @@ def latency_line(label: str, statuses: list[LearnerStatusInfo]) -> str:
             f"p90 {p90:.0f} ms, p99 {p99:.0f} ms, max {latencies.max():.0f} ms")
 
 
-def main() -> int:
+@dataclass
+class Samples:
+    """What the soak sampled, each series (seconds since it began, MB)."""
+
+    #: resident set per process
+    rss: dict[str, list[tuple[float, float]]]
+    #: the logger's output files ("rrd", "mcap"), whether or not they were written
+    files: dict[str, Path]
+    #: size per output file, once it exists
+    sizes: dict[str, list[tuple[float, float]]]
+
+
+def parse_args() -> argparse.Namespace:
+    """The soak's options (see the module's docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--minutes", type=float, default=10.0)
     parser.add_argument("--width", type=int, default=320)
@@ -109,24 +122,67 @@ def main() -> int:
                         help="loop this recording instead of a synthetic tabletop")
     parser.add_argument("--logger-args", default="",
                         help="extra `gngdt log` options, e.g. \"--keep-everything\"")
-    args = parser.parse_args()
+    return parser.parse_args()
 
-    work = Path(tempfile.mkdtemp(prefix="gngdt-soak-"))
-    recording = args.recording or make_recording(work, args.width, args.height, args.frames)
+
+def start_services(args: argparse.Namespace, work: Path, endpoint: str,
+                   processes: dict[str, subprocess.Popen], devnull) -> None:
+    """Start the router, learner and logger into ``processes`` (each added as it starts, so
+    the caller can stop whichever are up if one fails)."""
+    connect = ["--zenoh-connect", endpoint]
+    processes["router"] = start(["router", "--listen", endpoint], work / "router.log")
+    wait_until(lambda: "listening on" in (work / "router.log").read_text(), 60, "the router")
+    processes["learn"] = start(["learn", "--samples-per-frame", str(args.samples_per_frame),
+                                *connect], work / "learn.log")
+    viewer = ["--save", str(work / "soak.rrd")] if args.save_rrd else ["--stdout"]
+    viewer += ["--mcap", str(work / "soak-log.mcap")] if args.mcap else []
+    viewer += args.logger_args.split()
+    processes["log"] = start(["log", *viewer, "--keep-running", *connect], work / "log.log",
+                             stdout=None if args.save_rrd else devnull)
+
+
+def sample_processes(processes: dict[str, subprocess.Popen], started: float, duration: float,
+                     sample_every: float, work: Path) -> Samples:
+    """Every ``sample_every`` s until ``duration`` s after ``started``: each process's RSS and
+    each output file's size; then a last RSS of each. A process exiting ends the soak."""
+    rss: dict[str, list[tuple[float, float]]] = {name: [] for name in processes}
+    files = {"rrd": work / "soak.rrd", "mcap": work / "soak-log.mcap"}
+    sizes: dict[str, list[tuple[float, float]]] = {name: [] for name in files}
+    while (elapsed := time.monotonic() - started) < duration:
+        for name, process in processes.items():
+            if process.poll() is not None:
+                raise SystemExit(f"{name} exited with {process.returncode}; see {work}")
+            rss[name].append((elapsed, status_mb(process.pid, "VmRSS")))
+        for name, path in files.items():
+            if path.exists():
+                sizes[name].append((elapsed, path.stat().st_size / 1e6))
+        time.sleep(min(sample_every, max(0.0, duration - elapsed)))
+    for name, process in processes.items():
+        rss[name].append((time.monotonic() - started, status_mb(process.pid, "VmRSS")))
+    return Samples(rss, files, sizes)
+
+
+def stop_processes(processes: dict[str, subprocess.Popen]) -> None:
+    """SIGINT every process still running; SIGKILL any not gone 30 s later."""
+    for process in processes.values():
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGINT)
+    for process in processes.values():
+        try:
+            process.wait(30)
+        except subprocess.TimeoutExpired:
+            os.killpg(process.pid, signal.SIGKILL)
+
+
+def soak(args: argparse.Namespace, work: Path, recording: Path) -> tuple[StatusLog, Samples]:
+    """Run the pipeline on ``recording`` looped for ``args.minutes``, sampling as it goes; every
+    process is stopped however the soak ends."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     connect = ["--zenoh-connect", endpoint]
     processes: dict[str, subprocess.Popen] = {}
     devnull = open(os.devnull, "wb")
     try:
-        processes["router"] = start(["router", "--listen", endpoint], work / "router.log")
-        wait_until(lambda: "listening on" in (work / "router.log").read_text(), 60, "the router")
-        processes["learn"] = start(["learn", "--samples-per-frame", str(args.samples_per_frame),
-                                    *connect], work / "learn.log")
-        viewer = ["--save", str(work / "soak.rrd")] if args.save_rrd else ["--stdout"]
-        viewer += ["--mcap", str(work / "soak-log.mcap")] if args.mcap else []
-        viewer += args.logger_args.split()
-        processes["log"] = start(["log", *viewer, "--keep-running", *connect], work / "log.log",
-                                 stdout=None if args.save_rrd else devnull)
+        start_services(args, work, endpoint, processes, devnull)
         session = open_config(client_config([endpoint]))
         statuses = StatusLog()
         session.declare_subscriber("gngdt/camera/learner/status", statuses.add)
@@ -135,50 +191,35 @@ def main() -> int:
         processes["capture"] = start(["capture", str(recording), "--loop",
                                       "--max-points", str(args.max_points), *connect],
                                      work / "capture.log")
-        duration = args.minutes * 60.0
-        rss: dict[str, list[tuple[float, float]]] = {name: [] for name in processes}
-        files = {"rrd": work / "soak.rrd", "mcap": work / "soak-log.mcap"}
-        sizes: dict[str, list[tuple[float, float]]] = {name: [] for name in files}
-        while (elapsed := time.monotonic() - statuses.started) < duration:
-            for name, process in processes.items():
-                if process.poll() is not None:
-                    raise SystemExit(f"{name} exited with {process.returncode}; see {work}")
-                rss[name].append((elapsed, status_mb(process.pid, "VmRSS")))
-            for name, path in files.items():
-                if path.exists():
-                    sizes[name].append((elapsed, path.stat().st_size / 1e6))
-            time.sleep(min(args.sample_every, max(0.0, duration - elapsed)))
-        for name, process in processes.items():
-            rss[name].append((time.monotonic() - statuses.started, status_mb(process.pid, "VmRSS")))
+        samples = sample_processes(processes, statuses.started, args.minutes * 60.0,
+                                   args.sample_every, work)
         session.close()
     finally:
-        for process in processes.values():
-            if process.poll() is None:
-                os.killpg(process.pid, signal.SIGINT)
-        for process in processes.values():
-            try:
-                process.wait(30)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
+        stop_processes(processes)
         devnull.close()
+    return statuses, samples
 
-    source = (str(args.recording) if args.recording
-              else f"{args.width}x{args.height} tabletop ({args.frames} frames)")
-    print(f"soak: {args.minutes:g} min, {source} looped at 30 fps, {args.samples_per_frame} "
-          f"steps/frame, logger {'to .rrd' if args.save_rrd else 'to --stdout > /dev/null'}"
-          f"{' + MCAP' if args.mcap else ''} {args.logger_args}; logs in {work}")
-    for name, samples in sizes.items():
-        if samples:
-            steady = [sample for sample in samples if sample[0] >= 60.0] or samples
-            print(f".{name}: {files[name].stat().st_size / 1e6:.1f} MB at the end, growing "
-                  f"{slope_mb_per_min(steady):.1f} MB/min after the first minute")
+
+def print_memory(samples: Samples) -> None:
+    """Print each output file's growth and each process's RSS over time, with their slopes
+    after the first minute."""
+    for name, series in samples.sizes.items():
+        if series:
+            steady = [sample for sample in series if sample[0] >= 60.0] or series
+            print(f".{name}: {samples.files[name].stat().st_size / 1e6:.1f} MB at the end, "
+                  f"growing {slope_mb_per_min(steady):.1f} MB/min after the first minute")
     print("RSS (MB) over time; slope fitted after the first minute:")
-    for name, samples in rss.items():
-        steady = [sample for sample in samples if sample[0] >= 60.0] or samples
-        shown = ", ".join(f"{at / 60:.1f}m {mb:.0f}" for at, mb in samples[:: max(
-            1, len(samples) // 8)])
-        print(f"  {name:8s} start {samples[0][1]:6.0f}  end {samples[-1][1]:6.0f}  "
+    for name, series in samples.rss.items():
+        steady = [sample for sample in series if sample[0] >= 60.0] or series
+        shown = ", ".join(f"{at / 60:.1f}m {mb:.0f}" for at, mb in series[:: max(
+            1, len(series) // 8)])
+        print(f"  {name:8s} start {series[0][1]:6.0f}  end {series[-1][1]:6.0f}  "
               f"slope {slope_mb_per_min(steady):+.2f} MB/min   [{shown}]")
+
+
+def print_latency_and_frames(statuses: StatusLog, duration: float) -> None:
+    """Print latency percentiles over the first and last minute, then the learner's last
+    frame counts and the capture rate."""
     minute = min(60.0, duration / 3)
     first, last = statuses.window(0, minute), statuses.window(duration - minute, duration + 1)
     print(f"latency (capture -> topology published), first and last {minute:.0f} s:")
@@ -194,6 +235,26 @@ def main() -> int:
               f"{final.steps_per_second:,.0f} steps/s")
         capture_rate = sent / duration
         print(f"capture rate: {capture_rate:.1f} frames/s (target 30)")
+
+
+def print_report(args: argparse.Namespace, work: Path, statuses: StatusLog,
+                 samples: Samples) -> None:
+    """Print the soak's set-up, memory over time, latency and frame counts."""
+    source = (str(args.recording) if args.recording
+              else f"{args.width}x{args.height} tabletop ({args.frames} frames)")
+    print(f"soak: {args.minutes:g} min, {source} looped at 30 fps, {args.samples_per_frame} "
+          f"steps/frame, logger {'to .rrd' if args.save_rrd else 'to --stdout > /dev/null'}"
+          f"{' + MCAP' if args.mcap else ''} {args.logger_args}; logs in {work}")
+    print_memory(samples)
+    print_latency_and_frames(statuses, args.minutes * 60.0)
+
+
+def main() -> int:
+    args = parse_args()
+    work = Path(tempfile.mkdtemp(prefix="gngdt-soak-"))
+    recording = args.recording or make_recording(work, args.width, args.height, args.frames)
+    statuses, samples = soak(args, work, recording)
+    print_report(args, work, statuses, samples)
     return 0
 
 

@@ -64,27 +64,23 @@ def median_gaps(clouds: list[np.ndarray]) -> list[float]:
     return gaps
 
 
-def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.collections import LineCollection
-
-    from gngdt_core import GNGDT
-    from gngdt_io.profiles import load_profile
-
-    frames = posed_frames(folder)
+def in_first_camera(frames: list[tuple[np.ndarray, np.ndarray, np.ndarray]]
+                    ) -> tuple[np.ndarray, list[np.ndarray], list[np.ndarray]]:
+    """The clouds drawn in the first camera's axes: (world -> first camera (4, 4), each cloud as
+    it comes in its own camera frame, each placed by its pose; clouds (N, 3) m)."""
     first_from_world = np.linalg.inv(frames[0][2])
-    # drawn in the first camera's axes: as they come (each in its own camera frame), and placed
-    # by their poses (world -> first camera, so both panels share axes)
     as_they_come = [points for points, _, _ in frames]
     placed = [points @ (first_from_world @ pose)[:3, :3].T + (first_from_world @ pose)[:3, 3]
               for points, _, pose in frames]
-    gaps = {"as they come": median_gaps(as_they_come), "placed": median_gaps(placed)}
-    for name, values in gaps.items():
-        print(f"{name}: median distance to the other frames "
-              + ", ".join(f"{v * 1000:.1f} mm" for v in values))
+    return first_from_world, as_they_come, placed
+
+
+def learn_network(frames: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+                  first_from_world: np.ndarray, seed: int):
+    """GNG-DT learned from the posed frames with the learner's parameters: (model, its node
+    positions (M, 3) m in the first camera's axes, position error (m) per frame)."""
+    from gngdt_core import GNGDT
+    from gngdt_io.profiles import load_profile
 
     model = GNGDT(**{**load_profile(None).config.model, "random_state": seed})
     for points, colors, pose in frames:
@@ -92,13 +88,17 @@ def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
     nodes = model.positions_ @ first_from_world[:3, :3].T + first_from_world[:3, 3]
     errors = [model.quantization_error(points @ pose[:3, :3].T + pose[:3, 3])["pos"]
               for points, _, pose in frames]
+    return model, nodes, errors
 
-    rng = np.random.default_rng(seed)
-    figure, axes = plt.subplots(2, 3, figsize=(15, 10))
+
+def draw_clouds(axes, panels: tuple[tuple[str, list[np.ndarray], str], ...],
+                gaps: dict[str, list[float]], rng: np.random.Generator) -> None:
+    """Draw each panel's clouds in its column of ``axes``: a random subset of each on top (with
+    the close-up's box), the close-up's points below."""
+    from matplotlib.patches import Rectangle
+
     (x0, x1), (z0, z1) = CLOSE_UP
-    for column, (title, clouds, key) in enumerate((
-            ("each frame in its own camera frame", as_they_come, "as they come"),
-            ("placed by their poses in one frame", placed, "placed"))):
+    for column, (title, clouds, key) in enumerate(panels):
         for row, close in enumerate((False, True)):
             axis = axes[row, column]
             for index, cloud in enumerate(clouds):
@@ -115,7 +115,13 @@ def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
             axis.set_title(("close-up: " if close else "") + title, fontsize=10)
             if not close:
                 axis.legend(fontsize=8, markerscale=12, loc="upper left")
-                axis.add_patch(plt.Rectangle((x0, z0), x1 - x0, z1 - z0, fill=False, lw=0.8))
+                axis.add_patch(Rectangle((x0, z0), x1 - x0, z1 - z0, fill=False, lw=0.8))
+
+
+def draw_network(axes, model, nodes: np.ndarray, errors: list[float]) -> None:
+    """Draw the network's position edges and coloured nodes in the last column of ``axes``."""
+    from matplotlib.collections import LineCollection
+
     edges = model.edges("pos")
     for row, axis in enumerate(axes[:, 2]):
         axis.add_collection(LineCollection(nodes[edges][:, :, [0, 2]], colors="0.6",
@@ -126,6 +132,12 @@ def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
                          "nodes\nposition error per frame "
                          + ", ".join(f"{e * 1000:.0f}" for e in errors) + " mm", fontsize=10)
     axes[1, 2].set_title("close-up: the network", fontsize=10)
+
+
+def style_axes(axes) -> None:
+    """Label every axis; the top row shares the placed panel's limits, the bottom row the
+    close-up's."""
+    (x0, x1), (z0, z1) = CLOSE_UP
     for axis in axes.flat:
         axis.set_xlabel("x (m), first camera's axes", fontsize=8)
         axis.set_ylabel("z, away from the first camera (m)", fontsize=8)
@@ -138,6 +150,30 @@ def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
     for axis in axes[1]:
         axis.set_xlim(x0, x1)
         axis.set_ylim(z0, z1)
+
+
+def make_figure(folder: Path, out: Path, seed: int = 0) -> Path:
+    """Draw the clouds as they come, placed by their poses, and the network learned from
+    them (each with a close-up); print the median gaps; save the picture to ``out``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    frames = posed_frames(folder)
+    first_from_world, as_they_come, placed = in_first_camera(frames)
+    gaps = {"as they come": median_gaps(as_they_come), "placed": median_gaps(placed)}
+    for name, values in gaps.items():
+        print(f"{name}: median distance to the other frames "
+              + ", ".join(f"{v * 1000:.1f} mm" for v in values))
+    model, nodes, errors = learn_network(frames, first_from_world, seed)
+
+    rng = np.random.default_rng(seed)
+    figure, axes = plt.subplots(2, 3, figsize=(15, 10))
+    draw_clouds(axes, (("each frame in its own camera frame", as_they_come, "as they come"),
+                       ("placed by their poses in one frame", placed, "placed")), gaps, rng)
+    draw_network(axes, model, nodes, errors)
+    style_axes(axes)
     figure.suptitle("TUM RGB-D fr1_xyz, three real Kinect frames seen from above "
                     "(../shared/data/rgbd/tum_fr1_xyz_dvo_examples)", fontsize=11)
     figure.tight_layout()

@@ -92,16 +92,16 @@ def detect_format(directory: str | Path) -> str:
     if not directory.is_dir():
         raise RecordingError(directory, None, "not a directory")
     found = []
+    if (directory / "color").is_dir() and (directory / "depth").is_dir():
+        found.append("redwood")
     if (directory / "rgb.txt").is_file() and (directory / "depth.txt").is_file():
         found.append("tum")
     if any(_PCL_NAME.match(path.name) for path in directory.iterdir()):
         found.append("pcl-tiff")
-    if (directory / "color").is_dir() and (directory / "depth").is_dir():
-        found.append("redwood")
     if not found:
         raise RecordingError(
-            directory, None, "no known image layout (tum: rgb.txt + depth.txt; pcl-tiff: "
-            "frame_*_rgb.tiff + frame_*_depth.tiff; redwood: color/ + depth/)")
+            directory, None, "no known image layout (redwood: color/ + depth/; tum: rgb.txt + "
+            "depth.txt; pcl-tiff: frame_*_rgb.tiff + frame_*_depth.tiff)")
     if len(found) > 1:
         raise RecordingError(directory, None, f"the layout is ambiguous ({' and '.join(found)} "
                              "both match); choose one with --format")

@@ -32,6 +32,9 @@ DEFAULT_SENSOR_PROFILE = "kinect.toml"
 LEARNER_DEFAULT = "the learner's default"
 DEFAULT = "default"
 TABLES = ("gngdt", "learner", "segmentation", "frames")
+#: the constraint of samples_per_frame, for its other name in [frames]
+_STEPS = next(item.metadata["constraint"] for item in fields(LearnerOptions)
+              if item.name == "samples_per_frame")
 
 
 @dataclass(frozen=True)
@@ -173,6 +176,10 @@ def _tables(document: dict[str, Any], path: Path) -> dict[str, dict[str, Any] | 
     frames = tables["frames"]
     if frames is not None and "steps_per_frame" in frames:  # the other name of samples_per_frame
         steps = frames.pop("steps_per_frame")
+        try:
+            _STEPS.check("[frames] steps_per_frame", steps)
+        except ValueError as error:
+            raise ValueError(f"{path}: {error}") from None
         learner = tables["learner"]
         if learner.get("samples_per_frame", steps) != steps:
             raise ValueError(f"{path}: [frames] steps_per_frame = {steps} contradicts "

@@ -1,0 +1,181 @@
+"""Import real RGB-D frames (../shared/data/rgbd) with every layout, and the `record images` CLI."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from gngdt_io.errors import RecordingError
+from gngdt_io.images import iter_image_frames
+from gngdt_io.mcap_reader import read_frames
+from services import record as cli
+
+RGBD = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd"
+TUM = RGBD / "tum_fr1_xyz_dvo_examples"
+
+#: folder -> (format, frames) as listed in ../shared/data/rgbd/README.md
+DATASETS = {
+    "pcl_grabber_sequence": ("pcl-tiff", 3),
+    "pcl_milk_cartoon_organized_kinect": ("redwood", 1),
+    "rtabmap_rgbd_test": ("redwood", 2),
+    "tum_fr1_xyz_dvo_examples": ("redwood", 3),
+}
+
+
+@pytest.fixture(scope="module")
+def rgbd() -> Path:
+    if not RGBD.is_dir():
+        pytest.skip(f"real RGB-D samples not found at {RGBD} (the repository's sibling ../shared)")
+    return RGBD
+
+
+def run_cli(*argv: str) -> int:
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    return cli.main(parser.parse_args(list(argv)))
+
+
+@pytest.mark.parametrize("folder", sorted(DATASETS))
+def test_every_sample_dataset_imports(rgbd: Path, folder: str) -> None:
+    fmt, count = DATASETS[folder]
+    camera = json.loads((rgbd / folder / "camera.json").read_text())
+    frames = list(iter_image_frames(rgbd / folder, fmt))
+    assert len(frames) == count
+    for frame in frames:
+        assert frame.color.shape == (camera["height"], camera["width"], 3)
+        assert frame.color.dtype == np.uint8 and frame.depth.dtype == np.uint16
+        assert (frame.intrinsics.fx, frame.intrinsics.cy) == (camera["fx"], camera["cy"])
+        raw_depth = cv2.imread(frame.extras["depth_path"], cv2.IMREAD_UNCHANGED)
+        expected_mm = np.rint(raw_depth * (1000.0 / camera["depth_scale"])).astype(np.uint16)
+        np.testing.assert_array_equal(frame.depth, expected_mm)
+        valid = frame.depth[frame.depth > 0]
+        assert 300 < np.median(valid) < 5000  # indoor scenes: metres, not TUM units
+        bgr = cv2.imread(frame.extras["color_path"], cv2.IMREAD_COLOR)
+        np.testing.assert_array_equal(frame.color, bgr[..., ::-1])
+    stamps = [frame.timestamp_ns for frame in frames]
+    assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)
+
+
+def test_pcl_tiff_timestamps_come_from_file_names(rgbd: Path) -> None:
+    frames = list(iter_image_frames(rgbd / "pcl_grabber_sequence", "pcl-tiff"))
+    # frame_20121214T142255.814212 -> 2012-12-14 14:22:55.814212 UTC
+    assert frames[0].timestamp_ns == 1355494975_814212000
+    assert frames[1].timestamp_ns - frames[0].timestamp_ns == 254_471_000
+
+
+def _build_tum_folder(root: Path) -> list[tuple[str, str]]:
+    """A TUM-layout folder from the fr1 samples; returns (rgb stamp, depth stamp) pairs."""
+    (root / "rgb").mkdir(parents=True)
+    (root / "depth").mkdir()
+    stamps = [
+        ("1305031102.175304", "1305031102.160407"),
+        ("1305031102.211214", "1305031102.226738"),
+        ("1305031102.275326", "1305031102.262886"),
+    ]
+    rgb_lines = [
+        "# color images",
+        "# file: 'rgbd_dataset_freiburg1_xyz.bag'",
+        "# timestamp filename",
+    ]
+    depth_lines = [
+        "# depth maps",
+        "# file: 'rgbd_dataset_freiburg1_xyz.bag'",
+        "# timestamp filename",
+    ]
+    for index, (rgb_stamp, depth_stamp) in enumerate(stamps):
+        shutil.copy(TUM / "color" / f"{index:06d}.png", root / "rgb" / f"{rgb_stamp}.png")
+        shutil.copy(TUM / "depth" / f"{index:06d}.png", root / "depth" / f"{depth_stamp}.png")
+        rgb_lines.append(f"{rgb_stamp} rgb/{rgb_stamp}.png")
+        depth_lines.append(f"{depth_stamp} depth/{depth_stamp}.png")
+    depth_lines.append("1305031109.000000 depth/unpaired.png")  # no colour near it: skipped
+    (root / "rgb.txt").write_text("\n".join(rgb_lines) + "\n")
+    (root / "depth.txt").write_text("\n".join(depth_lines) + "\n")
+    return stamps
+
+
+def test_tum_layout(rgbd: Path, tmp_path: Path) -> None:
+    stamps = _build_tum_folder(tmp_path / "fr1")
+    frames = list(iter_image_frames(tmp_path / "fr1", "tum"))
+    assert [frame.timestamp_ns for frame in frames] == [
+        int(rgb.replace(".", "")) * 1000 for rgb, _ in stamps
+    ]
+    intrinsics = frames[0].intrinsics
+    assert (intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy) == (
+        517.3,
+        516.5,
+        318.6,
+        255.3,
+    )
+    for index, frame in enumerate(frames):
+        raw = cv2.imread(str(TUM / "depth" / f"{index:06d}.png"), cv2.IMREAD_UNCHANGED)
+        np.testing.assert_array_equal(frame.depth, np.rint(raw / 5.0).astype(np.uint16))
+
+
+def test_record_images_cli_writes_a_readable_recording(rgbd: Path, tmp_path: Path) -> None:
+    out = tmp_path / "lab.mcap"
+    assert (
+        run_cli(
+            "images",
+            "--format",
+            "redwood",
+            str(rgbd / "rtabmap_rgbd_test"),
+            "--out",
+            str(out),
+            "--fx",
+            "530",
+        )
+        == 0
+    )
+    imported = list(iter_image_frames(rgbd / "rtabmap_rgbd_test", "redwood"))
+    recorded = list(read_frames(out))
+    assert len(recorded) == len(imported) == 2
+    for original, copy in zip(imported, recorded, strict=True):
+        np.testing.assert_array_equal(copy.color, original.color)
+        np.testing.assert_array_equal(copy.depth, original.depth)
+        assert copy.intrinsics.fx == 530 and copy.intrinsics.fy == 525
+
+
+def test_record_images_cli_tum_depth_scale_override(rgbd: Path, tmp_path: Path) -> None:
+    _build_tum_folder(tmp_path / "fr1")
+    out = tmp_path / "fr1.mcap"
+    assert (
+        run_cli(
+            "images",
+            "--format",
+            "tum",
+            str(tmp_path / "fr1"),
+            "--out",
+            str(out),
+            "--depth-scale",
+            "1000",
+        )
+        == 0
+    )
+    raw = cv2.imread(str(TUM / "depth" / "000000.png"), cv2.IMREAD_UNCHANGED)
+    np.testing.assert_array_equal(next(read_frames(out)).depth, raw)
+
+
+def test_unpaired_and_missing_files_are_clear_errors(rgbd: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "redwood"
+    shutil.copytree(rgbd / "rtabmap_rgbd_test", folder)
+    (folder / "depth" / "000154.png").unlink()
+    with pytest.raises(RecordingError, match=r"000154\.jpg: no matching depth image"):
+        list(iter_image_frames(folder, "redwood"))
+    with pytest.raises(RecordingError, match=r"rgb\.txt: missing"):
+        list(iter_image_frames(folder, "tum"))
+    with pytest.raises(RecordingError, match="not a directory"):
+        list(iter_image_frames(tmp_path / "nothing", "redwood"))
+    (folder / "depth" / "000017.png").write_bytes(b"not a png")
+    (folder / "color" / "000154.jpg").unlink()
+    with pytest.raises(RecordingError, match=r"000017\.png: frame 0: cannot read depth"):
+        list(iter_image_frames(folder, "redwood"))
+    assert (
+        run_cli("images", "--format", "redwood", str(folder), "--out", str(tmp_path / "x.mcap"))
+        == 2
+    )

@@ -1,0 +1,75 @@
+"""Zenoh configuration: secure defaults, pass-through files, router rendezvous on loopback."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from services.plumbing.session import (
+    DEFAULT_ENDPOINT,
+    ZenohSetupError,
+    client_config,
+    router_config,
+)
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def setting(config, key: str):
+    return json.loads(config.get_json(key))
+
+
+def test_default_client_config_is_loopback_only_without_scouting() -> None:
+    config = client_config()
+    assert setting(config, "mode") == "client"
+    assert setting(config, "connect/endpoints") == [DEFAULT_ENDPOINT]
+    assert setting(config, "listen/endpoints") == []
+    assert setting(config, "scouting/multicast/enabled") is False
+    assert setting(config, "scouting/gossip/enabled") is False
+
+
+def test_router_config_listens_where_told_only() -> None:
+    config = router_config(["tcp/127.0.0.1:7999"])
+    assert setting(config, "mode") == "router"
+    assert setting(config, "listen/endpoints") == ["tcp/127.0.0.1:7999"]
+    assert setting(config, "scouting/multicast/enabled") is False
+
+
+def test_config_file_passes_through(tmp_path: Path) -> None:
+    path = tmp_path / "site.json5"
+    path.write_text('{ mode: "peer", connect: { endpoints: ["tcp/10.1.2.3:7447"] },\n'
+                    "  // a comment, as json5 allows\n"
+                    '  scouting: { multicast: { enabled: false } } }\n')
+    config = client_config(config_file=path)
+    assert setting(config, "mode") == "peer"
+    assert setting(config, "connect/endpoints") == ["tcp/10.1.2.3:7447"]
+    overridden = client_config(["tcp/127.0.0.1:1234"], config_file=path)
+    assert setting(overridden, "connect/endpoints") == ["tcp/127.0.0.1:1234"]
+
+
+def test_missing_or_bad_config_file_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(ZenohSetupError, match="no such file"):
+        client_config(config_file=tmp_path / "absent.json5")
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ mode: ")
+    with pytest.raises(ZenohSetupError, match=r"bad\.json5"):
+        client_config(config_file=bad)
+
+
+@pytest.mark.parametrize("path", sorted((REPO_ROOT / "config").rglob("*.json5")),
+                         ids=lambda path: str(path.relative_to(REPO_ROOT / "config")))
+def test_every_shipped_config_keeps_gngdt_bounds(path: Path) -> None:
+    import json
+
+    import zenoh
+
+    from services.plumbing.session import BLOCKED_CLIENT_CUTOFF_US, MAX_MESSAGE_BYTES
+
+    config = zenoh.Config.from_file(str(path))
+    rx = json.loads(config.get_json("transport/link/rx"))
+    assert rx["max_message_size"] == MAX_MESSAGE_BYTES
+    if json.loads(config.get_json("mode")) == "router" or "router" in path.name:
+        block = json.loads(config.get_json("transport/link/tx/queue/congestion_control/block"))
+        assert block["wait_before_close"] == BLOCKED_CLIENT_CUTOFF_US
