@@ -39,6 +39,8 @@ def open_source(spec: str | Path, fmt: str | None = None,
         if kind.scheme and kind.scheme == scheme:
             return kind(text)
     path = Path(spec)
+    if not path.exists():
+        raise RecordingError(path, None, "no such file or folder")
     if fmt in FORMATS or (fmt is None and path.is_dir()):
         return ImageFolderSource(path, fmt or _folder_layout(path), options)
     check_recording(path)  # says why it is no recording: missing, empty, another kind of file
