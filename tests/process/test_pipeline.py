@@ -312,7 +312,7 @@ def test_run_reports_a_failed_service_with_its_error(
     )
     assert completed.returncode == 1, completed.stdout + completed.stderr
     assert "learn failed" in completed.stderr
-    assert "not a gngdt checkpoint" in completed.stderr
+    assert "broken.npz: not a zip (.npz) archive" in completed.stderr
 
 
 @pytest.mark.parametrize(("content", "reason"), [
