@@ -12,6 +12,8 @@ WORKDIR /app
 COPY pyproject.toml README.md LICENSE ./
 COPY gngdt_core ./gngdt_core
 COPY schemas ./schemas
+COPY gngdt_io ./gngdt_io
+COPY gngdt_eval ./gngdt_eval
 COPY services ./services
 COPY config ./config
 RUN pip install . \

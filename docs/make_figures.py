@@ -27,8 +27,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger("make_figures")
 
-#: learning steps per frame: as `tests/test_pipeline.py` runs data2 (`gngdt run --samples-per-frame
-#: 40000`); at the live default (10000) the 30 frames leave the normal topology visibly young
+#: learning steps per frame: as `tests/process/test_pipeline.py` runs data2 (`gngdt run
+#: --samples-per-frame 40000`); at the live default (10000) the 30 frames leave the normal
+#: topology visibly young
 SAMPLES_PER_FRAME = 40_000
 #: colours in the saved PNG (a palette image keeps the file small)
 PNG_COLOURS = 256

@@ -2,7 +2,7 @@
 
 Usage: ``python -m schemas.generate [--out DIR]``. Runs protoc from grpcio-tools, so nothing beyond
 the test dependencies is needed. The bindings are checked in so that users need no protoc;
-``tests/test_schemas.py`` fails when they drift from the .proto files.
+``tests/unit/test_schemas.py`` fails when they drift from the .proto files.
 """
 
 from __future__ import annotations

@@ -35,7 +35,7 @@ __all__ = [
 ]
 
 #: What a GNG-DT learner can send, enforced before anything is allocated: a node keeps at most
-#: 16 neighbours (``gngdt_core._kernels.MAX_DEGREE``), so an edge set holds at most 8 edges a
+#: 16 neighbours (``gngdt_core.kernels.layout.MAX_DEGREE``), so an edge set holds at most 8 edges a
 #: node; a learner publishes a handful of named edge sets and clusterings.
 MAX_TOPOLOGY_NODES = 1_000_000
 MAX_EDGES_PER_NODE = 8

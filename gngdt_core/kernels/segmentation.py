@@ -1,7 +1,7 @@
 """Numba kernels over a learned network: fresh normals, property bits, nearest-node labelling;
 and over a depth image: veil pixels.
 
-They read the estimator's arrays (layout in `_kernels`) and write only their outputs; the
+They read the estimator's arrays (layout in `kernels.layout`) and write only their outputs; the
 learning loop never calls them.
 """
 

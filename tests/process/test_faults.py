@@ -1,7 +1,7 @@
 """Faults with real processes on loopback: torn checkpoints refused by a running learner's
 start-up, a logger killed outright leaves a readable .rrd and its restart does not clobber it,
 and every service reconnects after a router restart. (kill -9 of the learner and its resume
-from the checkpoint: tests/test_pipeline.py.)"""
+from the checkpoint: tests/process/test_pipeline.py.)"""
 
 from __future__ import annotations
 

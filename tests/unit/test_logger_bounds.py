@@ -117,10 +117,10 @@ def test_topologies_beyond_what_a_learner_sends_are_refused(payload: bytes, matc
 
 
 def test_the_edge_limit_is_what_the_kernel_can_hold() -> None:
-    from gngdt_core.kernels import layout as _kernels
+    from gngdt_core.kernels import layout
     from schemas.topology import MAX_EDGES_PER_NODE, decode_topology
 
-    assert MAX_EDGES_PER_NODE == _kernels.MAX_DEGREE // 2
+    assert MAX_EDGES_PER_NODE == layout.MAX_DEGREE // 2
     assert decode_topology(_topology(100, edges_per_node=8)).node_count == 100
 
 
