@@ -101,8 +101,6 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     (``segmentation.md``, ``segmentation.json``, ``segmentation_<frame>.png``); returns the
     report's data."""
     from gngdt_eval.open3d_peer import Open3DPeer, load_open3d
-    from gngdt_eval.progress import ProgressBar
-    from gngdt_eval.segment_scores import score_frame
     from gngdt_io.profiles import load_sensor_profile
     from gngdt_io.segment_frames import make_segmenter, organized_frames, segment_frames
     from gngdt_io.sources import open_source
@@ -120,42 +118,20 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     log.info("%s: %d frames, methods: %s", set_dir, len(frames),
              ", ".join(method_name(mode) for mode in settings.modes))
 
-    methods: dict[str, dict[str, Any]] = {}
-    predictions: dict[str, dict[int, np.ndarray]] = {}
-
-    def run(method: str, labelled: Iterator[tuple[np.ndarray, dict[str, float], dict]]) -> None:
-        bar = ProgressBar(len(frames), method) if progress else None
-        records, scores, drawn_labels = [], [], {}
-        for index, (labels, milliseconds, extra) in enumerate(labelled):
-            kept = frames[index]
-            score = score_frame(kept.truth, labels, kept.valid)
-            scores.append(score)
-            records.append({"name": kept.name, "mean_best_iou": score.mean_best_iou,
-                            **{recall_key(t): score.recall(t) for t in RECALL_THRESHOLDS},
-                            "truth_segments": len(score.best_iou),
-                            "segments": score.n_predicted, "best_iou": score.best_iou,
-                            "milliseconds": milliseconds, **extra})
-            if index in drawn:
-                drawn_labels[index] = labels
-            if bar:
-                bar.advance()
-        if bar:
-            bar.close()
-        methods[method] = _method_summary(scores, records)
-        predictions[method] = drawn_labels
+    runs = _MethodRuns(frames, drawn, progress)
 
     for mode in settings.modes:
         segmenter = make_segmenter(profile, settings.seed)
         items = _limited(segment_frames(source, segmenter, mode == "independent"),
                          settings.max_frames)
-        run(method_name(mode), ((item.result.labels, item.milliseconds,
+        runs.run(method_name(mode), ((item.result.labels, item.milliseconds,
                                  {"nodes": item.result.n_nodes, "steps": item.result.steps})
                                 for item in items))
 
     open3d, peer_note = load_open3d() if settings.peer else (None, "not requested (--no-peer)")
     if open3d is not None:
         peer = Open3DPeer(open3d, settings.peer_params)
-        run(PEER, _peer_labels(peer, _limited(organized_frames(source), settings.max_frames)))
+        runs.run(PEER, _peer_labels(peer, _limited(organized_frames(source), settings.max_frames)))
     else:
         log.warning("the peer was not run: %s", peer_note)
 
@@ -163,6 +139,7 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
                                                       settings.max_frames)):
         if index in drawn:
             frames[index].color = frame.color
+    methods, predictions = runs.methods, runs.predictions
     data = {
         "set": str(set_dir), "frames": len(frames), "format": source.format,
         "intrinsics_from": source.camera_note,
@@ -181,6 +158,43 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     data["wall_seconds"] = time.perf_counter() - started
     write_report(out, "segmentation", _markdown(data), data)
     return data
+
+
+class _MethodRuns:
+    """Each method's labels of every frame, scored (``methods``: summary and per-frame records),
+    and the labels of the frames drawn (``predictions``)."""
+
+    def __init__(self, frames: list[_Frame], drawn: set[int], progress: bool) -> None:
+        self.frames = frames
+        self.drawn = drawn
+        self.progress = progress
+        self.methods: dict[str, dict[str, Any]] = {}
+        self.predictions: dict[str, dict[int, np.ndarray]] = {}
+
+    def run(self, method: str,
+            labelled: Iterator[tuple[np.ndarray, dict[str, float], dict]]) -> None:
+        from gngdt_eval.progress import ProgressBar
+        from gngdt_eval.segment_scores import score_frame
+
+        bar = ProgressBar(len(self.frames), method) if self.progress else None
+        records, scores, drawn_labels = [], [], {}
+        for index, (labels, milliseconds, extra) in enumerate(labelled):
+            kept = self.frames[index]
+            score = score_frame(kept.truth, labels, kept.valid)
+            scores.append(score)
+            records.append({"name": kept.name, "mean_best_iou": score.mean_best_iou,
+                            **{recall_key(t): score.recall(t) for t in RECALL_THRESHOLDS},
+                            "truth_segments": len(score.best_iou),
+                            "segments": score.n_predicted, "best_iou": score.best_iou,
+                            "milliseconds": milliseconds, **extra})
+            if index in self.drawn:
+                drawn_labels[index] = labels
+            if bar:
+                bar.advance()
+        if bar:
+            bar.close()
+        self.methods[method] = _method_summary(scores, records)
+        self.predictions[method] = drawn_labels
 
 
 def _peer_labels(peer: Any, items: Iterator[tuple[str, Any, np.ndarray, float]]
