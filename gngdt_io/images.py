@@ -179,29 +179,50 @@ def _read_tum_list(path: Path) -> list[tuple[int, Path]]:
     return entries
 
 
+def associate(first: list[int], second: list[int], max_difference: int) -> list[tuple[int, int]]:
+    """Index pairs (i, j) of two stamp lists as TUM's ``associate.py`` pairs them: every pair
+    closer than ``max_difference`` is a candidate, the closest pairs are taken first, and each
+    stamp is used at most once. Sorted by ``i``.
+
+    first, second: stamps (any integer unit, e.g. ns); ``second`` sorted ascending.
+    """
+    candidates = []
+    for i, stamp in enumerate(first):
+        j = bisect_left(second, stamp - max_difference + 1)
+        while j < len(second) and second[j] < stamp + max_difference:
+            candidates.append((abs(second[j] - stamp), i, j))
+            j += 1
+    candidates.sort()
+    used_first, used_second, pairs = set(), set(), []
+    for _, i, j in candidates:
+        if i not in used_first and j not in used_second:
+            used_first.add(i)
+            used_second.add(j)
+            pairs.append((i, j))
+    return sorted(pairs)
+
+
 def _pairs_tum(directory: Path) -> list[_ImagePair]:
+    """Colour and depth images of a TUM folder paired by `associate`; unpaired colour images
+    are dropped (said once, by `iter_image_frames`)."""
     colors = sorted(_read_tum_list(directory / "rgb.txt"))
     depths = sorted(_read_tum_list(directory / "depth.txt"))
-    depth_stamps = [stamp for stamp, _ in depths]
-    max_difference_ns = int(TUM_MAX_DIFFERENCE_S * 1e9)
-    pairs, used = [], set()
-    for stamp, color in colors:
-        position = bisect_left(depth_stamps, stamp)
-        candidates = [i for i in (position - 1, position) if 0 <= i < len(depths)]
-        best = min(candidates, key=lambda i: abs(depth_stamps[i] - stamp), default=None)
-        if best is None or best in used or abs(depth_stamps[best] - stamp) > max_difference_ns:
-            continue
-        used.add(best)
-        pairs.append(_ImagePair(stamp, color, depths[best][1]))
-    skipped = len(colors) - len(pairs)
-    if skipped:
-        logger.info(
-            "%s: %d colour images have no depth within %.0f ms; skipped",
-            directory,
-            skipped,
-            TUM_MAX_DIFFERENCE_S * 1e3,
-        )
-    return pairs
+    pairs = associate([stamp for stamp, _ in colors], [stamp for stamp, _ in depths],
+                      round(TUM_MAX_DIFFERENCE_S * 1e9))
+    return [_ImagePair(colors[i][0], colors[i][1], depths[j][1]) for i, j in pairs]
+
+
+def _unpaired_note(directory: Path, fmt: str, pairs: list[_ImagePair]) -> str:
+    """What `_pairs_tum` left out, for people (``""``: nothing)."""
+    if fmt != "tum":
+        return ""
+    colors = len(_read_tum_list(directory / "rgb.txt"))
+    depths = len(_read_tum_list(directory / "depth.txt"))
+    if len(pairs) == colors:
+        return ""
+    return (f"{directory}: {colors - len(pairs)} of {colors} colour images have no depth image "
+            f"of their own within {TUM_MAX_DIFFERENCE_S * 1e3:.0f} ms ({depths} depth images; "
+            "closest pairs first, each image used once, as TUM's associate.py); left out")
 
 
 def _pairs_pcl_tiff(directory: Path) -> list[_ImagePair]:
@@ -322,6 +343,9 @@ def iter_image_frames(
             raise ValueError(f"depth_scale must be positive, got {depth_scale}")
         camera = replace(camera, depth_scale=float(depth_scale))
     pairs = _image_pairs(directory, fmt, fps)
+    note = _unpaired_note(directory, fmt, pairs)
+    if note:
+        logger.warning("%s", note)
     for index, pair in enumerate(pairs):
         color = _load_color(pair.color, index)
         depth = _load_depth_mm(pair.depth, index, camera.depth_scale)

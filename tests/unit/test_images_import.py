@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import shutil
 from pathlib import Path
 
@@ -179,3 +180,38 @@ def test_unpaired_and_missing_files_are_clear_errors(rgbd: Path, tmp_path: Path)
         run_cli("images", "--format", "redwood", str(folder), "--out", str(tmp_path / "x.mcap"))
         == 2
     )
+
+
+def test_tum_pairs_follow_associate_py_closest_pairs_first() -> None:
+    """Colour c1 is nearest to depth d0, which colour c0 also wants: taking each colour's nearest
+    depth in turn loses c1's frame; TUM's associate.py takes the closest pair (c1, d0) first and
+    still pairs c0 with d1 (19 ms apart, within 20 ms)."""
+    from gngdt_io.images import associate
+
+    ms = 1_000_000
+    colors, depths = [0, 10 * ms], [6 * ms, 19 * ms]
+    assert associate(colors, depths, 20 * ms) == [(0, 1), (1, 0)]
+    assert associate(colors, depths, 10 * ms) == [(1, 0)]  # (c0, d1) is 19 ms apart
+    assert associate([0, 5, 9], [1, 8, 100], 3) == [(0, 0), (2, 1)]  # each image used once
+
+
+def test_a_tum_colour_image_without_depth_is_said_once(tmp_path: Path, caplog) -> None:
+    folder = tmp_path / "tum"
+    (folder / "rgb").mkdir(parents=True)
+    (folder / "depth").mkdir()
+    color, depth = np.zeros((4, 4, 3), np.uint8), np.full((4, 4), 5000, np.uint16)
+    rgb_lines, depth_lines = [], []
+    for stamp in ("10.000", "10.010", "10.500"):  # the last has no depth near it
+        cv2.imwrite(str(folder / "rgb" / f"{stamp}.png"), color)
+        rgb_lines.append(f"{stamp} rgb/{stamp}.png")
+    for stamp in ("10.006", "10.019"):
+        cv2.imwrite(str(folder / "depth" / f"{stamp}.png"), depth)
+        depth_lines.append(f"{stamp} depth/{stamp}.png")
+    (folder / "rgb.txt").write_text("\n".join(rgb_lines) + "\n")
+    (folder / "depth.txt").write_text("\n".join(depth_lines) + "\n")
+    with caplog.at_level(logging.INFO):
+        frames = list(iter_image_frames(folder, "tum"))
+    assert len(frames) == 2  # both close colour images kept (associate.py's rule)
+    notes = [record for record in caplog.records if "no depth image" in record.getMessage()]
+    assert len(notes) == 1 and notes[0].levelno == logging.WARNING
+    assert "1 of 3 colour images" in notes[0].getMessage()
