@@ -232,10 +232,11 @@ def _add_segmentation(sub: argparse._SubParsersAction) -> None:
                               help="output folder (default: report/<set name>)")
     segmentation.add_argument(
         "--independent", action="store_true",
-        help="gngdt learns every frame from scratch (the default when no mode is given)")
+        help="gngdt learns every frame from scratch")
     segmentation.add_argument(
         "--online", action="store_true",
-        help="gngdt carries one network from frame to frame (both flags: both, side by side)")
+        help="gngdt carries one network from frame to frame, as `gngdt segment` does (the "
+        "default when no mode is given; both flags: both, side by side)")
     segmentation.add_argument("--params", type=Path, metavar="FILE.toml",
                               help="sensor profile (as gngdt segment)")
     segmentation.add_argument("--no-peer", action="store_true", help="do not run the peer")
@@ -371,7 +372,7 @@ def _main_segmentation(args: argparse.Namespace) -> int:
 
     modes = tuple(mode for mode in ("independent", "online") if getattr(args, mode))
     settings = SegmentationEvalSettings(
-        modes=modes or ("independent",), params=args.params, peer=not args.no_peer,
+        modes=modes or ("online",), params=args.params, peer=not args.no_peer,
         figures=args.figures, max_frames=args.max_frames, seed=args.seed,
     )
     out = args.out or Path("report") / args.set_dir.resolve().name

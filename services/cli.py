@@ -34,6 +34,11 @@ EPILOG = """examples:
 """
 
 
+def first_paragraph(text: str) -> str:
+    """The first paragraph of a docstring, on one line (a subcommand's description)."""
+    return " ".join(text.strip().split("\n\n")[0].split())
+
+
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     """Options every subcommand accepts."""
     parser.add_argument(
@@ -44,6 +49,16 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def gngdt_version() -> str:
+    """The installed gngdt's version (its package metadata)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("gngdt")
+    except PackageNotFoundError:  # run from a checkout that was never installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="gngdt",
@@ -51,13 +66,14 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--version", action="version", version=f"gngdt {gngdt_version()}")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         module = importlib.import_module(module_name)
         sub = subparsers.add_parser(
             name,
             help=help_text,
-            description=(module.__doc__ or help_text).strip().splitlines()[0],
+            description=first_paragraph(module.__doc__ or help_text),
             epilog=getattr(module, "EXAMPLES", None),
             formatter_class=argparse.RawDescriptionHelpFormatter,
         )

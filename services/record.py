@@ -98,10 +98,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     images.add_argument("directory", type=Path, metavar="DIR", help="folder with the images")
-    images.add_argument("--format", dest="image_format", choices=FORMATS, required=True,
-                        help="folder layout: tum (rgb/, depth/ and their .txt lists), pcl-tiff "
-                        "(PCL ImageGrabber frame_*_rgb.tiff/_depth.tiff), redwood (rgb/, depth/ "
-                        "PNGs)")
+    images.add_argument("--format", dest="image_format", choices=FORMATS,
+                        help="folder layout (default: detected): tum (rgb.txt and depth.txt "
+                        "listing the images), pcl-tiff (PCL ImageGrabber frame_*_rgb.tiff and "
+                        "frame_*_depth.tiff), redwood (color/ and depth/ PNGs of the same names)")
     images.add_argument("--camera-json", type=Path, metavar="FILE.json",
                         help="camera parameters: fx, fy, cx, cy, depth_scale (and width, height)")
     for name in ("fx", "fy", "cx", "cy"):
@@ -163,12 +163,19 @@ def _synth_frames(args: argparse.Namespace) -> Iterable[Frame]:
     )
 
 
+def image_format(args: argparse.Namespace) -> str:
+    """The folder's layout: ``--format``, else detected (RecordingError when ambiguous)."""
+    from gngdt_io.images import detect_format
+
+    return args.image_format or detect_format(args.directory)
+
+
 def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     from dataclasses import replace
 
     from gngdt_io.images import iter_image_frames, load_camera
 
-    camera = load_camera(args.directory, args.image_format, args.camera_json)
+    camera = load_camera(args.directory, image_format(args), args.camera_json)
     overrides = {
         name: getattr(args, name)
         for name in ("fx", "fy", "cx", "cy", "depth_scale")
@@ -178,7 +185,7 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
         if name != "cx" and name != "cy" and value <= 0:
             raise ValueError(f"--{name.replace('_', '-')} must be positive, got {value}")
     frames = iter_image_frames(
-        args.directory, args.image_format, fps=args.fps, camera=replace(camera, **overrides)
+        args.directory, image_format(args), fps=args.fps, camera=replace(camera, **overrides)
     )
     if args.poses is None:
         return frames
@@ -186,7 +193,7 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     from gngdt_io.pose_files import attach_poses, load_poses
 
     poses = load_poses(args.poses)  # every pose error before the first frame is written
-    count = count_image_frames(args.directory, args.image_format, fps=args.fps)
+    count = count_image_frames(args.directory, image_format(args), fps=args.fps)
     return attach_poses(frames, poses, count)
 
 

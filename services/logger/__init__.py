@@ -1,6 +1,7 @@
-"""Log every gngdt stream (``gngdt/**``) to its outputs: rerun (a .rrd by default, or a viewer)
-and, when asked, an MCAP recording of every stream as it is (``--mcap``); `gngdt_io.outputs`
-has them all behind one interface.
+"""Log every gngdt stream (gngdt/**) to rerun (a .rrd file by default, or a viewer) and, when
+asked, every stream as it is to an MCAP file (--mcap).
+
+The outputs are `gngdt_io.outputs`, behind one interface.
 
 The logger stops on its own once every camera it knows of (from its first message, or from its
 capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of

@@ -67,3 +67,16 @@ def test_sub_subcommands_accept_the_common_options() -> None:
     args = build_parser().parse_args(["record", "synth", "--scene", "data2", "--frames", "1",
                                       "--out", "x.mcap", "--log-level", "DEBUG"])
     assert args.log_level == "DEBUG"
+
+
+def test_descriptions_are_whole_sentences_and_the_version_is_the_packages(capsys) -> None:
+    """A description is the module's first paragraph, never cut mid-sentence; --version says
+    the installed package's version."""
+    from importlib.metadata import version
+
+    for prog, parser in COMMANDS:
+        assert parser.description.rstrip().endswith((".", ")")), f"{prog}: {parser.description}"
+    with pytest.raises(SystemExit) as exit_info:
+        build_parser().parse_args(["--version"])
+    assert exit_info.value.code == 0
+    assert capsys.readouterr().out.strip() == f"gngdt {version('gngdt')}"

@@ -192,7 +192,7 @@ def test_the_report_says_the_peer_was_not_run_without_open3d(
     monkeypatch.setitem(sys.modules, "open3d", None)  # `import open3d` raises ImportError
     out = tmp_path / "report"
     data = run_eval(synthetic_set, out, "--params", str(small_profile), "--figures", "1")
-    check_report(data, out, ["000000", "000001", "000002"], ["gngdt independent"])
+    check_report(data, out, ["000000", "000001", "000002"], ["gngdt online"])  # the default
     assert data["peer"]["run"] is False
     assert "open3d cannot be imported" in data["peer"]["status"]
     assert "pip install -e '.[peers]'" in data["peer"]["status"]
@@ -224,7 +224,7 @@ def test_report_on_real_labelled_frames(tmp_path: Path) -> None:
     for name in ("mosd_learn", "ycbv_0000"):
         out = tmp_path / name
         data = run_eval(LABELLED / name, out, "--max-frames", "2", "--figures", "1")
-        methods = ["gngdt independent"] + (["open3d peer"] if HAS_OPEN3D else [])
+        methods = ["gngdt online"] + (["open3d peer"] if HAS_OPEN3D else [])
         check_report(data, out, ["000000", "000001"], methods)
         assert data["intrinsics_from"].endswith("camera.json")
         expected = 0
@@ -234,5 +234,5 @@ def test_report_on_real_labelled_frames(tmp_path: Path) -> None:
             depth = cv2.imread(str(LABELLED / name / "depth" / f"{stem}.png"),
                                cv2.IMREAD_UNCHANGED)
             expected += len(np.unique(truth[(truth >= 2) & (depth > 0)]))
-        summary = data["methods"]["gngdt independent"]["summary"]
+        summary = data["methods"]["gngdt online"]["summary"]
         assert summary["truth_segments"] == expected > 0
