@@ -71,7 +71,8 @@ class LearnerOptions:
                             "malformed) before anything is allocated")
     settle_max_steps: int = param(2_000_000, Interval(int, 0),
                                   "when the stream ends, learning goes on with its last frame "
-                                  "until the network is settled or this many more steps; 0: "
+                                  "until the network is settled, at most this many more steps "
+                                  "and never more than one frame's (samples_per_frame); 0: "
                                   "never")
     seed: int | None = param(0, Interval(int, 0, optional=True), "random seed of the model")
     ghost_distance_m: float = param(0.05, Interval(float, 0.0, closed="neither"),
@@ -298,19 +299,24 @@ class FrameLearner:
         return LearnedFrame(edges=edges, labels=labels, cluster_ids=cluster_ids,
                             confirmed=confirmed)
 
-    def objects(self, learned: LearnedFrame) -> ObjectSet:
+    def objects(self, learned: LearnedFrame, final: bool = False) -> ObjectSet:
         """One object per confirmed cluster of at least ``min_cluster_size`` nodes of the
-        ``objects_from`` clustering, ids persistent."""
+        ``objects_from`` clustering, ids persistent. ``final``: the stream is over and the network
+        will not change any more, so every cluster of that size is an object, confirmed or not
+        (confirmation only keeps a growing network's flickering fragments out; a stream of a few
+        frames would otherwise end without a single object)."""
         name = self.options.objects_from
         return self._trackers[name].objects(self.model, learned.labels[name],
-                                            learned.cluster_ids[name])
+                                            learned.cluster_ids[name], confirmed_only=not final)
 
     def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
         """Learn the stream's last frame on until the network is settled: the node budget
         reached and eq. 17's position error changing by less than ``SETTLED_CHANGE`` over
-        ``SETTLE_CHUNK`` steps, or ``settle_max_steps`` more steps (0: none). Returns how it
+        ``SETTLE_CHUNK`` steps, or the settling budget spent: ``settle_max_steps``, and never
+        more than a normal frame's share (``samples_per_frame``), so that the last view does not
+        outweigh the stream (a moving camera's map would bend toward it). Returns how it
         stopped (the final status says it, and the logger waits for it)."""
-        limit = self.options.settle_max_steps
+        limit = min(self.options.settle_max_steps, self.options.samples_per_frame)
         model = self.model
         sample = self.placed(positions[self._rng.choice(len(positions),
                                                         min(len(positions), 5_000),
@@ -332,8 +338,8 @@ class FrameLearner:
             if model.n_nodes_ >= model.max_nodes and change < SETTLED_CHANGE:
                 reason = (f"settled after {steps:,} more steps on the last frame: node budget "
                           f"reached, position error changed {change:.2%} over the last {chunk:,}")
-        reason = reason or (f"stopped after {steps:,} more steps on the last frame "
-                            f"(settle_max_steps): {model.n_nodes_} of {model.max_nodes} nodes")
+        reason = reason or (f"stopped after {steps:,} more steps on the last frame (at most a "
+                            f"frame's): {model.n_nodes_} of {model.max_nodes} nodes")
         self.counters.add_learning(time.perf_counter() - started, steps)
         self.last_segmentation = None
         self.ghosts = self.measure_ghosts(positions, self.last_pose)  # the settled network's

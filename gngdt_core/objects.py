@@ -182,11 +182,16 @@ class ObjectTracker:
         """(K,) int64 persistent id of each label 0..K-1 of this labelling (`ClusterTracker`)."""
         return self.tracker.update(node_ids, labels)
 
-    def objects(self, model: Any, labels: np.ndarray, ids: np.ndarray) -> ObjectSet:
-        """The confirmed clusters of at least ``min_size`` nodes among ``labels`` (the labelling
-        `track` was last given, ``ids`` what it returned) as objects of ``model``."""
+    def objects(self, model: Any, labels: np.ndarray, ids: np.ndarray,
+                confirmed_only: bool = True) -> ObjectSet:
+        """The confirmed clusters (every one when not ``confirmed_only``) of at least
+        ``min_size`` nodes among ``labels`` (the labelling `track` was last given, ``ids`` what
+        it returned) as objects of ``model``."""
+        confirmed = self.tracker.confirmed_
+        if not confirmed_only:
+            confirmed = np.ones_like(confirmed)
         return describe_objects(model.positions_, model.colors_, model.normals_,
-                                object_labels(labels, self.tracker.confirmed_, self.min_size), ids)
+                                object_labels(labels, confirmed, self.min_size), ids)
 
     def update(self, model: Any) -> ObjectSet:
         """The model's objects now (confirmed clusters of at least ``min_size`` nodes); ids

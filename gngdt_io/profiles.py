@@ -65,6 +65,10 @@ class Profile:
         sources.update({f"learner.{name}": source for name in options})
         return Profile(config, sources, self.path)
 
+    def model_value(self, name: str) -> Any:
+        """A GNG-DT parameter's effective value: set, or the constructor's default."""
+        return self.config.model.get(name, _signature_defaults()[name])
+
     def segmenter_schedule(self) -> FrameSchedule:
         """The frame schedule of `gngdt segment`: the profile's, else the defaults with the
         profile's steps per frame."""

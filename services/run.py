@@ -51,6 +51,7 @@ if TYPE_CHECKING:
     import zenoh
 
     from gngdt_io.outputs.rerun_log import DisplayRates
+    from gngdt_io.profiles import Profile
     from schemas.status import LearnerStatusInfo, StreamEndInfo
 
 log = logging.getLogger(__name__)
@@ -300,16 +301,6 @@ def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None)
     return arguments
 
 
-def sensor_veil_ratio(params: Path | None) -> float | None:
-    """The veil ratio of a sensor profile's [frames] table (capture drops those pixels)."""
-    if params is None:
-        return None
-    from gngdt_io.profiles import load_profile
-
-    schedule = load_profile(params).config.schedule
-    return None if schedule is None else schedule.veil_ratio
-
-
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
                      mcap_path: Path | None = None) -> list[str]:
     arguments = rate_arguments(args)
@@ -332,9 +323,10 @@ def file_size(path: Path | None) -> str:
 
 def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
                    destination: str, recorded_frames: int | None = None,
-                   early_end: str = "", outputs: list[str] | None = None) -> str:
+                   early_end: str = "", outputs: list[str] | None = None,
+                   node_budget: int | None = None) -> str:
     """The lines ``run`` prints at the end; ``early_end`` says why the stream ended before the
-    recording did."""
+    recording did; ``node_budget``: the learner's, to say when the network stayed small."""
     sent = str(end.frames_sent) if end else "no end of stream"
     if end and recorded_frames is not None:
         sent += f" of {recorded_frames} in the recording"
@@ -347,7 +339,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
         clusters = ", ".join(f"{name} {count}" for name, count in
                              sorted(status.cluster_counts.items()))
         lines += [
-            f"frames learned:     {status.frames_used} ({status.frames_dropped} dropped, "
+            f"frames learned:     {learned_share(status, end)} ({status.frames_dropped} dropped, "
             f"{status.malformed_messages} malformed)",
             f"learning steps:     {status.steps} ({status.steps_per_second:,.0f} steps/s)",
             f"nodes:              {status.nodes}",
@@ -361,7 +353,43 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
         ]
     lines.append(f"rerun:              {destination}")
     lines += outputs or []
+    lines += [f"WARNING: {warning}" for warning in summary_warnings(status, end, node_budget)]
     return "\n".join(lines)
+
+
+#: below this share of the frames sent, the summary warns that the learner did not keep up
+MIN_LEARNED_SHARE = 0.5
+
+
+def learned_share(status: LearnerStatusInfo, end: StreamEndInfo | None) -> str:
+    """``"37 of 50 sent (74 %)"``, or the count alone without an end of stream."""
+    if end is None or end.frames_sent == 0:
+        return str(status.frames_used)
+    return (f"{status.frames_used} of {end.frames_sent} sent "
+            f"({status.frames_used / end.frames_sent:.0%})")
+
+
+def summary_warnings(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
+                     node_budget: int | None = None) -> list[str]:
+    """What the user should know about how the run learned: a learner that did not keep up,
+    a network that stayed small because the recording was short."""
+    if status is None or end is None or end.frames_sent == 0:
+        return []
+    warnings = []
+    share = status.frames_used / end.frames_sent
+    if share < MIN_LEARNED_SHARE:
+        warnings.append(
+            f"the learner kept up with only {share:.0%} of the frames (latest frame wins: it "
+            "skips what arrives while it learns), so the network saw few views; the machine is "
+            "busy or the frames are large: replay slower (--rate 0.5), cap the clouds "
+            "(--max-points) or learn fewer steps per frame (--samples-per-frame)")
+    if node_budget and status.nodes < node_budget / 2:
+        warnings.append(
+            f"the network has {status.nodes} of its {node_budget} nodes: it grows one node per "
+            f"lambda steps, and it learned {status.steps:,} steps in all ({status.frames_used} "
+            "frames and the settling on the last one); a longer recording or more steps per "
+            "frame (--samples-per-frame) grow it")
+    return warnings
 
 
 def recorded_frames(path: Path) -> int | None:
@@ -376,12 +404,19 @@ def recorded_frames(path: Path) -> int | None:
 
 @dataclass
 class RunPlan:
-    """What a run will write, checked before anything starts."""
+    """What a run will learn with and write, checked before anything starts."""
 
     rates: DisplayRates
-    veil_ratio: float | None
+    #: the learner's parameters, as the learner will read them (a wrong file fails here)
+    profile: Profile
     rrd_path: Path | None
     mcap_path: Path | None
+
+    @property
+    def veil_ratio(self) -> float | None:
+        """The sensor profile's veil ratio (capture drops those pixels), if it has a schedule."""
+        schedule = self.profile.config.schedule
+        return None if schedule is None else schedule.veil_ratio
 
     @property
     def destination(self) -> str:
@@ -396,7 +431,9 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     open_source(args.recording)  # a source capture can read (RecordingError says why not)
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
-    veil_ratio = sensor_veil_ratio(args.params)  # a wrong params file: said before starting
+    from services.learner import profile_from_args
+
+    profile = profile_from_args(args)  # a wrong params file: said before anything starts
     topic(args.cam, "points")  # validates the camera name
     rates = rates_from_args(args)
     mcap_path = unused_rrd_path(args.mcap) if args.mcap else None
@@ -406,7 +443,7 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     if not (args.connect or args.serve):
         rrd_path = unused_rrd_path(args.save or default_rrd_path(args.recording.stem))
         rrd_path.parent.mkdir(parents=True, exist_ok=True)
-    return RunPlan(rates, veil_ratio, rrd_path, mcap_path)
+    return RunPlan(rates, profile, rrd_path, mcap_path)
 
 
 @dataclass
@@ -460,7 +497,8 @@ def report(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome) -> None
     failure = outcome.failure
     try:  # after a SIGHUP the terminal may be gone: nothing more to say then
         print(format_summary(outcome.status, outcome.end, plan.destination,
-                             recorded_frames(args.recording), outcome.early_end, outputs),
+                             recorded_frames(args.recording), outcome.early_end, outputs,
+                             plan.profile.model_value("max_nodes")),
               flush=True)
         if failure is not None:
             print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"

@@ -76,17 +76,14 @@ def profile_from_args(args: argparse.Namespace) -> Profile:
     ValueError naming the file or option that is wrong."""
     from gngdt_io.profiles import load_profile
 
-    options = {
-        "samples_per_frame": args.samples_per_frame,
-        "min_cluster_size": args.min_cluster_size,
-        "checkpoint_every_frames": args.checkpoint_every,
-        "seed": args.seed,
-        "objects_from": args.objects_from,
-        "object_confirm_frames": args.object_confirm_frames,
-        "scene_every_frames": args.scene_every,
-    }
-    return load_profile(args.params).with_overrides({"max_nodes": args.max_nodes}, options,
-                                                    "command line")
+    flags = {"samples_per_frame": "samples_per_frame", "min_cluster_size": "min_cluster_size",
+             "checkpoint_every_frames": "checkpoint_every", "seed": "seed",
+             "objects_from": "objects_from", "object_confirm_frames": "object_confirm_frames",
+             "scene_every_frames": "scene_every"}
+    # `gngdt run` has some of these options (and passes them to its learner), not all
+    options = {name: getattr(args, flag, None) for name, flag in flags.items()}
+    return load_profile(args.params).with_overrides(
+        {"max_nodes": getattr(args, "max_nodes", None)}, options, "command line")
 
 
 def main(args: argparse.Namespace) -> int:

@@ -234,7 +234,7 @@ class LearnerService:
         percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
         status = status_message(learner, stamp, latency_ms, percentiles, topology, settled)
         self._status.put(status.SerializeToString(), attachment=attachment)
-        objects = objects_message(learner, stamp, learner.objects(learned))
+        objects = objects_message(learner, stamp, learner.objects(learned, final=bool(settled)))
         self._objects.put(objects.SerializeToString(), attachment=attachment)
         every = self.options.scene_every_frames
         if every and (settled or learner.counters.frames_used % every == 1 % every):
