@@ -177,13 +177,19 @@ def test_a_profile_with_a_wrong_frames_key_names_it(tmp_path: Path) -> None:
         load_profile(path)
 
 
-def test_settling_stops_at_its_step_limit_and_says_so() -> None:
+@pytest.mark.parametrize(("settle_max_steps", "settled_steps"), [
+    (30_000, 10_000),  # never more than a normal frame's share (samples_per_frame) ...
+    (4_000, 4_000),  # ... nor than settle_max_steps
+])
+def test_settling_stops_at_its_step_limit_and_says_so(settle_max_steps: int,
+                                                      settled_steps: int) -> None:
     config = load_profile(None).config
     config = replace(config, model={**config.model, "max_nodes": 5000},  # a budget it cannot
-                     options=replace(config.options, settle_max_steps=30_000))  # reach in time
+                     options=replace(config.options, samples_per_frame=10_000,  # reach in time
+                                     settle_max_steps=settle_max_steps))
     learner = FrameLearner("camera", config)
     positions, colors = frame_clouds("tabletop_small.mcap", 1)[0]
     learner.learn(positions, colors)
     reason = learner.settle(positions, colors)
-    assert reason.startswith("stopped after 30,000 more steps"), reason
-    assert learner.model.n_steps_ == config.options.samples_per_frame + 30_000
+    assert reason.startswith(f"stopped after {settled_steps:,} more steps"), reason
+    assert learner.model.n_steps_ == 10_000 + settled_steps
