@@ -99,14 +99,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--samples-per-frame", type=int, help="learning steps per frame")
     parser.add_argument("--max-nodes", type=int, help="learner node budget")
     parser.add_argument("--startup-timeout", type=float, default=60.0, metavar="SECONDS",
-                        help="how long the learner and logger may take to come up (default 60)")
+                        help="while the learner and logger come up (the first run on a machine "
+                        "compiles kernels: 15-40 s, longer on a busy one), give up on one only "
+                        "when it shows no progress, no CPU time used and nothing logged, for "
+                        "this long (default 60)")
     parser.add_argument("--drain-timeout", type=float, default=30.0, metavar="SECONDS",
                         help="after the stream ends, how long learner and logger may take to "
                         "finish before they are interrupted (default 30)")
     add_rate_arguments(parser)
 
 
-@dataclass
+@dataclass(eq=False)  # a process: equal only to itself (and hashable)
 class Child:
     """One service process; its stderr goes to a file whose tail is shown when it fails."""
 
@@ -278,6 +281,62 @@ def wait_until(condition, timeout_s: float, stop: threading.Event, pipeline: Pip
             return True
         time.sleep(0.05)
     return bool(condition())
+
+
+class StartupProgress:
+    """Whether a starting child is making progress: the CPU time it used, the lines it logged
+    (its start-up steps, e.g. "compiling kernels 2/4", are shown as they come)."""
+
+    def __init__(self, child: Child) -> None:
+        self.child = child
+        self.cpu_ticks = -1
+        self.log_bytes = 0
+        self.last_progress = time.monotonic()
+
+    def advanced(self) -> bool:
+        """Did the child use CPU or log anything since the last call? New start-up steps in its
+        log are shown."""
+        ticks = cpu_ticks(self.child.process.pid)
+        size = self.child.stderr_path.stat().st_size if self.child.stderr_path.exists() else 0
+        moved = ticks != self.cpu_ticks or size != self.log_bytes
+        if size > self.log_bytes:
+            with open(self.child.stderr_path, "rb") as file:
+                file.seek(self.log_bytes)
+                for line in file.read(size - self.log_bytes).decode(errors="replace").splitlines():
+                    if lifecycle.STARTUP_PROGRESS in line:
+                        log.info("%s: %s", self.child.name,
+                                 line[line.index(lifecycle.STARTUP_PROGRESS):])
+        self.cpu_ticks, self.log_bytes = ticks, size
+        if moved:
+            self.last_progress = time.monotonic()
+        return moved
+
+
+def cpu_ticks(pid: int) -> int:
+    """CPU time a process has used (user + system, in clock ticks; Linux /proc), -1 if gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return -1
+    return int(fields[11]) + int(fields[12])
+
+
+def wait_for_startup(starting: dict[Child, str], observed: Observed, silence_s: float,
+                     stop: threading.Event, pipeline: Pipeline) -> Child | None:
+    """Wait until every child in ``starting`` has declared its liveliness token, as long as each
+    keeps making progress; the first child silent for ``silence_s`` (None: all came up, or a
+    stop signal or a failed child ended the wait)."""
+    progress = {child: StartupProgress(child) for child in starting}
+    while not stop.is_set() and pipeline.failed() is None:
+        waiting = [child for child, token in starting.items() if not observed.has_alive(token)]
+        if not waiting:
+            return None
+        for child in waiting:
+            watch = progress[child]
+            if not watch.advanced() and time.monotonic() - watch.last_progress > silence_s:
+                return child
+        time.sleep(0.1)
+    return None
 
 
 def learner_arguments(args: argparse.Namespace) -> list[str]:
@@ -541,17 +600,17 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
               veil_ratio: float | None = None, mcap_path: Path | None = None) -> str:
     """Start the services and see the stream through; why it ended early, or ``""``."""
     log.info("starting the learner and the logger (the first run on a machine compiles the "
-             "learning kernels, ~20 s)")
+             "learning kernels: 15-40 s, longer on a busy machine; later runs take seconds)")
     learner = pipeline.start("learn", learner_arguments(args))
     logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
-    ready = wait_until(
-        lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
-        and observed.has_alive(LIVELINESS_KEY),
-        args.startup_timeout, stop, pipeline)
+    starting = {learner: f"gngdt/{args.cam}/learner/alive", logger: LIVELINESS_KEY}
+    silent = wait_for_startup(starting, observed, args.startup_timeout, stop, pipeline)
+    ready = not silent and not stop.is_set() and pipeline.failed() is None
     early_end = ""
-    if not ready and not stop.is_set() and pipeline.failed() is None:
-        log.error("learner and logger did not come up within %.0f s; their logs: %s",
-                  args.startup_timeout, pipeline.log_dir)
+    if silent:
+        log.error("the %s shows no progress: no CPU time used and nothing logged for %.0f s "
+                  "while starting (a hung process?); its log: %s", silent.name,
+                  args.startup_timeout, silent.stderr_path)
         pipeline.interrupt_all()
         for child in pipeline.children:
             child.stop(args.drain_timeout)

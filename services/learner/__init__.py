@@ -110,7 +110,7 @@ def main(args: argparse.Namespace) -> int:
             learner = FrameLearner(args.cam, config)
         started = time.monotonic()
         log.info("preparing the learning kernels (the first run on a machine compiles them "
-                 "with numba, ~20 s; later runs load them from its cache)")
+                 "with numba, 15-40 s; later runs load them from its cache in under a second)")
         warm_up(config)
         log.info("kernels ready in %.1f s", time.monotonic() - started)
         try:

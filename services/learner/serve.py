@@ -336,23 +336,19 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner
 
 
 def warm_up(config: LearnerConfig) -> None:
-    """Run every model and message operation once on random points, so that numba compiles (or
-    loads its cache) and modules load before the first frame instead of adding to its latency."""
-    from gngdt_core.model import GNGDT
+    """Compile (or load from numba's cache) every kernel the learner uses and encode each
+    message once, before the first frame, logging each step (`gngdt run` shows them)."""
+    from gngdt_core.warm_up import warm_up_learner
 
-    rng = np.random.default_rng(0)
-    positions = rng.random((500, 3), dtype=np.float32)
-    colors = rng.integers(0, 256, (500, 3), dtype=np.uint8)
-    positions[:, 2] += 1.0  # in front of the camera, as a depth camera's points are
-    model = GNGDT(**{**config.model, "random_state": 0})
-    pose = np.eye(4)
-    pose[:3, 3] = 0.1
-    model.partial_fit(positions, colors, n_steps=2_000, camera_pose=pose)
-    model.quantization_error(positions, colors)
-    learner = FrameLearner("warm-up", config, model=model)
-    learner.measure_ghosts(positions, pose)
+    learner = warm_up_learner(config, log_compile_progress)
     learned = learner.learned_frame()
     stamp = FrameStamp(0, 1)
     topology_message(learner, stamp, {}, learned)
     objects_message(learner, stamp, learner.objects(learned))
     scene_message(learner, stamp, learned)
+
+
+def log_compile_progress(done: int, total: int, what: str) -> None:
+    """One log line per kernel group (`gngdt_core.warm_up.Progress`)."""
+    if done < total:
+        log.info("%s %d/%d: %s", lifecycle.STARTUP_PROGRESS, done + 1, total, what)
