@@ -10,14 +10,30 @@ progress instead of silence.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig
+if TYPE_CHECKING:  # light module: the kernels load when a warm-up runs
+    from gngdt_core.frame_learner import FrameLearner, LearnerConfig
+    from gngdt_core.frame_segmenter import FrameSegmenter
 
 #: progress(done, total, what): called before each group, and once at the end (done == total)
 Progress = Callable[[int, int, str], None]
+#: how each step is logged (`logged_progress`); `gngdt run` looks for it in a service's log
+PROGRESS_PHRASE = "compiling kernels"
+
+
+def logged_progress(logger: logging.Logger) -> Progress:
+    """A `Progress` that logs each step at INFO: ``compiling kernels 2/4: nearest nodes``."""
+
+    def progress(done: int, total: int, what: str) -> None:
+        if done < total:
+            logger.info("%s %d/%d: %s", PROGRESS_PHRASE, done + 1, total, what)
+
+    return progress
 
 
 def sample_frame(count: int = 500, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -36,6 +52,8 @@ def sample_frame(count: int = 500, seed: int = 0) -> tuple[np.ndarray, np.ndarra
 def warm_up_learner(config: LearnerConfig, progress: Progress | None = None) -> FrameLearner:
     """Run every kernel the learner's per-frame policy uses once on random points; returns the
     throw-away learner (its messages can be warmed up with it)."""
+    from gngdt_core.frame_learner import FrameLearner
+
     positions, colors, pose = sample_frame()
     learner = FrameLearner("warm-up", config)
     groups: list[tuple[str, Callable[[], object]]] = [
@@ -57,3 +75,28 @@ def run_groups(groups: list[tuple[str, Callable[[], object]]],
         call()
     if progress is not None:
         progress(len(groups), len(groups), "done")
+
+
+def sample_organized_frame(height: int = 60, width: int = 80
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """A small organized frame as a depth camera gives it: points (H, W, 3) float32 metres of a
+    table 1 m away with a box on it (NaN in one corner: no depth), colors (H, W, 3) uint8."""
+    rows, columns = np.mgrid[0:height, 0:width].astype(np.float32)
+    depth = np.full((height, width), 1.0, dtype=np.float32) + rows / height * 0.3
+    box = (slice(height // 3, 2 * height // 3), slice(width // 3, 2 * width // 3))
+    depth[box] -= 0.1
+    points = np.stack([(columns - width / 2) / width * depth, (rows - height / 2) / width * depth,
+                       depth], axis=-1)
+    points[:5, :5] = np.nan
+    colors = np.full((height, width, 3), 120, dtype=np.uint8)
+    colors[box] = (200, 40, 40)
+    return points, colors
+
+
+def warm_up_segmenter(segmenter: FrameSegmenter, progress: Progress | None = None) -> None:
+    """Run every kernel a frame segmenter uses once, on a small frame (``segmenter`` is used up:
+    pass one made for the purpose)."""
+    points, colors = sample_organized_frame()
+    run_groups([("learning, segmentation and pixel labels",
+                 lambda: segmenter.segment_frame(points, colors)),
+                ("streamed frames", lambda: segmenter.segment_frame(points, colors))], progress)

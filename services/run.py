@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
+from gngdt_core.warm_up import PROGRESS_PHRASE
 from gngdt_io.outputs.rerun_output import (
     add_rate_arguments,
     add_serve_arguments,
@@ -303,9 +304,9 @@ class StartupProgress:
             with open(self.child.stderr_path, "rb") as file:
                 file.seek(self.log_bytes)
                 for line in file.read(size - self.log_bytes).decode(errors="replace").splitlines():
-                    if lifecycle.STARTUP_PROGRESS in line:
+                    if PROGRESS_PHRASE in line:
                         log.info("%s: %s", self.child.name,
-                                 line[line.index(lifecycle.STARTUP_PROGRESS):])
+                                 line[line.index(PROGRESS_PHRASE):])
         self.cpu_ticks, self.log_bytes = ticks, size
         if moved:
             self.last_progress = time.monotonic()

@@ -338,17 +338,11 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner
 def warm_up(config: LearnerConfig) -> None:
     """Compile (or load from numba's cache) every kernel the learner uses and encode each
     message once, before the first frame, logging each step (`gngdt run` shows them)."""
-    from gngdt_core.warm_up import warm_up_learner
+    from gngdt_core.warm_up import logged_progress, warm_up_learner
 
-    learner = warm_up_learner(config, log_compile_progress)
+    learner = warm_up_learner(config, logged_progress(log))
     learned = learner.learned_frame()
     stamp = FrameStamp(0, 1)
     topology_message(learner, stamp, {}, learned)
     objects_message(learner, stamp, learner.objects(learned))
     scene_message(learner, stamp, learned)
-
-
-def log_compile_progress(done: int, total: int, what: str) -> None:
-    """One log line per kernel group (`gngdt_core.warm_up.Progress`)."""
-    if done < total:
-        log.info("%s %d/%d: %s", lifecycle.STARTUP_PROGRESS, done + 1, total, what)

@@ -18,9 +18,6 @@ import sys
 import threading
 from collections.abc import Iterator
 
-#: what a service logs for each step of a long start-up (compiling kernels); `gngdt run` shows
-#: these lines while it waits for the service
-STARTUP_PROGRESS = "compiling kernels"
 #: set by the first stop signal; every service loop polls it
 STOP = threading.Event()
 #: names the parent a child of `gngdt run` must not outlive (its pid)

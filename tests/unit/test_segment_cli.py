@@ -4,6 +4,7 @@ frames (../shared), bad input named and nothing half-written, profiles validated
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 
@@ -91,12 +92,17 @@ def check_outputs(out: Path, names: list[str], depths: list[np.ndarray]) -> dict
 
 
 def test_segment_a_recording_online_and_independent(
-        tmp_path: Path, small_profile: Path, recorded_frames: list, capsys) -> None:
+        tmp_path: Path, small_profile: Path, recorded_frames: list, capsys, caplog) -> None:
     depths = [frame.depth for frame in recorded_frames]
     names = [f"{index:06d}" for index in range(len(depths))]
     out = tmp_path / "online"
-    assert gngdt(["segment", str(SMALL_RECORDING), "--out", str(out),
-                  "--params", str(small_profile)]) == 0
+    with caplog.at_level(logging.INFO):
+        assert gngdt(["segment", str(SMALL_RECORDING), "--out", str(out),
+                      "--params", str(small_profile)]) == 0
+    # the kernels are compiled (or loaded) before the first frame, step by step, and that time
+    # is reported apart from the frames'
+    assert "compiling kernels 1/2: learning, segmentation and pixel labels" in caplog.text
+    assert caplog.text.index("compiling kernels") < caplog.text.index("frame 1/10")
     summary = check_outputs(out, names, depths)
     assert summary["mode"] == "online" and summary["format"] == "mcap"
     assert [entry["steps"] for entry in summary["per_frame"]] == [20000] + [4000] * 9
@@ -105,6 +111,7 @@ def test_segment_a_recording_online_and_independent(
     assert summary["parameters"]["profile"] == str(small_profile)
     assert all(0 < entry["nodes"] <= 400 for entry in summary["per_frame"])
     assert summary["milliseconds"]["total"]["p90"] >= summary["milliseconds"]["total"]["p50"]
+    assert summary["compile_seconds"] > 0
     assert "wrote 10 label images" in capsys.readouterr().out
 
     out = tmp_path / "independent"
