@@ -14,6 +14,7 @@ import numpy as np
 from gngdt_core.geometry import CameraIntrinsics
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import Frame
+from gngdt_io.images import CameraParameters
 from gngdt_io.mcap_decoding import normalize_color, normalize_depth
 from gngdt_io.mcap_limits import ReadLimits
 from gngdt_io.mcap_poses import PoseLookup
@@ -51,8 +52,15 @@ class FrameAssembler:
         on_bad_frame: BadFrameHandler | None = None,
         poses: PoseLookup | None = None,
         max_held_bytes: int = ReadLimits.max_held_bytes,
+        camera: CameraParameters | None = None,
+        depth_scale: float | None = None,
     ) -> None:
         self.path = path
+        #: the user's camera (--camera-json): its intrinsics replace the recording's calibration
+        self.camera = camera
+        #: units per metre of the recording's 16-bit depth (--depth-scale, or the camera's);
+        #: None: millimetres
+        self.depth_scale = depth_scale or (None if camera is None else camera.depth_scale)
         self.poses = poses
         self.max_held_bytes = max_held_bytes
         self.on_bad_frame = on_bad_frame
@@ -76,6 +84,8 @@ class FrameAssembler:
         self.on_bad_frame(error)
 
     def add_calibration(self, intrinsics: CameraIntrinsics) -> Iterator[Frame]:
+        if self.camera is not None:
+            return  # the user's intrinsics win over the recording's
         self.calibration = intrinsics
         held, self.awaiting_calibration = self.awaiting_calibration, []
         for color, depth, labels in held:
@@ -121,7 +131,7 @@ class FrameAssembler:
         labels = next(
             (item.pixels for item in self.labels if item.stamp_ns == color.stamp_ns), None
         )
-        if self.calibration is None:
+        if self.calibration is None and self.camera is None:
             frame_bytes = color.pixels.nbytes + depth.pixels.nbytes
             frame_bytes += 0 if labels is None else labels.nbytes
             if (len(self.awaiting_calibration) >= MAX_FRAMES_WITHOUT_CALIBRATION
@@ -152,10 +162,20 @@ class FrameAssembler:
             self.next_index += 1
             self.skip_or_raise(error)
 
-    def _frame(self, color: DecodedImage, depth: DecodedImage, labels: np.ndarray | None) -> Frame:
+    def _intrinsics(self, width: int, height: int) -> CameraIntrinsics:
+        if self.camera is not None:
+            expected = (self.camera.width or width, self.camera.height or height)
+            if expected != (width, height):
+                raise self.error(f"--camera-json is for {expected[0]}x{expected[1]}, colour is "
+                                 f"{width}x{height}")
+            return self.camera.intrinsics(width, height)
         assert self.calibration is not None
+        return self.calibration
+
+    def _frame(self, color: DecodedImage, depth: DecodedImage, labels: np.ndarray | None) -> Frame:
         color_pixels = normalize_color(color.pixels)
         height, width = color_pixels.shape[:2]
+        intrinsics = self._intrinsics(width, height)
         if depth.pixels.shape != (height, width):
             depth_height, depth_width = depth.pixels.shape[:2]
             raise self.error(
@@ -165,9 +185,9 @@ class FrameAssembler:
             raise self.error(
                 f"labels {labels.shape[1]}x{labels.shape[0]} do not match colour {width}x{height}"
             )
-        if (self.calibration.width, self.calibration.height) != (width, height):
+        if (intrinsics.width, intrinsics.height) != (width, height):
             raise self.error(
-                f"calibration is for {self.calibration.width}x{self.calibration.height}, "
+                f"calibration is for {intrinsics.width}x{intrinsics.height}, "
                 f"colour is {width}x{height}"
             )
         pose, pose_error = None, None
@@ -179,8 +199,8 @@ class FrameAssembler:
             index=self.next_index,
             timestamp_ns=color.stamp_ns,
             color=color_pixels,
-            depth=normalize_depth(depth.pixels),
-            intrinsics=self.calibration,
+            depth=normalize_depth(depth.pixels, self.depth_scale),
+            intrinsics=intrinsics,
             labels=None if labels is None else labels.astype(np.uint16, copy=False),
             pose=pose,
             extras={} if pose_error is None else {"pose_error": pose_error},

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import re
 from bisect import bisect_left
 from collections.abc import Iterator
@@ -123,6 +124,27 @@ def load_camera(
     path = Path(camera_json) if camera_json is not None else Path(directory) / "camera.json"
     if camera_json is None and not path.is_file():
         return defaults
+    return replace(defaults, **_camera_values(path))
+
+
+#: the depth units of a recording's 16-bit depth when nothing says otherwise (millimetres)
+RECORDING_DEPTH_SCALE = MILLIMETRES_PER_METRE
+
+
+def read_camera_json(path: str | Path) -> CameraParameters:
+    """Camera parameters for a recording (`--camera-json`): fx, fy, cx, cy required; depth_scale
+    (16-bit depth units per metre) defaults to millimetres; width/height, when given, are
+    checked against the images. RecordingError naming the file for anything wrong."""
+    path = Path(path)
+    values = _camera_values(path)
+    missing = [key for key in ("fx", "fy", "cx", "cy") if key not in values]
+    if missing:
+        raise RecordingError(path, None, f"camera parameters lack {', '.join(missing)}")
+    return CameraParameters(**{"depth_scale": RECORDING_DEPTH_SCALE, **values})
+
+
+def _camera_values(path: Path) -> dict:
+    """The camera parameters a JSON file sets, checked (finite; fx, fy, depth_scale > 0)."""
     try:
         values = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as error:
@@ -130,20 +152,19 @@ def load_camera(
     if not isinstance(values, dict):
         raise RecordingError(path, None, "camera parameters must be a JSON object")
     try:
-        overrides = {
-            key: float(values[key])
-            for key in ("fx", "fy", "cx", "cy", "depth_scale")
-            if key in values
-        }
-        overrides.update({key: int(values[key]) for key in ("width", "height") if key in values})
+        found = {key: float(values[key]) for key in ("fx", "fy", "cx", "cy", "depth_scale")
+                 if key in values}
+        found.update({key: int(values[key]) for key in ("width", "height") if key in values})
         if "distortion_k1_k2_p1_p2_k3" in values:
-            overrides["distortion"] = tuple(float(v) for v in values["distortion_k1_k2_p1_p2_k3"])
+            found["distortion"] = tuple(float(v) for v in values["distortion_k1_k2_p1_p2_k3"])
     except (TypeError, ValueError) as error:
         raise RecordingError(path, None, f"invalid camera parameter: {error}") from error
-    camera = replace(defaults, **overrides)
-    if min(camera.fx, camera.fy, camera.depth_scale) <= 0:
+    numbers = [value for key, value in found.items() if key != "distortion"]
+    if not all(math.isfinite(value) for value in numbers):
+        raise RecordingError(path, None, "camera parameters must be finite numbers")
+    if min(found.get(key, 1.0) for key in ("fx", "fy", "depth_scale")) <= 0:
         raise RecordingError(path, None, "fx, fy and depth_scale must be positive")
-    return camera
+    return found
 
 
 # ------------------------------------------------------------------------------------ pairing

@@ -35,8 +35,12 @@ class DecodeFailure(Exception):
     """One message could not be decoded (wraps MessageError, OpenCV and CDR errors)."""
 
 
-def normalize_depth(depth: np.ndarray) -> np.ndarray:
-    """(H, W) depth as uint16 millimetres: float input is metres (NaN, inf, <= 0 -> 0)."""
+def normalize_depth(depth: np.ndarray, units_per_metre: float | None = None) -> np.ndarray:
+    """(H, W) depth as uint16 millimetres: float input is metres (NaN, inf, <= 0 -> 0); 16-bit
+    input is millimetres, or ``units_per_metre`` (e.g. 10000 for 0.1 mm) when given."""
+    if depth.dtype == np.uint16 and units_per_metre not in (None, 1000.0):
+        millimetres = depth.astype(np.float64) * (1000.0 / units_per_metre)
+        return np.clip(np.rint(millimetres), 0, np.iinfo(np.uint16).max).astype(np.uint16)
     if depth.dtype == np.uint16:
         return depth
     if depth.dtype.kind == "f":

@@ -50,6 +50,7 @@ from gngdt_core.geometry import CameraIntrinsics
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import Frame
 from gngdt_io.frame_assembly import BadFrameHandler, DecodedImage, FrameAssembler
+from gngdt_io.images import CameraParameters
 from gngdt_io.mcap_decoding import (
     FOXGLOVE_SCHEMAS,
     ROS_SCHEMAS,
@@ -132,6 +133,8 @@ def read_frames(
     on_bad_frame: BadFrameHandler | None = None,
     fixed_frame: str | None = "auto",
     limits: ReadLimits | None = None,
+    camera: CameraParameters | None = None,
+    depth_scale: float | None = None,
 ) -> Iterator[Frame]:
     """Yield the frames of an MCAP recording in file order (see the module docstring).
 
@@ -142,6 +145,9 @@ def read_frames(
     the frame poses are given in (``"auto"``: see the module docstring; None: no poses).
     limits: what reading may cost (:class:`ReadLimits`; an image over the pixel limit is a bad
     frame, a chunk over the chunk limit refuses the file before anything is decompressed).
+    camera: intrinsics that replace the recording's calibration (a bag without CameraInfo);
+    depth_scale: units per metre of its 16-bit depth images (default: millimetres, or the
+    camera's).
     Raises RecordingError naming the file and frame for missing calibration, mismatched sizes,
     undecodable messages and truncated or corrupt files -- after yielding the frames before.
     """
@@ -160,7 +166,7 @@ def read_frames(
                 poses = PoseLookup(path, transforms, fixed_frame)
             stream.seek(0)
         assembler = FrameAssembler(path, intrinsics, max_skew_ns, on_bad_frame, poses,
-                                    limits.max_held_bytes)
+                                    limits.max_held_bytes, camera, depth_scale)
         yield from _read_stream(path, stream, camera_prefix, assembler, limits)
 
 

@@ -106,8 +106,20 @@ def _add_replay_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-gap", type=float, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
         help="longest wait between two frames: a longer gap in the recorded stamps is "
         f"shortened to this, with a warning (default {DEFAULT_MAX_GAP_S:g})")
+    add_camera_arguments(parser)
+
+
+def add_camera_arguments(parser: argparse.ArgumentParser) -> None:
+    """--camera-json and --depth-scale, for every kind of source (shared with `gngdt run`)."""
     parser.add_argument("--camera-json", type=Path, metavar="FILE",
-                        help="camera parameters of an image folder (default: DIR/camera.json)")
+                        help="camera parameters, a JSON object with fx, fy, cx, cy (pixels) and "
+                        "optionally depth_scale, width, height: an image folder's instead of its "
+                        "camera.json, a recording's instead of its calibration (a bag recorded "
+                        "without CameraInfo)")
+    parser.add_argument("--depth-scale", type=float, metavar="UNITS_PER_M",
+                        help="units per metre of the 16-bit depth images (1000: millimetres, "
+                        "the default of recordings; 5000: TUM; 10000: 0.1 mm) instead of what "
+                        "the source says")
 
 
 def _add_cloud_arguments(parser: argparse.ArgumentParser) -> None:
@@ -156,7 +168,8 @@ def source_options(args: argparse.Namespace) -> SourceOptions:
     limits = ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20,
                         args.max_pending_mb << 20, args.max_transforms)
     fixed_frame = None if args.fixed_frame.lower() == "none" else args.fixed_frame
-    return SourceOptions(camera_json=args.camera_json, topic_prefix=args.topics,
+    return SourceOptions(camera_json=args.camera_json, depth_scale=args.depth_scale,
+                         topic_prefix=args.topics,
                          max_skew_ms=args.max_skew_ms, fixed_frame=fixed_frame, limits=limits,
                          on_bad_frame=log_bad_frame)
 

@@ -38,6 +38,7 @@ from gngdt_io.outputs.rerun_output import (
     unused_rrd_path,
 )
 from schemas.wire import DEFAULT_CAMERA, topic
+from services.capture import add_camera_arguments
 from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
 from services.plumbing.session import (
@@ -71,7 +72,9 @@ DEFAULT_MAX_POINTS = 50_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", type=Path, metavar="RECORDING", help="MCAP recording")
+    parser.add_argument("recording", type=Path, metavar="SOURCE",
+                        help="a recording (MCAP, ROS 2 bag), a folder of RGB-D images or "
+                        "synth:<scene>[:<frames>] (see `gngdt capture --help`)")
     viewer = parser.add_mutually_exclusive_group()
     viewer.add_argument("--save", type=Path, metavar="PATH",
                         help="write the rerun recording here (default runs/<recording>-<time>.rrd)")
@@ -88,6 +91,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
     parser.add_argument("--voxel", type=float, metavar="SIZE_M", help="capture voxel size, metres")
+    add_camera_arguments(parser)
     parser.add_argument(
         "--max-points", type=int, default=DEFAULT_MAX_POINTS,
         help=f"capture's random point cap per frame (default {DEFAULT_MAX_POINTS}; 0: full "
@@ -355,7 +359,8 @@ def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None)
     arguments = [str(args.recording), "--cam", args.cam]
     arguments += ["--fast"] if args.fast else ["--rate", str(args.rate)]
     for flag, value in (("--voxel", args.voxel), ("--max-points", args.max_points),
-                        ("--drop-veil", veil_ratio)):
+                        ("--drop-veil", veil_ratio), ("--camera-json", args.camera_json),
+                        ("--depth-scale", args.depth_scale)):
         if value is not None:
             arguments += [flag, str(value)]
     return arguments
@@ -486,9 +491,10 @@ class RunPlan:
 def plan_run(args: argparse.Namespace) -> RunPlan:
     """The run's outputs, named (the logger never overwrites a file: the names it will really
     write); ValueError or RecordingError for anything wrong, before any process starts."""
-    from gngdt_io.sources import open_source
+    from gngdt_io.sources import SourceOptions, open_source
 
-    open_source(args.recording)  # a source capture can read (RecordingError says why not)
+    options = SourceOptions(camera_json=args.camera_json, depth_scale=args.depth_scale)
+    open_source(args.recording, options=options)  # as capture will: RecordingError says why not
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
     from services.learner import profile_from_args

@@ -127,6 +127,7 @@ def segment_source(source: FrameSource, profile: Profile, out: Path, *,
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from gngdt_io.sources import SOURCE_FORMATS
+    from services.capture import add_camera_arguments
 
     parser.add_argument("source", type=Path, metavar="SOURCE",
                         help="MCAP recording, or a folder of colour/depth frames")
@@ -140,8 +141,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "as gngdt_config; `python -m gngdt_config` prints where)")
     parser.add_argument("--format", dest="source_format", choices=SOURCE_FORMATS,
                         help="source layout (default: detected; needed when it is ambiguous)")
-    parser.add_argument("--camera-json", type=Path, metavar="FILE",
-                        help="camera parameters of a folder (default: DIR/camera.json)")
+    add_camera_arguments(parser)
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace a non-empty --out folder once the new one is complete")
@@ -156,7 +156,8 @@ def main(args: argparse.Namespace) -> int:
     try:
         profile = load_profile(args.params or default_sensor_profile(), base_model={})
         source = open_source(args.source, args.source_format,
-                             SourceOptions(camera_json=args.camera_json))
+                             SourceOptions(camera_json=args.camera_json,
+                                           depth_scale=args.depth_scale))
         summary = segment_source(source, profile, args.out, independent=args.independent,
                                  seed=args.seed, overwrite=args.overwrite)
     except (RecordingError, ValueError, OSError) as error:

@@ -8,6 +8,7 @@ is paced by capture at that rate, a live one (``live``) paces itself.
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -28,9 +29,12 @@ BadFrameHandler = Callable[[Exception], None]
 class SourceOptions:
     """How to read a source; each source takes the options that apply to it."""
 
-    #: image folders: camera parameters (JSON: fx, fy, cx, cy, depth_scale ...) instead of the
-    #: folder's camera.json
+    #: camera parameters (JSON: fx, fy, cx, cy, depth_scale, ...) instead of a folder's
+    #: camera.json or a recording's calibration (a bag without CameraInfo)
     camera_json: Path | None = None
+    #: units per metre of the 16-bit depth images (1000: millimetres, 5000: TUM, 10000: 0.1 mm)
+    #: instead of what the source says
+    depth_scale: float | None = None
     #: recordings: read only the topics under this prefix (a bag with several cameras)
     topic_prefix: str | None = None
     #: recordings: largest stamp difference between a frame's colour and depth images
@@ -41,6 +45,12 @@ class SourceOptions:
     limits: ReadLimits = field(default_factory=ReadLimits)
     #: called with a bad frame's error, which is then skipped (None: raise it)
     on_bad_frame: BadFrameHandler | None = None
+
+    def __post_init__(self) -> None:
+        scale = self.depth_scale
+        if scale is not None and not (math.isfinite(scale) and scale > 0):
+            raise ValueError(f"--depth-scale must be a positive number of units per metre, "
+                             f"got {scale}")
 
 
 class FrameSource(ABC):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 from gngdt_io.errors import RecordingError
@@ -29,6 +30,7 @@ class ImageFolderSource(FrameSource):
             raise ValueError(f"image layout must be one of {FORMATS}, got {layout!r}")
         self.format = layout
         self.camera_json = options.camera_json
+        self.depth_scale = options.depth_scale
         if self.camera_json is not None:
             load_camera(path, layout, self.camera_json)  # fail now on a bad file
             note = str(self.camera_json)
@@ -50,6 +52,8 @@ class ImageFolderSource(FrameSource):
 
     def frames(self) -> Iterator[tuple[str, Frame]]:
         camera = load_camera(self.path, self.format, self.camera_json)
+        if self.depth_scale is not None:
+            camera = replace(camera, depth_scale=self.depth_scale)
         names: dict[str, str] = {}
         for frame in iter_image_frames(self.path, self.format, camera=camera):
             color_path = str(frame.extras["color_path"])

@@ -199,3 +199,16 @@ def test_children_of_a_killed_run_stop_too(tabletop_recording: Path, tmp_path: P
         run.kill()  # SIGKILL: run cannot clean up; the kernel tells the children
         run.wait()
     wait_for(lambda: not any(alive(pid) for pid in pids), 30, "the orphans to stop")
+
+
+def test_run_refuses_a_bag_without_calibration_before_starting_anything(tmp_path: Path) -> None:
+    from test_recording_io import make_frames, write_ros_bag
+
+    bag = tmp_path / "no_info.mcap"
+    write_ros_bag(bag, make_frames(2), color_encoding="rgb8", depth_encoding="16UC1",
+                  camera_info=False)
+    completed = subprocess.run([*GNGDT, "run", str(bag)], cwd=REPO_ROOT, capture_output=True,
+                               text=True, timeout=60)
+    assert completed.returncode == 2
+    assert "no calibration channel" in completed.stderr and "--camera-json FILE" in completed.stderr
+    assert "starting the learner" not in completed.stderr  # said before anything started

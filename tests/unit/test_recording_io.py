@@ -278,8 +278,10 @@ def write_ros_bag(
     depth_encoding: str,
     depth_skew_ns: int = 0,
     big_endian_depth: bool = False,
+    camera_info: bool = True,
 ) -> None:
-    """A RealSense-style bag: colour, aligned depth and camera_info with header stamps."""
+    """A RealSense-style bag: colour, aligned depth and (unless not ``camera_info``) camera_info
+    with header stamps."""
     with open(path, "wb") as stream:
         writer = Ros2Writer(stream)
         image_schema = writer.register_msgdef("sensor_msgs/msg/Image", IMAGE_MSGDEF)
@@ -297,31 +299,32 @@ def write_ros_bag(
                 _ros_image(stamp, color, color_encoding),
                 log_time=stamp + 10,
             )
-            k = INTRINSICS.matrix().ravel().tolist()
-            writer.write_message(
-                "/camera/color/camera_info",
-                info_schema,
-                {
-                    "header": _ros_header(stamp),
-                    "height": HEIGHT,
-                    "width": WIDTH,
-                    "distortion_model": "plumb_bob",
-                    "d": [0.1, 0.0, 0.0, 0.0, 0.0],
-                    "k": k,
-                    "r": np.eye(3).ravel().tolist(),
-                    "p": [*k[:3], 0, *k[3:6], 0, *k[6:], 0],
-                    "binning_x": 0,
-                    "binning_y": 0,
-                    "roi": {
-                        "x_offset": 0,
-                        "y_offset": 0,
-                        "height": 0,
-                        "width": 0,
-                        "do_rectify": False,
+            if camera_info:
+                k = INTRINSICS.matrix().ravel().tolist()
+                writer.write_message(
+                    "/camera/color/camera_info",
+                    info_schema,
+                    {
+                        "header": _ros_header(stamp),
+                        "height": HEIGHT,
+                        "width": WIDTH,
+                        "distortion_model": "plumb_bob",
+                        "d": [0.1, 0.0, 0.0, 0.0, 0.0],
+                        "k": k,
+                        "r": np.eye(3).ravel().tolist(),
+                        "p": [*k[:3], 0, *k[3:6], 0, *k[6:], 0],
+                        "binning_x": 0,
+                        "binning_y": 0,
+                        "roi": {
+                            "x_offset": 0,
+                            "y_offset": 0,
+                            "height": 0,
+                            "width": 0,
+                            "do_rectify": False,
+                        },
                     },
-                },
-                log_time=stamp + 20,
-            )
+                    log_time=stamp + 20,
+                )
             writer.write_message(
                 "/camera/aligned_depth_to_color/image_raw",
                 image_schema,
@@ -370,3 +373,33 @@ def test_ros2_unsynchronised_stamps_pair_within_the_skew(tmp_path: Path) -> None
     restored = list(read_frames(path, max_skew_ns=5_000_000))
     assert len(restored) == 3
     np.testing.assert_array_equal(restored[2].depth, frames[2].depth)
+
+
+def test_a_bag_without_camera_info_needs_camera_json_and_says_so_before_reading(
+        tmp_path: Path) -> None:
+    """A bag recorded without CameraInfo is refused when opened, naming the fix; with
+    --camera-json its frames carry those intrinsics, and --depth-scale says its depth units."""
+    import json
+
+    from gngdt_io.sources import SourceOptions, open_source
+
+    frames = make_frames(2)
+    bag = tmp_path / "no_info.mcap"
+    write_ros_bag(bag, frames, color_encoding="rgb8", depth_encoding="16UC1", camera_info=False)
+    with pytest.raises(RecordingError, match=r"no calibration channel .* --camera-json FILE"):
+        open_source(bag)
+    camera = tmp_path / "camera.json"
+    camera.write_text(json.dumps({"fx": 50.0, "fy": 51.0, "cx": 20.0, "cy": 15.0}))
+    source = open_source(bag, options=SourceOptions(camera_json=camera, depth_scale=10_000))
+    assert "--camera-json" in source.camera_note
+    read = [frame for _, frame in source.frames()]
+    assert [(k.fx, k.fy, k.cx, k.cy) for k in (frame.intrinsics for frame in read)] == [
+        (50.0, 51.0, 20.0, 15.0)] * 2
+    # 0.1 mm units: the recording's 16-bit values are ten times the millimetres
+    expected = np.rint(frames[0].depth / 10.0).astype(np.uint16)
+    np.testing.assert_array_equal(read[0].depth, expected)
+    camera.write_text(json.dumps({"fx": float("nan"), "fy": 1.0, "cx": 0.0, "cy": 0.0}))
+    with pytest.raises(RecordingError, match="finite"):
+        open_source(bag, options=SourceOptions(camera_json=camera))
+    with pytest.raises(ValueError, match="--depth-scale must be a positive"):
+        SourceOptions(depth_scale=0.0)
