@@ -18,6 +18,7 @@ import argparse
 import logging
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -31,6 +32,7 @@ HERE = Path(__file__).resolve().parent
 REPO_ROOT = HERE.parent
 sys.path.insert(0, str(REPO_ROOT))
 
+from gngdt_io.outputs.rerun_sinks import rerun_binary  # noqa: E402
 from services.plumbing.session import free_tcp_port  # noqa: E402
 
 log = logging.getLogger("screenshot_viewer")
@@ -59,10 +61,13 @@ def screenshot(rrd: Path, out: Path, width: int, height: int, timeout_s: float) 
     with tempfile.TemporaryDirectory(prefix="gngdt-shot-") as config:
         # rerun writes its analytics config on first use: keep it out of the user's home
         env = dict(os.environ, XDG_CONFIG_HOME=config)
+        # the binary itself (the `rerun` script would start it as a grandchild, left running
+        # when the script is stopped), in a process group of its own, stopped as a whole below
         server = subprocess.Popen(
-            ["rerun", "--serve-web", str(rrd), "--bind", "127.0.0.1", "--port", str(grpc_port),
-             "--web-viewer-port", str(web_port), "--hide-welcome-screen"],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+            [rerun_binary(), "--serve-web", str(rrd), "--bind", "127.0.0.1", "--port",
+             str(grpc_port), "--web-viewer-port", str(web_port), "--hide-welcome-screen"],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+            start_new_session=True)
         try:
             viewer = f"http://127.0.0.1:{web_port}"
             wait_for_http(viewer, 60)
@@ -73,12 +78,21 @@ def screenshot(rrd: Path, out: Path, width: int, height: int, timeout_s: float) 
                  str(out), str(width), str(height), str(int(timeout_s))],
                 check=False).returncode
         finally:
-            server.terminate()
-            try:
-                server.wait(10)
-            except subprocess.TimeoutExpired:
-                server.kill()
-                server.wait()
+            stop_group(server)
+
+
+def stop_group(process: subprocess.Popen) -> None:
+    """Stop ``process`` and everything it started (its process group): SIGTERM, then SIGKILL."""
+    for signum, wait_s in ((signal.SIGTERM, 10.0), (signal.SIGKILL, None)):
+        try:
+            os.killpg(process.pid, signum)
+        except ProcessLookupError:
+            break
+        try:
+            process.wait(wait_s)
+            break
+        except subprocess.TimeoutExpired:
+            continue
 
 
 def main() -> int:
