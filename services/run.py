@@ -85,7 +85,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_serve_arguments(parser)
     parser.add_argument("--mcap", type=Path, metavar="PATH",
                         help="also record every gngdt stream (images, clouds, topology, scene, "
-                        "objects, status) into this MCAP file for Foxglove or rerun")
+                        "objects, status) into this MCAP file for Foxglove (rerun shows only its "
+                        "images and clouds)")
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -559,7 +560,7 @@ def report(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome) -> None
         outputs[0:0] = [f"  .rrd size:        {file_size(plan.rrd_path)}"]
     if plan.mcap_path is not None:
         outputs.append(f"mcap:               {plan.mcap_path} ({file_size(plan.mcap_path)}; "
-                       "every stream, for Foxglove or `rerun`)")
+                       "every stream, for Foxglove)")
     failure = outcome.failure
     try:  # after a SIGHUP the terminal may be gone: nothing more to say then
         print(format_summary(outcome.status, outcome.end, plan.destination,

@@ -1,4 +1,4 @@
-"""Record gngdt's zenoh streams into one MCAP file that Foxglove and rerun open as it is.
+"""Record gngdt's zenoh streams into one MCAP file that Foxglove opens as it is.
 
 Every sample is written as it arrived (its protobuf bytes, never re-encoded) on the channel
 ``/<cam>/<stream>`` (``/camera/color``, ``/camera/points``, ``/camera/scene``, ...), with the
@@ -205,7 +205,8 @@ class McapOutput(Output):
         parser.add_argument("--mcap", type=Path, metavar="PATH",
                             help="also record every gngdt stream as it is (images, clouds, "
                             "topology, scene, objects, status) into this MCAP file, which "
-                            "Foxglove and rerun open directly; <name>.1.mcap if it exists")
+                            "Foxglove opens directly (rerun shows only its images and clouds); "
+                            "<name>.1.mcap if it exists")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> McapOutput | None:
