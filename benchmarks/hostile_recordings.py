@@ -12,11 +12,14 @@ MB = 1024 * 1024
 
 
 def _writer(file, compression: str, chunk_size: int):
-    """(mcap writer, its /camera/color channel id)."""
+    """(mcap writer, its /camera/color channel id). A calibration channel is declared too (with
+    no message), so that readers get past their first check and meet what the file hides."""
     from mcap.writer import CompressionType, Writer
 
     writer = Writer(file, compression=CompressionType[compression.upper()], chunk_size=chunk_size)
     writer.start()
+    calibration = writer.register_schema("foxglove.CameraCalibration", "protobuf", b"")
+    writer.register_channel("/camera/calibration", "protobuf", calibration)
     schema = writer.register_schema("foxglove.RawImage", "protobuf", b"")
     return writer, writer.register_channel("/camera/color", "protobuf", schema)
 
@@ -44,9 +47,13 @@ def lz4_chunk_hiding_its_size(path: Path, inflated_bytes: int) -> Path:
             writer.finish()
     finally:
         lz4.frame.compress = real_compress
+    from mcap.reader import SeekingReader
+
+    with open(path, "rb") as file:
+        (chunk,) = SeekingReader(file).get_summary().chunk_indexes
     data = path.read_bytes()
-    stated = struct.pack("<Q", inflated_bytes + 125)  # the message record and its header
-    assert stated in data
+    stated = struct.pack("<Q", chunk.uncompressed_size)  # the message record and its header
+    assert chunk.uncompressed_size > inflated_bytes and stated in data
     path.write_bytes(data.replace(stated, struct.pack("<Q", 100), 1))  # the chunk record's
     return path
 

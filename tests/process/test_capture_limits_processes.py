@@ -59,7 +59,9 @@ def _capture(router_endpoint: str, path: Path, *options: str) -> tuple[int, str,
 
 
 def _write_images(path: Path, images: list[tuple[str, object]], calibrated: bool) -> None:
-    """An MCAP of raw images (role, array), stamped 33 ms apart, with or without calibration."""
+    """An MCAP of raw images (role, array), stamped 33 ms apart, with a calibration for each
+    colour image, or (not ``calibrated``) a single one only after the last image: the reader
+    holds every frame before it."""
     from mcap_protobuf.writer import Writer
 
     from gngdt_io.frame import CameraIntrinsics
@@ -75,6 +77,12 @@ def _write_images(path: Path, images: list[tuple[str, object]], calibrated: bool
                     intrinsics, timestamp_ns=stamp), log_time=stamp, publish_time=stamp)
             writer.write_message(f"/camera/{role}", image_to_raw(image, timestamp_ns=stamp),
                                  log_time=stamp, publish_time=stamp)
+        if not calibrated:
+            height, width = images[-1][1].shape[:2]
+            late = 2_000_000_000 + len(images) * 33_000_000
+            writer.write_message("/camera/calibration", intrinsics_to_calibration(
+                CameraIntrinsics(width, height, 500.0, 500.0, width / 2, height / 2),
+                timestamp_ns=late), log_time=late, publish_time=late)
 
 
 @pytest.mark.timeout(120)

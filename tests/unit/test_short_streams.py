@@ -8,7 +8,7 @@ from gngdt_core.frame_learner import FrameLearner, LearnerConfig
 from gngdt_io.deproject import Deprojector
 from gngdt_io.mcap_reader import read_frames
 from schemas.status import LearnerStatusInfo, StreamEndInfo
-from services.run import format_summary
+from services.run.summary import format_summary
 
 SMALL_RECORDING = Path(__file__).resolve().parents[2] / "recordings" / "tabletop_small.mcap"
 

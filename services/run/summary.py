@@ -1,0 +1,98 @@
+"""What `gngdt run` says at the end: how the stream went, what was learned, the files written,
+and warnings a user should act on."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from schemas.status import LearnerStatusInfo, StreamEndInfo
+
+
+def file_size(path: Path | None) -> str:
+    """``"12.3 MB"``, or a note that the file is missing."""
+    if path is None or not path.is_file():
+        return "not written"
+    return f"{path.stat().st_size / 1e6:.1f} MB"
+
+
+def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
+                   destination: str, recorded_frames: int | None = None,
+                   early_end: str = "", outputs: list[str] | None = None,
+                   node_budget: int | None = None) -> str:
+    """The lines ``run`` prints at the end; ``early_end`` says why the stream ended before the
+    recording did; ``node_budget``: the learner's, to say when the network stayed small."""
+    sent = str(end.frames_sent) if end else "no end of stream"
+    if end and recorded_frames is not None:
+        sent += f" of {recorded_frames} in the recording"
+    lines = [f"frames sent:        {sent}"]
+    if early_end:
+        lines.append(f"ended early:        {early_end}")
+    if status is None:
+        lines.append("learner:            no status received")
+    else:
+        clusters = ", ".join(f"{name} {count}" for name, count in
+                             sorted(status.cluster_counts.items()))
+        lines += [
+            f"frames learned:     {learned_share(status, end)} ({status.frames_dropped} dropped, "
+            f"{status.malformed_messages} malformed)",
+            f"learning steps:     {status.steps} ({status.steps_per_second:,.0f} steps/s)",
+            f"nodes:              {status.nodes}",
+            f"forgetting:         {status.nodes_forgotten} nodes forgotten; ghost share "
+            f"{status.ghost_share:.1%} (seen nodes > {status.ghost_distance_m * 100:g} cm from "
+            "the last frame)",
+            *([f"last frame:         {status.settled}"] if status.settled else []),
+            f"clusters:           {clusters}",
+            f"latency:            p50 {status.latency_p50_ms:.1f} ms, "
+            f"p99 {status.latency_p99_ms:.1f} ms",
+        ]
+    lines.append(f"rerun:              {destination}")
+    lines += outputs or []
+    lines += [f"WARNING: {warning}" for warning in summary_warnings(status, end, node_budget)]
+    return "\n".join(lines)
+
+
+#: below this share of the frames sent, the summary warns that the learner did not keep up
+MIN_LEARNED_SHARE = 0.5
+
+
+def learned_share(status: LearnerStatusInfo, end: StreamEndInfo | None) -> str:
+    """``"37 of 50 sent (74 %)"``, or the count alone without an end of stream."""
+    if end is None or end.frames_sent == 0:
+        return str(status.frames_used)
+    return (f"{status.frames_used} of {end.frames_sent} sent "
+            f"({status.frames_used / end.frames_sent:.0%})")
+
+
+def summary_warnings(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
+                     node_budget: int | None = None) -> list[str]:
+    """What the user should know about how the run learned: a learner that did not keep up,
+    a network that stayed small because the recording was short."""
+    if status is None or end is None or end.frames_sent == 0:
+        return []
+    warnings = []
+    share = status.frames_used / end.frames_sent
+    if share < MIN_LEARNED_SHARE:
+        warnings.append(
+            f"the learner kept up with only {share:.0%} of the frames (latest frame wins: it "
+            "skips what arrives while it learns), so the network saw few views; the machine is "
+            "busy or the frames are large: replay slower (--rate 0.5), cap the clouds "
+            "(--max-points) or learn fewer steps per frame (--samples-per-frame)")
+    if node_budget and status.nodes < node_budget / 2:
+        warnings.append(
+            f"the network has {status.nodes} of its {node_budget} nodes: it grows one node per "
+            f"lambda steps, and it learned {status.steps:,} steps in all ({status.frames_used} "
+            "frames and the settling on the last one); a longer recording or more steps per "
+            "frame (--samples-per-frame) grow it")
+    return warnings
+
+
+def recorded_frames(path: Path) -> int | None:
+    """Frames in the recording by its index (None without one)."""
+    from gngdt_io.mcap_reader import RecordingError, recording_info
+
+    try:
+        return int(recording_info(path)["frames"])
+    except RecordingError:
+        return None
