@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+from typing import TYPE_CHECKING
 
 from services.logger.cameras import DEFAULT_MAX_CAMERAS
 from services.logger.inbox import DEFAULT_QUEUE_MB
@@ -20,6 +21,9 @@ from services.logger.run import LIVELINESS_KEY
 
 __all__ = ["EXAMPLES", "LIVELINESS_KEY", "add_arguments", "main"]
 from services.plumbing.session import add_zenoh_arguments
+
+if TYPE_CHECKING:
+    from gngdt_io.outputs import Output
 
 log = logging.getLogger(__name__)
 
@@ -50,8 +54,25 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_zenoh_arguments(parser)
 
 
+def build_outputs(args: argparse.Namespace) -> list[Output]:
+    """Every registered output (`gngdt_io.outputs.OUTPUTS`) the options ask for; on an error
+    (ValueError, OSError) the ones already made are closed."""
+    from gngdt_io import outputs as registry
+
+    made: list[Output] = []
+    try:
+        for kind in registry.OUTPUTS:
+            output = kind.from_args(args)
+            if output is not None:
+                made.append(output)
+    except (ValueError, OSError):
+        for output in made:
+            output.close()
+        raise
+    return made
+
+
 def main(args: argparse.Namespace) -> int:
-    from gngdt_io.outputs import OUTPUTS, Output
     from gngdt_io.outputs.rerun_sinks import exit_now_if_stuck
     from services.logger.run import run_logger
 
@@ -59,16 +80,10 @@ def main(args: argparse.Namespace) -> int:
         log.error("--max-queue-mb must be >= 0 and --max-cameras >= 1, got %s and %s",
                   args.max_queue_mb, args.max_cameras)
         return 2
-    outputs: list[Output] = []
     try:
-        for kind in OUTPUTS:
-            output = kind.from_args(args)
-            if output is not None:
-                outputs.append(output)
+        outputs = build_outputs(args)
     except (ValueError, OSError) as error:
         log.error("%s", error)
-        for output in outputs:
-            output.close()
         return 2
     if not args.stdout:  # with --stdout, standard output is rerun's stream
         for output in outputs:
