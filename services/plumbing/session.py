@@ -133,13 +133,26 @@ def client_config(
     return config
 
 
-def router_config(listen: list[str], config_file: Path | None = None) -> zenoh.Config:
-    """Configuration of a zenoh router listening on ``listen`` only, scouting off."""
+def router_config(listen: list[str] | None, config_file: Path | None = None) -> zenoh.Config:
+    """Configuration of a zenoh router, scouting off.
+
+    Where it listens: ``listen`` when given (``--listen`` wins); else the file's own
+    ``listen/endpoints``; else the loopback default ``DEFAULT_ENDPOINT`` -- never zenoh's own
+    default, every interface (a file that sets no listen endpoints opens nothing more than
+    loopback). A file's ``connect/endpoints`` (links to other routers) are kept.
+    """
     import zenoh
 
     config = _load_config_file(config_file) if config_file is not None else zenoh.Config()
     config.insert_json5("mode", '"router"')
-    config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if listen:
+        config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    elif config_file is None or not listen_endpoints_set(config):
+        if config_file is not None:
+            log.warning("%s sets no listen endpoints: listening on %s only (loopback); set "
+                        "listen.endpoints in the file or --listen to listen elsewhere",
+                        config_file, DEFAULT_ENDPOINT)
+        config.insert_json5("listen/endpoints", json.dumps([DEFAULT_ENDPOINT]))
     if config_file is None:
         config.insert_json5("connect/endpoints", "[]")
         _secure_defaults(config)
@@ -148,6 +161,23 @@ def router_config(listen: list[str], config_file: Path | None = None) -> zenoh.C
         config.insert_json5("transport/link/tx/queue/congestion_control/block/wait_before_close",
                             str(BLOCKED_CLIENT_CUTOFF_US))
     return config
+
+
+def listen_endpoints_set(config: zenoh.Config) -> bool:
+    """Whether ``config`` sets its own ``listen/endpoints`` (zenoh's default, left unset, is
+    every interface: ``{"router": ["tcp/[::]:7447"], ...}``)."""
+    import zenoh
+
+    return config.get_json("listen/endpoints") != zenoh.Config().get_json("listen/endpoints")
+
+
+def router_endpoints(config: zenoh.Config, key: str = "listen/endpoints") -> list[str]:
+    """The endpoints a router opened with ``config`` listens on (``key`` "listen/endpoints") or
+    connects to ("connect/endpoints"): a list, or the ``router`` entry of a per-mode mapping."""
+    value = _setting(config, key) or []
+    if isinstance(value, dict):
+        value = value.get("router", [])
+    return [str(endpoint) for endpoint in value]
 
 
 def _load_config_file(path: Path) -> zenoh.Config:
@@ -212,7 +242,7 @@ def _short(error: Exception) -> str:
 def _open_failure(config: zenoh.Config, what: str, error: Exception) -> str:
     reason = _short(error)
     if _setting(config, "mode") == "router":
-        listen = ", ".join(_setting(config, "listen/endpoints") or [])
+        listen = ", ".join(router_endpoints(config)) or "no endpoint"
         hint = ("another process (a router?) already listens there; pick a free port with "
                 "--listen" if "in use" in reason else "check --listen and --zenoh-config")
         return f"cannot open a zenoh router on {listen}: {reason}; {hint}"
