@@ -112,13 +112,18 @@ class Host:
         """The device of this host's /dev/shm (private hosts have different ones)."""
         return self.run("stat", "-c", "%d", "/dev/shm/.").stdout.strip()
 
-    def close(self) -> None:
-        """Stop every process of the host (SIGINT, then SIGKILL), then its anchor."""
+    def stop_processes(self) -> None:
+        """Stop every process started on the host (SIGINT, then SIGKILL)."""
         for process in self.processes:
             if process.poll() is None:
                 process.send_signal(signal.SIGINT)
         for process in self.processes:
             stop(process)
+        self.processes = []
+
+    def close(self) -> None:
+        """Stop every process of the host, then its anchor."""
+        self.stop_processes()
         if self.anchor is not None and self.anchor.poll() is None:
             self.anchor.kill()
             self.anchor.wait()
@@ -193,17 +198,21 @@ class TwoHosts:
                 if line.startswith(PREFIX) and line.split()[0].endswith(f"-{os.getpid()}")]
 
 
-#: the zenoh port of each host's router
-ROUTER_PORT = 7447
+#: where each host's services reach its router (its own loopback, as on one host)
+LOCAL_ROUTER = "tcp/127.0.0.1:7447"
+#: the example configurations of a two-host deployment, and the address of host A in them
+HOST_CONFIGS = REPO_ROOT / "config" / "hosts"
+EXAMPLE_ADDRESS_A = "192.168.1.10"
 
 
 def endpoint(host: Host) -> str:
-    return f"tcp/{host.address}:{ROUTER_PORT}"
+    """Where the services of ``host`` reach their router."""
+    return LOCAL_ROUTER
 
 
 class Deployment:
     """gngdt on two hosts: a ``gngdt router`` on each, B's linked to A's by its configuration
-    file (as a zenohd file would say it), capture on A, the learner and the logger where asked,
+    file (config/hosts/, as zenohd reads it), capture on A, the learner and the logger where asked,
     and a watcher (``zenoh_probe.py watch``) on B reporting topologies and liveliness."""
 
     def __init__(self, hosts: TwoHosts, workdir: Path, recording: Path,
@@ -224,14 +233,11 @@ class Deployment:
         return self.hosts.a if label == "A" else self.hosts.b
 
     def router_file(self, label: str) -> Path:
-        """Host ``label``'s router configuration: listen on its address, B connects to A."""
-        from services.plumbing.session import router_settings, settings_file_text
-
-        settings = router_settings([endpoint(self.host(label))])
-        if label == "B":
-            settings["connect/endpoints"] = [endpoint(self.hosts.a)]
+        """Host ``label``'s router configuration: the shipped example (config/hosts/), with host
+        A's address in it. A listens on loopback and its address; B on loopback, linked to A."""
+        text = (HOST_CONFIGS / f"router-{label.lower()}.json5").read_text()
         path = self.workdir / f"router-{label}.json5"
-        path.write_text(settings_file_text(settings))
+        path.write_text(text.replace(EXAMPLE_ADDRESS_A, self.hosts.a.address))
         return path
 
     def start_router(self, label: str) -> subprocess.Popen:
@@ -250,8 +256,7 @@ class Deployment:
         """Routers, watcher, learner and logger; once they are alive, capture."""
         for label in ("A", "B"):
             self.start_router(label)
-        self.hosts.b.start("watch", sys.executable, str(Path(__file__).with_name(
-            "zenoh_probe.py")), "watch", endpoint(self.hosts.b), str(self.watch_path))
+        self.probe("B", "watch", self.watch_path)
         self.service("learner", self.learner_on, "learn", *self.learner_options)
         expected = ["gngdt/camera/learner/alive"]
         if self.logger_on is not None:
@@ -273,6 +278,12 @@ class Deployment:
             if time.monotonic() > deadline:
                 raise TimeoutError(f"timed out waiting for {what}")
             time.sleep(0.05)
+
+    def probe(self, label: str, mode: str, out: Path) -> subprocess.Popen:
+        """``zenoh_probe.py MODE`` on host ``label`` (a client of its router), writing ``out``."""
+        return self.host(label).start(f"{mode}-{label}", sys.executable, str(
+            Path(__file__).with_name("zenoh_probe.py")), mode, endpoint(self.host(label)),
+            str(out))
 
     def records(self, event: str = "topology") -> list[dict]:
         import json
@@ -325,8 +336,10 @@ class Deployment:
         return codes
 
 
-def link_bytes(hosts: TwoHosts) -> int:
-    """Bytes host A has sent over the link so far (its veth's TX counter)."""
-    path = f"/sys/class/net/{hosts.veth['A']}/statistics/tx_bytes"
-    result = hosts.a.run("cat", path)
-    return int(result.stdout.strip() or 0)
+def link_bytes(hosts: TwoHosts) -> tuple[int, int]:
+    """Bytes host A has sent to B and received from B over the link so far (its veth's
+    counters: zenoh's payloads, headers and TCP/IP included)."""
+    folder = f"/sys/class/net/{hosts.veth['A']}/statistics"
+    result = hosts.a.run("cat", f"{folder}/tx_bytes", f"{folder}/rx_bytes")
+    sent, received = (int(value) for value in result.stdout.split())
+    return sent, received

@@ -20,8 +20,7 @@ EXAMPLES = """examples:
   gngdt router                                   # listens on tcp/127.0.0.1:7447
   gngdt router --listen tcp/127.0.0.1:7450
   gngdt router --listen tls/127.0.0.1:7447 --zenoh-config config/secure/router.json5  # TLS, ACL
-  gngdt router --zenoh-config config/hosts/router-b.json5   # listen and link to another router
-                                                            # where the file says
+  gngdt router --zenoh-config config/hosts/router-b.json5  # listen, link to host A's router
 """
 
 
