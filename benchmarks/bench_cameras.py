@@ -107,9 +107,12 @@ def report(runs: list[dict], args: argparse.Namespace) -> None:
         text = ", ".join(f"{group} {np.mean(values):.0f} each" if len(values) > 1
                          else f"{group} {values[0]:.0f}"
                          for group, values in groups.items() if values)
+        sent = sum(seen.end.frames_sent for seen in run["seen"].values() if seen and seen.end)
+        per_frame = ", ".join(f"{group} {sum(values) * run['seconds'] * 10 / max(sent, 1):.1f}"
+                              for group, values in groups.items() if values)
         peaks = ", ".join(f"{name} {mb:.0f}" for name, mb in run["peaks"].items())
         print(f"  {run['count']} camera(s), {run['seconds']:.1f} s: {text}; total "
-              f"{sum(cpu.values()):.0f} %; RSS {peaks}")
+              f"{sum(cpu.values()):.0f} %; CPU ms per frame sent: {per_frame}; RSS {peaks}")
 
 
 def _cores() -> int:

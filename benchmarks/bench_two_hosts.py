@@ -67,8 +67,12 @@ def steady(setup: Deployment, seconds: float) -> dict[str, float]:
     sent1, received1 = link_bytes(setup.hosts)
     window = [r for r in setup.records() if started <= r["capture_ns"] < ended]
     latency = [(r["received_ns"] - r["capture_ns"]) / 1e6 for r in window]
+    # capture numbers every frame it sends: the span of the sequences learned is what it sent
+    frames = window[-1]["sequence"] - window[0]["sequence"] + 1 if len(window) > 1 else 0
     return {"a_to_b_mb_s": (sent1 - sent0) / seconds / 1e6,
             "b_to_a_mb_s": (received1 - received0) / seconds / 1e6,
+            "captured_per_s": frames / seconds,
+            "a_to_b_kb_per_frame": (sent1 - sent0) / max(frames, 1) / 1e3,
             "topologies_per_s": len(window) / seconds,
             "p50_ms": float(np.percentile(latency, 50)) if latency else float("nan"),
             "p99_ms": float(np.percentile(latency, 99)) if latency else float("nan")}
@@ -164,11 +168,15 @@ def main() -> int:
 def report(rows, topics, figures, args) -> None:
     cap = f"clouds capped at {args.max_points:,} points" if args.max_points else "full clouds"
     print(f"one 640x480 camera at 30 fps on host A, {cap}; {args.seconds:g} s per placement")
-    print(f"{'placement':42s} {'A->B MB/s':>9s} {'B->A MB/s':>9s} {'topo/s':>6s} "
-          f"{'p50 ms':>7s} {'p99 ms':>7s}")
+    print(f"{'placement':42s} {'A->B MB/s':>9s} {'B->A MB/s':>9s} {'fps':>5s} "
+          f"{'kB/frame':>8s} {'@30fps':>7s} {'topo/s':>6s} {'p50 ms':>7s} {'p99 ms':>7s}")
     for name, row in rows:
         print(f"{name:42s} {row['a_to_b_mb_s']:9.2f} {row['b_to_a_mb_s']:9.2f} "
+              f"{row['captured_per_s']:5.1f} {row['a_to_b_kb_per_frame']:8.0f} "
+              f"{row['a_to_b_kb_per_frame'] * 30 / 1e3:7.1f} "
               f"{row['topologies_per_s']:6.1f} {row['p50_ms']:7.1f} {row['p99_ms']:7.1f}")
+    print("(fps: frames capture sent; kB/frame: A->B bytes per frame sent; @30fps: MB/s A->B at "
+          "30 frames/s; p50/p99: capture -> topology received on B)")
     print("topics seen on B (placement 1): samples/s, kB per sample, MB/s")
     for key, (rate, size) in topics.items():
         print(f"  {key:32s} {rate:6.1f} {size / 1e3:9.1f} {rate * size / 1e6:7.2f}")
