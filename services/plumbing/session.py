@@ -329,16 +329,18 @@ _SHARED_MEMORY_HINT = ("raise its locked-memory limit (ulimit -l; Docker: --ulim
 
 def pool_setting() -> int | None:
     """Each publisher's pool in bytes from ``GNGDT_SHM_POOL_MB`` (0: none), None when unset
-    (sized from the first payload); ``ZenohSetupError`` for a value that is not a number."""
+    (sized from the first payload) or not a number of MiB >= 0 (warned)."""
     value = os.environ.get(SHARED_MEMORY_POOL_ENV, "").strip()
     if not value:
         return None
     try:
         megabytes = float(value)
     except ValueError:
-        raise ZenohSetupError(f"{SHARED_MEMORY_POOL_ENV}={value!r}: not a number of MiB") from None
-    if megabytes < 0:
-        raise ZenohSetupError(f"{SHARED_MEMORY_POOL_ENV}={value!r}: must be >= 0")
+        megabytes = -1.0
+    if not megabytes >= 0:  # also NaN
+        log.warning("%s=%r is not a number of MiB >= 0; pools are sized from their payloads",
+                    SHARED_MEMORY_POOL_ENV, value)
+        return None
     return int(megabytes * 1024 * 1024)
 
 
@@ -438,7 +440,6 @@ class SharedMemoryPublisher:
             log.info("%s: %d of %d large payloads went through shared memory", self.key_expr,
                      self.sent_shared, self.sent_shared + self.sent_network)
         self._publisher.undeclare()
-        self._provider = None
 
 
 def through_shared_memory(sample: zenoh.Sample) -> bool:

@@ -9,8 +9,10 @@ import pytest
 
 from services.plumbing.session import (
     DEFAULT_ENDPOINT,
+    SHARED_MEMORY_POOL_ENV,
     ZenohSetupError,
     client_config,
+    pool_setting,
     router_config,
     router_endpoints,
 )
@@ -112,3 +114,20 @@ def test_every_shipped_config_keeps_gngdt_bounds(path: Path) -> None:
     if json.loads(config.get_json("mode")) == "router" or "router" in path.name:
         block = json.loads(config.get_json("transport/link/tx/queue/congestion_control/block"))
         assert block["wait_before_close"] == BLOCKED_CLIENT_CUTOFF_US
+
+
+@pytest.mark.parametrize(("value", "expected"), [
+    ("", None), ("0", 0), ("2.5", int(2.5 * 1024 * 1024)), ("64", 64 * 1024 * 1024)])
+def test_shared_memory_pool_setting(monkeypatch: pytest.MonkeyPatch, value: str,
+                                    expected: int | None) -> None:
+    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, value)
+    assert pool_setting() == expected
+
+
+@pytest.mark.parametrize("value", ["lots", "-1", "nan"])
+def test_a_wrong_shared_memory_pool_setting_is_warned_and_ignored(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, value: str) -> None:
+    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, value)
+    with caplog.at_level("WARNING"):
+        assert pool_setting() is None
+    assert SHARED_MEMORY_POOL_ENV in caplog.text and repr(value) in caplog.text
