@@ -1,14 +1,20 @@
-"""End-to-end pipeline figures: real-time replay, frame-to-topology latency, peak RSS per service.
+"""End-to-end pipeline figures: real-time replay, frame-to-topology latency, CPU and peak RSS per
+process, with shared memory and over the network.
 
     python benchmarks/bench_pipeline.py [--frames 90] [--samples-per-frame 10000]
                                         [--max-points N] [--recording X]
+                                        [--transports network,shm] [--repeat N] [--pipeline-only]
+    python benchmarks/bench_pipeline.py --max-points 0      # full clouds, network vs shm
 
 Renders (or takes) a 640x480 recording, replays it at its recorded 30 fps through capture ->
-learner -> logger on a loopback router, and prints: frames sent / learned / dropped, learning steps
-per frame, latency p50/p99 (learner's publish time and a subscriber's receive time), peak RSS of
-each service. Baselines in the same run: deprojection as a per-pixel Python loop vs the
-vectorised ray map, and a learner that queues every frame (FIFO) vs latest-frame-wins, replayed
-against the learning times measured here.
+learner -> logger (writing a .rrd), clients of a `gngdt router` process on loopback, once per
+transport (``pipeline_runs.TRANSPORTS``: ``network`` = shared memory off everywhere, the
+baseline; ``shm`` = gngdt's default), and prints per run: frames sent / learned / dropped,
+latency p50/p99 (capture -> topology, the learner's publish time and a subscriber's receive
+time), CPU of each process while capture streams, how many payloads went through shared memory,
+peak RSS. Baselines in the same run: deprojection as a per-pixel Python loop vs the vectorised
+ray map, and a learner that queues every frame (FIFO) vs latest-frame-wins, replayed against the
+learning times measured here.
 """
 
 from __future__ import annotations
@@ -17,20 +23,25 @@ import argparse
 import logging
 import sys
 import tempfile
-import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from procstat import cpu_seconds, status_mb
+from pipeline_runs import (
+    TRANSPORTS,
+    BenchPipeline,
+    CpuWindow,
+    Transport,
+    load_average,
+    percentiles,
+    shared_memory_use,
+)
 
-from schemas.wire import FrameStamp, topic
 from services.logger import LIVELINESS_KEY
-from services.plumbing.session import free_tcp_port, open_config, router_config
-from services.run import Observed, Pipeline, wait_until
 
 
 def render_recording(path: Path, frames: int) -> None:
@@ -113,65 +124,83 @@ def queueing_baseline(recording: Path, samples_per_frame: int, fps: float) -> di
     }
 
 
-def run_pipeline(
-    recording: Path, samples_per_frame: int, workdir: Path, capture_options: list[str]
-) -> dict[str, object]:
-    from schemas.topology import decode_topology
+@dataclass
+class PipelineRun:
+    """One replay through capture -> learner -> logger with one transport."""
 
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    router = open_config(router_config([endpoint]), what="router")
-    observed = Observed()
-    received_latency_ms: list[float] = []
-    lock = threading.Lock()
+    transport: str
+    status: object
+    end: object
+    received_latency_ms: list[float]
+    cpu_percent: dict[str, float]
+    peaks_mb: dict[str, float]
+    streaming_seconds: float
+    shared_memory: dict[str, dict[str, tuple[int, int]]]
+    load: float
 
-    def on_topology(sample) -> None:
-        stamp = FrameStamp.from_attachment(sample.attachment.to_bytes())
-        latency = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-        decode_topology(sample.payload.to_bytes())
-        with lock:
-            received_latency_ms.append(latency)
 
-    declared = [
-        router.liveliness().declare_subscriber("gngdt/**", observed.on_liveliness, history=True),
-        router.declare_subscriber(topic("camera", "learner/status"), observed.on_status),
-        router.declare_subscriber(topic("camera", "eos"), observed.on_eos),
-        router.declare_subscriber(topic("camera", "topology"), on_topology),
-    ]
-    pipeline = Pipeline(endpoint, workdir, "WARNING")
-    stop = threading.Event()
-    peaks: dict[str, float] = {}
-    cpu: dict[str, float] = {}
+def run_pipeline(recording: Path, samples_per_frame: int, workdir: Path,
+                 capture_options: list[str], transport: Transport) -> PipelineRun:
+    """Replay ``recording`` at its recorded rate through a router process, a learner, a logger
+    writing a .rrd and a capture; CPU is measured while capture streams."""
+    load = load_average()
+    bench = BenchPipeline(workdir, transport)
     try:
-        learner = pipeline.start("learn", ["--exit-on-eos", "--samples-per-frame",
-                                           str(samples_per_frame)])
-        logger = pipeline.start("log", ["--save", str(workdir / "bench.rrd")])
-        wait_until(lambda: observed.has_alive("gngdt/camera/learner/alive")
-                   and observed.has_alive(LIVELINESS_KEY), 120, stop, pipeline)
-        capture = pipeline.start("capture", [str(recording), *capture_options])
-        started = time.monotonic()
-        children = {"capture": capture, "learner": learner, "logger": logger}
-        streaming_seconds = 0.0
-        while any(child.process.poll() is None for child in children.values()):
-            if capture.process.poll() is None:
-                streaming_seconds = time.monotonic() - started
-            for name, child in children.items():
-                peaks[name] = max(peaks.get(name, 0.0), status_mb(child.process.pid, "VmHWM"))
-                cpu[name] = max(cpu.get(name, 0.0), cpu_seconds(child.process.pid))
+        bench.start("learn", ["--exit-on-eos", "--samples-per-frame", str(samples_per_frame)],
+                    "learner")
+        bench.start("log", ["--save", str(workdir / "bench.rrd")], "logger")
+        bench.wait(lambda: bench.observer.has_alive("gngdt/camera/learner/alive",
+                                                    LIVELINESS_KEY), 120, "learner and logger")
+        capture = bench.start("capture", [str(recording), *capture_options])
+        window = CpuWindow(bench.pids())
+        # from capture's liveliness token on (declared after its start-up, just before its
+        # first frame) to its exit
+        bench.wait(lambda: bench.observer.has_alive("gngdt/camera/capture/alive"), 60, "capture")
+        window.start()
+        while capture.process.poll() is None:
+            window.sample()
             time.sleep(0.1)
-            if time.monotonic() - started > 600:
-                break
-        failed = pipeline.failed()
-        if failed is not None:
-            raise RuntimeError(f"{failed.name} failed:\n{failed.stderr_tail()}")
+        window.stop()
+        for child in bench.children:
+            if child.process.wait(120) != 0:
+                raise RuntimeError(f"{child.name} failed:\n{child.stderr_tail()}")
+        seen = bench.observer.camera("gngdt/camera")
+        with bench.observer.lock:
+            status, end, received = seen.status, seen.end, list(seen.received_latency_ms)
     finally:
-        pipeline.interrupt_all()
-        pipeline.close()
-        for entity in declared:
-            entity.undeclare()
-        router.close()
-    return {"status": observed.status, "end": observed.end, "peaks": peaks, "cpu": cpu,
-            "streaming_seconds": streaming_seconds,
-            "received_latency_ms": received_latency_ms}
+        bench.close()
+    use = {child.name: shared_memory_use(child.stderr_path.read_text(errors="replace"))
+           for child in bench.children}
+    return PipelineRun(transport.name, status, end, received, window.percent(), window.peaks,
+                       window.seconds, use, load)
+
+
+def print_runs(runs: list[PipelineRun]) -> None:
+    """One row per run: frames, latency, CPU per process, and what went through shared
+    memory."""
+    print(f"{'transport':9s} {'load':>4s} {'sent':>4s} {'learned':>7s} {'dropped':>7s} "
+          f"{'p50 ms':>6s} {'p99 ms':>6s} {'rx p50':>6s} {'rx p99':>6s}  "
+          "CPU % of a core while streaming: capture/learner/logger/router (total)")
+    for run in runs:
+        status, end = run.status, run.end
+        rx50, rx99 = percentiles(run.received_latency_ms)
+        cpu = run.cpu_percent
+        names = ("capture", "learner", "logger", "router")
+        print(f"{run.transport:9s} {run.load:4.1f} {end.frames_sent if end else '?':>4} "
+              f"{status.frames_used:7d} {status.frames_dropped:7d} "
+              f"{status.latency_p50_ms:6.1f} {status.latency_p99_ms:6.1f} {rx50:6.1f} {rx99:6.1f}"
+              f"  {'/'.join(f'{cpu.get(name, 0):.0f}' for name in names)} "
+              f"({sum(cpu.values()):.0f})")
+    for run in runs:
+        used = [f"{name}: " + ", ".join(f"{key.rsplit('/', 1)[-1]} {shared}/{total}"
+                                        for key, (shared, total) in use.items())
+                for name, use in run.shared_memory.items() if use]
+        sent = max(run.end.frames_sent if run.end else 0, 1)
+        per_frame = ", ".join(f"{name} {percent * run.streaming_seconds * 10 / sent:.1f}"
+                              for name, percent in run.cpu_percent.items())
+        print(f"  {run.transport}: streamed {run.streaming_seconds:.1f} s; CPU ms per frame sent: "
+              f"{per_frame}; through shared memory: {'; '.join(used) or 'nothing'}; peak RSS "
+              + ", ".join(f"{name} {mb:.0f} MB" for name, mb in run.peaks_mb.items()))
 
 
 def main() -> int:
@@ -180,8 +209,17 @@ def main() -> int:
     parser.add_argument("--samples-per-frame", type=int, default=10_000)
     parser.add_argument("--recording", type=Path, help="use this 640x480 recording instead")
     parser.add_argument("--max-points", type=int, help="capture's point cap per frame")
+    parser.add_argument("--transports", default="network,shm",
+                        help="comma-separated, run in this order: network (shared memory off: "
+                        "the baseline), zenoh (zenoh's own pool only, as before gngdt's pools), "
+                        "shm (gngdt's default); default network,shm")
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="run the transports this many times, interleaved (default 1)")
+    parser.add_argument("--pipeline-only", action="store_true",
+                        help="skip the deprojection and queueing baselines")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
+    transports = [TRANSPORTS[name.strip()] for name in args.transports.split(",")]
 
     with tempfile.TemporaryDirectory(prefix="bench-pipeline-") as directory:
         workdir = Path(directory)
@@ -194,39 +232,28 @@ def main() -> int:
 
         from gngdt_io.mcap_reader import read_frames
 
-        first = next(iter(read_frames(recording)))
-        vectorised_ms, loop_ms = deprojection_baseline(first)
-        print(f"deprojection 640x480: vectorised {vectorised_ms:.1f} ms, "
-              f"Python loop {loop_ms:.0f} ms ({loop_ms / vectorised_ms:.0f}x)")
+        if not args.pipeline_only:
+            first = next(iter(read_frames(recording)))
+            vectorised_ms, loop_ms = deprojection_baseline(first)
+            print(f"deprojection 640x480: vectorised {vectorised_ms:.1f} ms, "
+                  f"Python loop {loop_ms:.0f} ms ({loop_ms / vectorised_ms:.0f}x)")
 
         capture_options = [] if args.max_points is None else ["--max-points",
                                                                str(args.max_points)]
-        print(f"pipeline: capture {' '.join(capture_options) or '(full clouds)'}, "
-              f"learner {args.samples_per_frame} steps/frame, logger to .rrd")
-        result = run_pipeline(recording, args.samples_per_frame, workdir, capture_options)
-        status, end = result["status"], result["end"]
-        received = np.array(result["received_latency_ms"])
-        print(f"frames sent {end.frames_sent if end else '?'}, learned {status.frames_used}, "
-              f"dropped {status.frames_dropped}, malformed {status.malformed_messages}")
-        print(f"learning: {status.steps / max(status.frames_used, 1):,.0f} steps/frame, "
-              f"{status.steps_per_second:,.0f} steps/s, {status.nodes} nodes")
-        print(f"latency capture->topology published: p50 {status.latency_p50_ms:.1f} ms, "
-              f"p99 {status.latency_p99_ms:.1f} ms (target p99 < 100 ms)")
-        if received.size:
-            print(f"latency capture->topology received by a subscriber: "
-                  f"p50 {np.percentile(received, 50):.1f} ms, "
-                  f"p99 {np.percentile(received, 99):.1f} ms")
-        print("peak RSS: " + ", ".join(f"{name} {mb:.0f} MB"
-                                       for name, mb in result["peaks"].items())
-              + " (target learner < 500 MB)")
-        stream_seconds = result["streaming_seconds"]
-        print(f"CPU seconds per service incl. start-up, stream {stream_seconds:.1f} s: "
-              + ", ".join(f"{name} {seconds:.1f}" for name, seconds in result["cpu"].items()))
-        real_time = end is not None and status.frames_dropped == 0 \
-            and status.frames_used == end.frames_sent
-        print(f"real time at 30 fps with {args.samples_per_frame} steps/frame: "
-              f"{'yes' if real_time else 'no'}")
-
+        print(f"pipeline: capture {' '.join(capture_options) or '(full clouds)'} at the recorded "
+              f"rate, learner {args.samples_per_frame} steps/frame, logger to .rrd, a `gngdt "
+              f"router` process; transports {args.transports}, {args.repeat}x")
+        runs = []
+        for repeat in range(args.repeat):
+            for transport in transports:
+                runs.append(run_pipeline(recording, args.samples_per_frame,
+                                         workdir / f"{transport.name}-{repeat}", capture_options,
+                                         transport))
+        print_runs(runs)
+        print("(p50/p99: capture -> topology published, the learner's status; rx: received by "
+              "a subscriber; load: the machine's 1-minute load average before the run)")
+        if args.pipeline_only:
+            return 0
         overloaded = args.samples_per_frame * 4
         baseline = queueing_baseline(recording, overloaded, 30.0)
         print(f"queueing baseline at {overloaded} steps/frame (learning "

@@ -25,6 +25,7 @@ __all__ = [
     "MAX_CLOUD_POINTS",
     "cloud_pose",
     "cloud_to_msg",
+    "cloud_to_wire",
     "msg_to_cloud",
     "pose_to_transform",
 ]
@@ -83,31 +84,92 @@ def cloud_to_msg(
     from the points' own frame (the camera's) into ``frame_id`` (foxglove's "origin of the point
     cloud relative to the frame of reference"); None: the identity, the points are in ``frame_id``.
     """
+    xyz, colors = _checked_cloud(positions, colors)
+    message = _cloud_header(colors is not None, timestamp_ns, frame_id, pose)
+    if colors is None:
+        message.data = xyz.tobytes()
+    else:
+        packed = np.empty(len(xyz), dtype=_GNGDT_POINT)
+        packed["xyz"] = xyz
+        packed["rgb"] = colors
+        message.data = packed.tobytes()
+    return message
+
+
+def cloud_to_wire(
+    positions: np.ndarray,
+    colors: np.ndarray | None = None,
+    *,
+    timestamp_ns: int,
+    frame_id: str = "camera",
+    pose: np.ndarray | None = None,
+) -> bytearray:
+    """``cloud_to_msg(...).SerializeToString()``, byte for byte, with the points written once,
+    straight into the returned buffer (no intermediate copies of a cloud of megabytes).
+
+    The PointCloud's ``data`` is its last field (number 6), so the message is its other fields
+    serialised by protobuf, then ``data``'s tag, length and the packed points.
+    """
+    xyz, colors = _checked_cloud(positions, colors)
+    head = _cloud_header(colors is not None, timestamp_ns, frame_id, pose).SerializeToString()
+    stride = CLOUD_POINT_STRIDE if colors is not None else 12
+    size = len(xyz) * stride
+    prefix = _DATA_TAG + _varint(size) if size else b""  # proto3 leaves an empty field out
+    start = len(head) + len(prefix)
+    wire = bytearray(start + size)
+    wire[:start] = head + prefix
+    if colors is None:
+        np.frombuffer(wire, dtype="<f4", count=len(xyz) * 3, offset=start)[:] = xyz.ravel()
+    else:
+        packed = np.frombuffer(wire, dtype=_GNGDT_POINT, count=len(xyz), offset=start)
+        packed["xyz"] = xyz
+        packed["rgb"] = colors
+        del packed  # the buffer is handed on: no view of it stays behind
+    return wire
+
+
+#: the tag of PointCloud's ``data`` (length-delimited field 6): one byte
+_DATA_TAG = bytes([PointCloud.DESCRIPTOR.fields_by_name["data"].number << 3 | 2])
+
+
+def _varint(value: int) -> bytes:
+    """Protobuf's base-128 varint of a non-negative integer."""
+    out = bytearray()
+    while value >= 0x80:
+        out.append(value & 0x7F | 0x80)
+        value >>= 7
+    out.append(value)
+    return bytes(out)
+
+
+def _checked_cloud(positions: np.ndarray, colors: np.ndarray | None
+                   ) -> tuple[np.ndarray, np.ndarray | None]:
+    """(N, 3) little-endian float32 positions and (N, 3) uint8 colours (or None), checked."""
     positions = np.asarray(positions)
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"cloud_to_msg: positions must be (N, 3), got {positions.shape}")
     count = positions.shape[0]
     xyz = np.ascontiguousarray(positions, dtype="<f4")
     if colors is None:
-        stride, cloud_fields, data = 12, _GNGDT_CLOUD_FIELDS[:3], xyz.tobytes()
-    else:
-        colors = np.asarray(colors)
-        if colors.shape != (count, 3):
-            raise ValueError(
-                f"cloud_to_msg: colors must be ({count}, 3) like positions, got {colors.shape}"
-            )
-        if colors.dtype != np.uint8:
-            raise ValueError(f"cloud_to_msg: colors must be uint8, got {colors.dtype}")
-        packed = np.empty(count, dtype=_GNGDT_POINT)
-        packed["xyz"] = xyz
-        packed["rgb"] = colors
-        stride, cloud_fields, data = CLOUD_POINT_STRIDE, _GNGDT_CLOUD_FIELDS, packed.tobytes()
+        return xyz, None
+    colors = np.asarray(colors)
+    if colors.shape != (count, 3):
+        raise ValueError(
+            f"cloud_to_msg: colors must be ({count}, 3) like positions, got {colors.shape}"
+        )
+    if colors.dtype != np.uint8:
+        raise ValueError(f"cloud_to_msg: colors must be uint8, got {colors.dtype}")
+    return xyz, colors
+
+
+def _cloud_header(with_colors: bool, timestamp_ns: int, frame_id: str,
+                  pose: np.ndarray | None) -> PointCloud:
+    """A PointCloud with everything but its ``data``."""
     message = PointCloud(
         timestamp=ns_to_timestamp(timestamp_ns),
         frame_id=frame_id,
-        point_stride=stride,
-        fields=cloud_fields,
-        data=data,
+        point_stride=CLOUD_POINT_STRIDE if with_colors else 12,
+        fields=_GNGDT_CLOUD_FIELDS if with_colors else _GNGDT_CLOUD_FIELDS[:3],
     )
     if pose is None:
         message.pose.orientation.w = 1.0

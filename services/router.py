@@ -11,6 +11,7 @@ from services.plumbing.session import (
     ZenohSetupError,
     open_config,
     router_config,
+    router_endpoints,
 )
 
 log = logging.getLogger(__name__)
@@ -19,6 +20,7 @@ EXAMPLES = """examples:
   gngdt router                                   # listens on tcp/127.0.0.1:7447
   gngdt router --listen tcp/127.0.0.1:7450
   gngdt router --listen tls/127.0.0.1:7447 --zenoh-config config/secure/router.json5  # TLS, ACL
+  gngdt router --zenoh-config config/hosts/router-b.json5  # listen, link to host A's router
 """
 
 
@@ -27,25 +29,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--listen",
         action="append",
         metavar="ENDPOINT",
-        help=f"endpoint to listen on (repeatable; default {DEFAULT_ENDPOINT})",
+        help="endpoint to listen on (repeatable); default: the --zenoh-config file's "
+        f"listen endpoints, else {DEFAULT_ENDPOINT}",
     )
     parser.add_argument(
         "--zenoh-config",
         metavar="FILE.json5",
-        help="zenoh configuration file (mode and listen endpoints are set by this command)",
+        help="zenoh configuration file, e.g. one written for zenohd: its listen endpoints "
+        "(unless --listen), connect endpoints (links to other routers) and the rest are used; "
+        "the mode is set to router. A file without listen endpoints listens on "
+        f"{DEFAULT_ENDPOINT} only, never on every interface",
     )
 
 
 def main(args: argparse.Namespace) -> int:
-    listen = args.listen or [DEFAULT_ENDPOINT]
     try:
-        session = open_config(router_config(listen, args.zenoh_config), what="router")
+        config = router_config(args.listen, args.zenoh_config)
+        session = open_config(config, what="router")
     except ZenohSetupError as error:
         log.error("%s", error)
         return 1
+    listen = router_endpoints(config)
+    links = router_endpoints(config, "connect/endpoints")
     try:
         with lifecycle.graceful() as stop:
-            print(f"zenoh router listening on {', '.join(listen)} (Ctrl-C to stop)", flush=True)
+            print(f"zenoh router listening on {', '.join(listen) or 'no endpoint'}"
+                  + (f", linking to {', '.join(links)}" if links else "")
+                  + " (Ctrl-C to stop)", flush=True)
             while not stop.wait(0.5):  # with a timeout: a signal zenoh's threads received
                 pass                       # runs its Python handler only when we wake up
     finally:

@@ -36,7 +36,7 @@ from services.learner.messages import (
     topology_message,
 )
 from services.plumbing import lifecycle
-from services.plumbing.session import declare_publisher
+from services.plumbing.session import declare_publisher, through_shared_memory
 
 if TYPE_CHECKING:
     import zenoh
@@ -205,6 +205,8 @@ class LearnerService:
         self._settled_end = 0.0  # the end of stream (its arrival time) already settled on
         self._frames_since_checkpoint = 0
         self._last_checkpoint = time.monotonic()
+        #: clouds whose payload arrived through shared memory (a diagnostic, logged at the end)
+        self.clouds_shared = 0
 
     def _on_eos(self, sample: zenoh.Sample) -> None:
         from schemas.messages import MessageError
@@ -246,6 +248,7 @@ class LearnerService:
         """Decode, learn and publish one points sample; a bad one is counted and skipped."""
         counters = self.learner.counters
         counters.frames_received += 1
+        self.clouds_shared += through_shared_memory(sample)
         try:
             stamp, positions, colors, frame_id, pose = decode_points(
                 payload_bytes(sample, self._max_cloud_bytes), attachment_bytes(sample),
@@ -313,8 +316,12 @@ class LearnerService:
             checkpoints.save(self.learner, self.checkpoint)
         self._token.undeclare()
         self.instances.close()
-        for entity in (self._queryable, self._eos, self.points, self._objects, self._scene):
+        for entity in (self._queryable, self._eos, self.points, self._topology, self._status,
+                       self._objects, self._scene):
             entity.undeclare()
+        if self.learner.counters.frames_received:
+            log.info("%d of %d clouds arrived through shared memory", self.clouds_shared,
+                     self.learner.counters.frames_received)
 
 
 def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner,

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import re
 import socket
 import threading
@@ -90,10 +91,6 @@ _PUBLISHER_DROP_WAITS: dict[str, Any] = {
 }
 
 
-def _secure_defaults(config: zenoh.Config) -> None:
-    _insert(config, _SECURE_DEFAULTS)
-
-
 def _insert(config: zenoh.Config, settings: dict[str, Any]) -> None:
     for key, value in settings.items():
         config.insert_json5(key, json.dumps(value))
@@ -133,21 +130,75 @@ def client_config(
     return config
 
 
-def router_config(listen: list[str], config_file: Path | None = None) -> zenoh.Config:
-    """Configuration of a zenoh router listening on ``listen`` only, scouting off."""
+def router_config(listen: list[str] | None, config_file: Path | None = None) -> zenoh.Config:
+    """Configuration of a zenoh router, scouting off.
+
+    Where it listens: ``listen`` when given (``--listen`` wins); else the file's own
+    ``listen/endpoints``; else the loopback default ``DEFAULT_ENDPOINT`` -- never zenoh's own
+    default, every interface (a file that sets no listen endpoints opens nothing more than
+    loopback). A file's ``connect/endpoints`` (links to other routers) are kept.
+    """
     import zenoh
 
     config = _load_config_file(config_file) if config_file is not None else zenoh.Config()
     config.insert_json5("mode", '"router"')
-    config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if listen:
+        config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    elif config_file is None or not listen_endpoints_set(config):
+        if config_file is not None:
+            log.warning("%s sets no listen endpoints: listening on %s only (loopback); set "
+                        "listen.endpoints in the file or --listen to listen elsewhere",
+                        config_file, DEFAULT_ENDPOINT)
+        config.insert_json5("listen/endpoints", json.dumps([DEFAULT_ENDPOINT]))
     if config_file is None:
-        config.insert_json5("connect/endpoints", "[]")
-        _secure_defaults(config)
+        _insert(config, {key: value for key, value in router_settings([]).items()
+                         if key not in ("mode", "listen/endpoints")})
+    return config
+
+
+def router_settings(listen: list[str]) -> dict[str, Any]:
+    """A default router's settings (zenoh key path -> value): listening on ``listen`` only,
+    linking to no other router, scouting off, gngdt's bounds."""
+    return {
+        "mode": "router",
+        "listen/endpoints": list(listen),
+        "connect/endpoints": [],
+        **_SECURE_DEFAULTS,
         # a client that stops reading is cut off after this long instead of zenoh's 5 s, during
         # which every message that must arrive (status, end of stream) would wait for it
-        config.insert_json5("transport/link/tx/queue/congestion_control/block/wait_before_close",
-                            str(BLOCKED_CLIENT_CUTOFF_US))
-    return config
+        "transport/link/tx/queue/congestion_control/block/wait_before_close":
+            BLOCKED_CLIENT_CUTOFF_US,
+    }
+
+
+def settings_file_text(settings: dict[str, Any]) -> str:
+    """Settings by key path (``"transport/auth/usrpwd/user"``) as the text of a zenoh
+    configuration file (JSON, which JSON5 reads), for ``--zenoh-config``."""
+    nested: dict[str, Any] = {}
+    for key, value in settings.items():
+        *parents, leaf = key.split("/")
+        branch = nested
+        for name in parents:
+            branch = branch.setdefault(name, {})
+        branch[leaf] = value
+    return json.dumps(nested, indent=2)
+
+
+def listen_endpoints_set(config: zenoh.Config) -> bool:
+    """Whether ``config`` sets its own ``listen/endpoints`` (zenoh's default, left unset, is
+    every interface: ``{"router": ["tcp/[::]:7447"], ...}``)."""
+    import zenoh
+
+    return config.get_json("listen/endpoints") != zenoh.Config().get_json("listen/endpoints")
+
+
+def router_endpoints(config: zenoh.Config, key: str = "listen/endpoints") -> list[str]:
+    """The endpoints a router opened with ``config`` listens on (``key`` "listen/endpoints") or
+    connects to ("connect/endpoints"): a list, or the ``router`` entry of a per-mode mapping."""
+    value = _setting(config, key) or []
+    if isinstance(value, dict):
+        value = value.get("router", [])
+    return [str(endpoint) for endpoint in value]
 
 
 def _load_config_file(path: Path) -> zenoh.Config:
@@ -204,7 +255,7 @@ def open_config(config: zenoh.Config, what: str = "session",
         return session
 
 
-def _short(error: Exception) -> str:
+def _short(error: Exception | str) -> str:
     """zenoh's error text without the Rust source locations it appends."""
     return re.sub(r"\s*at \S+\.rs:\d+\.?", "", str(error)).strip()
 
@@ -212,7 +263,7 @@ def _short(error: Exception) -> str:
 def _open_failure(config: zenoh.Config, what: str, error: Exception) -> str:
     reason = _short(error)
     if _setting(config, "mode") == "router":
-        listen = ", ".join(_setting(config, "listen/endpoints") or [])
+        listen = ", ".join(router_endpoints(config)) or "no endpoint"
         hint = ("another process (a router?) already listens there; pick a free port with "
                 "--listen" if "in use" in reason else "check --listen and --zenoh-config")
         return f"cannot open a zenoh router on {listen}: {reason}; {hint}"
@@ -244,17 +295,157 @@ def open_session(args: argparse.Namespace) -> zenoh.Session:
 
 
 def declare_publisher(session: zenoh.Session, key: str, encoding: str,
-                      latest_wins: bool) -> zenoh.Publisher:
-    """The one place congestion is decided. ``latest_wins`` (images, clouds, topologies: a
-    newer one supersedes it): ``DROP``, so that a consumer that does not keep up loses stale
-    samples instead of stalling the publisher and everyone else. Otherwise (calibration, status,
-    end of stream: what must arrive): ``BLOCK``, a consumer that stops reading altogether then
-    being cut off by zenoh after ``transport/link/tx/queue/congestion_control/block/
-    wait_before_close``."""
+                      latest_wins: bool) -> SharedMemoryPublisher:
+    """The one place congestion and transport are decided. ``latest_wins`` (images, clouds,
+    topologies: a newer one supersedes it): ``DROP``, so that a consumer that does not keep up
+    loses stale samples instead of stalling the publisher and everyone else; large payloads go
+    through zenoh shared memory when the link allows (:class:`SharedMemoryPublisher`).
+    Otherwise (calibration, status, end of stream: what must arrive): ``BLOCK``, a consumer that
+    stops reading altogether then being cut off by zenoh after ``transport/link/tx/queue/
+    congestion_control/block/wait_before_close``."""
     import zenoh
 
     control = zenoh.CongestionControl.DROP if latest_wins else zenoh.CongestionControl.BLOCK
-    return session.declare_publisher(key, encoding=encoding, congestion_control=control)
+    publisher = session.declare_publisher(key, encoding=encoding, congestion_control=control)
+    return SharedMemoryPublisher(session, publisher, shared_memory=latest_wins)
+
+
+#: payloads at least this large go through gngdt's shared-memory pool when the link allows
+#: (below it, zenoh's own transport optimisation decides: it copies payloads of 3 kB and more
+#: into its own 16 MiB pool)
+SHARED_MEMORY_MIN_BYTES = 64 * 1024
+#: a publisher's pool holds this many of its largest payload: the one being written, the one a
+#: learner holds while it learns, those in flight in the router and toward slow subscribers
+SHARED_MEMORY_POOL_PAYLOADS = 8
+#: the smallest pool a publisher makes, bytes
+SHARED_MEMORY_MIN_POOL_BYTES = 4 * 1024 * 1024
+#: environment variable: each publisher's pool in MiB instead (0: no gngdt pool, zenoh's own
+#: transport optimisation only)
+SHARED_MEMORY_POOL_ENV = "GNGDT_SHM_POOL_MB"
+#: what a process lacking shared memory needs (mlock of its pool, room in /dev/shm)
+_SHARED_MEMORY_HINT = ("raise its locked-memory limit (ulimit -l; Docker: --ulimit memlock=-1 or "
+                       "cap_add IPC_LOCK) and give /dev/shm room (Docker: --shm-size or ipc: host)")
+
+
+def pool_setting() -> int | None:
+    """Each publisher's pool in bytes from ``GNGDT_SHM_POOL_MB`` (0: none), None when unset
+    (sized from the first payload) or not a number of MiB >= 0 (warned)."""
+    value = os.environ.get(SHARED_MEMORY_POOL_ENV, "").strip()
+    if not value:
+        return None
+    try:
+        megabytes = float(value)
+    except ValueError:
+        megabytes = -1.0
+    if not megabytes >= 0:  # also NaN
+        log.warning("%s=%r is not a number of MiB >= 0; pools are sized from their payloads",
+                    SHARED_MEMORY_POOL_ENV, value)
+        return None
+    return int(megabytes * 1024 * 1024)
+
+
+class SharedMemoryPublisher:
+    """A zenoh publisher whose large payloads travel through zenoh shared memory when the
+    session's link to its router negotiated it, and over the network otherwise.
+
+    zenoh negotiates shared memory per link: both ends on one host, with shared memory enabled
+    (``transport/shared_memory/enabled``, zenoh's default; ``false`` in the session's and the
+    router's configuration turns it off). A payload of ``SHARED_MEMORY_MIN_BYTES`` or more is
+    then copied once into this publisher's pool (``ShmProvider``, made at the first such payload
+    with room for ``SHARED_MEMORY_POOL_PAYLOADS`` of it) and only a reference crosses the router
+    to subscribers on the same host; zenoh turns it back into bytes on any link that has no
+    shared memory (another host). When the pool cannot be made (locked-memory limit, a small
+    /dev/shm) or is full (subscribers still hold its payloads), the payload goes over the
+    network as it would without shared memory: said once in the log, counted.
+    """
+
+    def __init__(self, session: zenoh.Session, publisher: zenoh.Publisher,
+                 shared_memory: bool = True) -> None:
+        self._session = session
+        self._publisher = publisher
+        self._pool_bytes = pool_setting()
+        self._shared_memory = shared_memory and self._pool_bytes != 0
+        self._provider: Any = None
+        self._unavailable = False  # the pool could not be made: the network from now on
+        self._pool_full_said = False
+        self._no_link_said = False
+        #: large payloads sent through shared memory / over the network
+        self.sent_shared = 0
+        self.sent_network = 0
+
+    @property
+    def key_expr(self) -> zenoh.KeyExpr:
+        return self._publisher.key_expr
+
+    @property
+    def matching_status(self) -> zenoh.MatchingStatus:
+        return self._publisher.matching_status
+
+    def put(self, payload: bytes | bytearray, attachment: bytes | None = None) -> None:
+        self._publisher.put(self._payload(payload), attachment=attachment)
+
+    def _payload(self, payload: bytes | bytearray) -> Any:
+        """``payload`` as it is, or copied into a shared-memory buffer."""
+        if not self._shared_memory or len(payload) < SHARED_MEMORY_MIN_BYTES:
+            return payload
+        buffer = None
+        if self._link_shares_memory():
+            buffer = self._allocate(len(payload))
+        elif not self._no_link_said:
+            self._no_link_said = True
+            log.info("%s: no shared memory on the link to the router (another host, or shared "
+                     "memory off); large payloads go over the network", self.key_expr)
+        if buffer is None:
+            self.sent_network += 1
+            return payload
+        buffer[:] = payload  # the one copy: zenoh's buffers take bytes only, no memoryview
+        self.sent_shared += 1
+        return buffer
+
+    def _link_shares_memory(self) -> bool:
+        return any(getattr(transport, "is_shm", False)
+                   for transport in self._session.info.transports())
+
+    def _allocate(self, size: int) -> Any:
+        """A shared-memory buffer of ``size`` bytes, or None (no pool, or the pool is full)."""
+        if self._unavailable:
+            return None
+        import zenoh
+
+        try:
+            import zenoh.shm as shm
+
+            if self._provider is None:
+                pool = self._pool_bytes or max(SHARED_MEMORY_MIN_POOL_BYTES,
+                                               SHARED_MEMORY_POOL_PAYLOADS * size)
+                self._provider = shm.ShmProvider.default_backend(pool)
+                log.debug("%s: shared-memory pool of %.1f MB", self.key_expr, pool / 1e6)
+            # collect what subscribers released, compact, else give up: never block a publisher
+            return self._provider.alloc(size, policy=shm.GarbageCollect(shm.Defragment()))
+        except (ImportError, zenoh.ZError) as error:
+            if self._provider is None:
+                self._unavailable = True
+                log.warning("%s: no shared memory (%s); large payloads go over the network. "
+                            "For shared memory, %s", self.key_expr, _short(str(error)),
+                            _SHARED_MEMORY_HINT)
+            elif not self._pool_full_said:
+                self._pool_full_said = True
+                log.info("%s: shared-memory pool full or too small for %d bytes (%s); such "
+                         "payloads go over the network (%s sizes the pool)", self.key_expr,
+                         size, _short(str(error)), SHARED_MEMORY_POOL_ENV)
+            return None
+
+    def undeclare(self) -> None:
+        if self.sent_shared or self.sent_network:
+            log.info("%s: %d of %d large payloads went through shared memory", self.key_expr,
+                     self.sent_shared, self.sent_shared + self.sent_network)
+        self._publisher.undeclare()
+
+
+def through_shared_memory(sample: zenoh.Sample) -> bool:
+    """Whether ``sample``'s payload arrived through shared memory (diagnostics)."""
+    as_shm = getattr(sample.payload, "as_shm", None)
+    return as_shm is not None and as_shm() is not None
 
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:

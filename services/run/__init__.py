@@ -47,6 +47,7 @@ from services.plumbing.session import (
     free_tcp_port,
     open_config,
     router_config,
+    settings_file_text,
 )
 from services.run.summary import file_size, format_summary, recorded_frames
 
@@ -206,23 +207,15 @@ class RunAccess:
         self.client_file = folder / "zenoh-client.json5"
         for path, text in (
             (self.users_file, f"{self.USER}:{password}\n"),
-            (self.client_file, json.dumps(self._client_settings(password), indent=2)),
+            (self.client_file, settings_file_text(self._client_settings(password))),
         ):
             path.touch(mode=0o600)
             path.write_text(text)
 
     def _client_settings(self, password: str) -> dict:
-        """The children's zenoh configuration as a nested mapping (a JSON5 file's content)."""
-        settings = {**client_settings([self.endpoint]),
-                    "transport/auth/usrpwd": {"user": self.USER, "password": password}}
-        nested: dict = {}
-        for key, value in settings.items():
-            *parents, leaf = key.split("/")
-            branch = nested
-            for name in parents:
-                branch = branch.setdefault(name, {})
-            branch[leaf] = value
-        return nested
+        """The children's zenoh configuration, by key path."""
+        return {**client_settings([self.endpoint]),
+                "transport/auth/usrpwd": {"user": self.USER, "password": password}}
 
     def router(self) -> zenoh.Config:
         config = router_config([self.endpoint])

@@ -13,6 +13,7 @@ import pytest
 from services.plumbing.session import (
     ZenohSetupError,
     client_config,
+    free_tcp_port,
     open_config,
 )
 
@@ -63,3 +64,21 @@ def test_gngdt_router_process_serves_clients(free_port: int) -> None:
             process.wait()
 
 
+
+
+@pytest.mark.timeout(60)
+def test_gngdt_router_listens_where_its_config_file_says(tmp_path: Path, spawn) -> None:
+    from processes import bound_sockets, log_text, wait_for
+
+    port = free_tcp_port()
+    path = tmp_path / "zenohd.json5"
+    path.write_text(f'{{ mode: "router", listen: {{ endpoints: ["tcp/127.0.0.1:{port}"] }},\n'
+                    "  scouting: { multicast: { enabled: false } } }\n")
+    router = spawn("router", "--zenoh-config", str(path))
+    wait_for(lambda: "listening on" in log_text(router), 30, "the router's start")
+    assert f"listening on tcp/127.0.0.1:{port}" in log_text(router)
+    listeners = [address for protocol, address, state in bound_sockets(router.pid)
+                 if state == "listen"]
+    assert listeners == [f"127.0.0.1:{port}"]  # the file's endpoint only, not 7447
+    session = open_config(client_config([f"tcp/127.0.0.1:{port}"]))
+    session.close()

@@ -37,6 +37,7 @@ from schemas import (
     raw_to_image,
     unpack_array,
 )
+from schemas.clouds import cloud_to_wire
 from schemas.generate import SCHEMA_DIR, generate
 
 STAMP_NS = 1_700_000_000_123_456_789
@@ -205,6 +206,37 @@ def test_cloud_views_without_copy_equal_the_copies_and_are_read_only() -> None:
     view_positions, view_colors = msg_to_cloud(payload, copy=False)
     assert np.array_equal(view_positions, positions) and np.array_equal(view_colors, colors)
     assert not view_positions.flags.writeable and not view_colors.flags.writeable
+
+
+@pytest.mark.parametrize("count", [0, 1, 7, 2000])
+@pytest.mark.parametrize("with_colors", [True, False])
+@pytest.mark.parametrize("posed", [True, False])
+def test_cloud_to_wire_is_the_serialised_message_byte_for_byte(
+        count: int, with_colors: bool, posed: bool) -> None:
+    rng = np.random.default_rng(count)
+    positions = rng.normal(size=(count, 3))  # float64: converted as cloud_to_msg does
+    colors = rng.integers(0, 256, (count, 3), dtype=np.uint8) if with_colors else None
+    pose = None
+    if posed:
+        pose = np.eye(4)
+        pose[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+        pose[:3, 3] = [0.5, -2.0, 1.25]
+    expected = cloud_to_msg(positions, colors, timestamp_ns=STAMP_NS, frame_id="map",
+                            pose=pose).SerializeToString()
+    wire = cloud_to_wire(positions, colors, timestamp_ns=STAMP_NS, frame_id="map", pose=pose)
+    assert isinstance(wire, bytearray) and bytes(wire) == expected
+    wire[:0] = b""  # no numpy view of it left behind: it can still be resized
+    restored, restored_colors = msg_to_cloud(bytes(wire))
+    np.testing.assert_array_equal(restored, positions.astype(np.float32))
+    if with_colors:
+        np.testing.assert_array_equal(restored_colors, colors)
+
+
+def test_cloud_to_wire_validates_like_cloud_to_msg() -> None:
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        cloud_to_wire(np.zeros((4, 2), np.float32), timestamp_ns=0)
+    with pytest.raises(ValueError, match="uint8"):
+        cloud_to_wire(np.zeros((4, 3), np.float32), np.zeros((4, 3)), timestamp_ns=0)
 
 
 def test_cloud_without_colors() -> None:

@@ -9,9 +9,12 @@ import pytest
 
 from services.plumbing.session import (
     DEFAULT_ENDPOINT,
+    SHARED_MEMORY_POOL_ENV,
     ZenohSetupError,
     client_config,
+    pool_setting,
     router_config,
+    router_endpoints,
 )
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -35,6 +38,44 @@ def test_router_config_listens_where_told_only() -> None:
     assert setting(config, "mode") == "router"
     assert setting(config, "listen/endpoints") == ["tcp/127.0.0.1:7999"]
     assert setting(config, "scouting/multicast/enabled") is False
+
+
+def test_router_config_without_anything_listens_on_loopback_and_links_nowhere() -> None:
+    config = router_config(None)
+    assert router_endpoints(config) == [DEFAULT_ENDPOINT]
+    assert setting(config, "connect/endpoints") == []
+
+
+def test_router_config_file_listen_and_connect_are_honoured(tmp_path: Path) -> None:
+    path = tmp_path / "zenohd.json5"
+    path.write_text('{ mode: "router", listen: { endpoints: ["tcp/10.9.0.2:7447"] },\n'
+                    '  connect: { endpoints: ["tcp/10.9.0.1:7447"] } }\n')
+    config = router_config(None, path)
+    assert router_endpoints(config) == ["tcp/10.9.0.2:7447"]
+    assert router_endpoints(config, "connect/endpoints") == ["tcp/10.9.0.1:7447"]
+    # --listen wins over the file; the file's links stay
+    config = router_config(["tcp/127.0.0.1:7450"], path)
+    assert router_endpoints(config) == ["tcp/127.0.0.1:7450"]
+    assert router_endpoints(config, "connect/endpoints") == ["tcp/10.9.0.1:7447"]
+
+
+def test_router_config_file_per_mode_listen_is_honoured(tmp_path: Path) -> None:
+    path = tmp_path / "per_mode.json5"
+    path.write_text('{ listen: { endpoints: { router: ["tcp/127.0.0.1:7461"], '
+                    'peer: ["tcp/127.0.0.1:0"] } } }')
+    assert router_endpoints(router_config(None, path)) == ["tcp/127.0.0.1:7461"]
+
+
+def test_router_config_file_without_listen_stays_on_loopback_and_says_so(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    path = tmp_path / "no_listen.json5"
+    path.write_text('{ connect: { endpoints: ["tcp/10.9.0.1:7447"] } }')
+    with caplog.at_level("WARNING"):
+        config = router_config(None, path)
+    # zenoh's own default would be tcp/[::]:7447, every interface
+    assert router_endpoints(config) == [DEFAULT_ENDPOINT]
+    assert router_endpoints(config, "connect/endpoints") == ["tcp/10.9.0.1:7447"]
+    assert "sets no listen endpoints" in caplog.text and DEFAULT_ENDPOINT in caplog.text
 
 
 def test_config_file_passes_through(tmp_path: Path) -> None:
@@ -73,3 +114,20 @@ def test_every_shipped_config_keeps_gngdt_bounds(path: Path) -> None:
     if json.loads(config.get_json("mode")) == "router" or "router" in path.name:
         block = json.loads(config.get_json("transport/link/tx/queue/congestion_control/block"))
         assert block["wait_before_close"] == BLOCKED_CLIENT_CUTOFF_US
+
+
+@pytest.mark.parametrize(("value", "expected"), [
+    ("", None), ("0", 0), ("2.5", int(2.5 * 1024 * 1024)), ("64", 64 * 1024 * 1024)])
+def test_shared_memory_pool_setting(monkeypatch: pytest.MonkeyPatch, value: str,
+                                    expected: int | None) -> None:
+    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, value)
+    assert pool_setting() == expected
+
+
+@pytest.mark.parametrize("value", ["lots", "-1", "nan"])
+def test_a_wrong_shared_memory_pool_setting_is_warned_and_ignored(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, value: str) -> None:
+    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, value)
+    with caplog.at_level("WARNING"):
+        assert pool_setting() is None
+    assert SHARED_MEMORY_POOL_ENV in caplog.text and repr(value) in caplog.text
