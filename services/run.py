@@ -1,4 +1,5 @@
-"""Run the whole pipeline on one recording: a loopback router, then learner, logger and capture.
+"""Run the whole pipeline on one source (a recording, or a live RealSense with ``--realsense``): a
+loopback router, then learner, logger and capture.
 
 The router is this process's own zenoh session (mode router, a free port on 127.0.0.1, scouting
 off) and admits only this run's children: they authenticate with a user and password made for
@@ -37,6 +38,7 @@ from gngdt_io.outputs.rerun_output import (
     unused_rrd_path,
 )
 from schemas.wire import DEFAULT_CAMERA, topic
+from services.capture import add_source_arguments, source_spec
 from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
 from services.plumbing.session import (
@@ -61,6 +63,8 @@ EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
   gngdt run recordings/tabletop.mcap --mcap runs/tabletop.mcap   # + every stream for Foxglove
   gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
+  gngdt run --realsense                              # the RealSense plugged in, until Ctrl-C
+  gngdt run session.db3 --foxglove                   # live in Foxglove at ws://127.0.0.1:8765
 """
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -69,7 +73,7 @@ DEFAULT_MAX_POINTS = 50_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", type=Path, metavar="RECORDING", help="MCAP recording")
+    add_source_arguments(parser)
     viewer = parser.add_mutually_exclusive_group()
     viewer.add_argument("--save", type=Path, metavar="PATH",
                         help="write the rerun recording here (default runs/<recording>-<time>.rrd)")
@@ -81,6 +85,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mcap", type=Path, metavar="PATH",
                         help="also record every gngdt stream (images, clouds, topology, scene, "
                         "objects, status) into this MCAP file for Foxglove or rerun")
+    parser.add_argument("--foxglove", action="store_true",
+                        help="also serve every stream live to Foxglove (WebSocket at --bind, "
+                        "port 8765 unless --bind names one)")
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -317,6 +324,8 @@ def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
         arguments += ["--mcap", str(mcap_path)]
     if args.connect:
         return [*arguments, "--connect", *(["--url", args.url] if args.url else [])]
+    if args.foxglove:
+        arguments += ["--foxglove", "--bind", args.bind]
     if args.serve:
         return [*arguments, "--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
                 str(args.grpc_port), "--web-port", str(args.web_port)]
@@ -364,14 +373,22 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
     return "\n".join(lines)
 
 
-def recorded_frames(path: Path) -> int | None:
-    """Frames in the recording by its index (None without one)."""
+def recorded_frames(spec: str) -> int | None:
+    """Frames in an MCAP recording by its index (None without one, or for another source)."""
     from gngdt_io.mcap_reader import RecordingError, recording_info
 
     try:
-        return int(recording_info(path)["frames"])
-    except RecordingError:
+        return int(recording_info(Path(spec))["frames"])
+    except (RecordingError, OSError):
         return None
+
+
+def run_name(spec: str) -> str:
+    """The name a run's files take from its source: a file's stem, or a spec without its
+    colons (``realsense:123`` -> ``realsense-123``)."""
+    if ":" in spec and not Path(spec).exists():
+        return "-".join(part for part in spec.split(":") if part)
+    return Path(spec).stem
 
 
 @dataclass
@@ -393,9 +410,15 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     write); ValueError or RecordingError for anything wrong, before any process starts."""
     from gngdt_io.sources import open_source
 
-    open_source(args.recording)  # a source capture can read (RecordingError says why not)
+    args.recording = source_spec(args)
+    open_source(args.recording).close()  # one capture can read (RecordingError says why not)
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
+    if args.foxglove:  # a port in use: said before anything starts
+        from gngdt_io.outputs.base import split_bind
+        from gngdt_io.outputs.foxglove import DEFAULT_FOXGLOVE_PORT, check_bindable
+
+        check_bindable(*split_bind(args.bind, DEFAULT_FOXGLOVE_PORT))
     veil_ratio = sensor_veil_ratio(args.params)  # a wrong params file: said before starting
     topic(args.cam, "points")  # validates the camera name
     rates = rates_from_args(args)
@@ -404,7 +427,7 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
         mcap_path.parent.mkdir(parents=True, exist_ok=True)
     rrd_path = None
     if not (args.connect or args.serve):
-        rrd_path = unused_rrd_path(args.save or default_rrd_path(args.recording.stem))
+        rrd_path = unused_rrd_path(args.save or default_rrd_path(run_name(args.recording)))
         rrd_path.parent.mkdir(parents=True, exist_ok=True)
     return RunPlan(rates, veil_ratio, rrd_path, mcap_path)
 
@@ -474,7 +497,7 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         plan = plan_run(args)
-    except (RecordingError, ValueError) as error:
+    except (RecordingError, ValueError, OSError) as error:
         log.error("%s", error)
         return 2
     log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))  # 0700: holds the run's password
@@ -510,7 +533,7 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
         lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
         and observed.has_alive(LIVELINESS_KEY),
         args.startup_timeout, stop, pipeline)
-    early_end = ""
+    early_end, stream_ended = "", False
     if not ready and not stop.is_set() and pipeline.failed() is None:
         log.error("learner and logger did not come up within %.0f s; their logs: %s",
                   args.startup_timeout, pipeline.log_dir)
@@ -531,7 +554,9 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
             quitter = learner if learner.process.poll() is not None else logger
             early_end = (f"the {'learner' if quitter is learner else 'logger'} stopped while "
                          "capture was still replaying")
-    if stop.is_set() or pipeline.failed() is not None or early_end:
+    failure = pipeline.failed()  # a capture that failed after its end of stream (a camera lost)
+    lost = failure is not None and failure.name == "capture" and stream_ended  # lets them finish
+    if stop.is_set() or (failure is not None and not lost) or early_end:
         log.info("%s; stopping the services",
                  "interrupted" if stop.is_set() else early_end or "a service failed")
         pipeline.interrupt_all()

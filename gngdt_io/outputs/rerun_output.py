@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gngdt_io.outputs.base import Output, StreamSample
+from gngdt_io.outputs.base import Output, StreamSample, split_bind
 from gngdt_io.outputs.rerun_blueprint import EntityPaths, blueprint
 from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
 from gngdt_io.outputs.rerun_sinks import (
@@ -76,10 +76,12 @@ def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
     """Where ``--serve`` listens (shared with `gngdt run`)."""
-    group = parser.add_argument_group("serving (--serve)")
-    group.add_argument("--bind", default=DEFAULT_BIND, metavar="ADDRESS",
-                       help=f"address the served viewer listens on (default {DEFAULT_BIND}, this "
-                       "machine only; 0.0.0.0 opens it to the network, with no authentication)")
+    group = parser.add_argument_group("serving (--serve, --foxglove)")
+    group.add_argument("--bind", default=DEFAULT_BIND, metavar="HOST[:PORT]",
+                       help=f"address the servers listen on (default {DEFAULT_BIND}, this "
+                       "machine only; 0.0.0.0 opens them to the network, with no "
+                       "authentication); PORT is the Foxglove server's (default 8765), rerun's "
+                       "are --grpc-port and --web-port")
     group.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, metavar="PORT",
                        help=f"port of the gRPC server logs go to (default {DEFAULT_GRPC_PORT})")
     group.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, metavar="PORT",
@@ -175,7 +177,7 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
         rec.stdout(default_blueprint=initial)
         return rec, "stdout", None, None
     if args.serve:
-        server = ViewerServer(args.bind, args.grpc_port, args.web_port)
+        server = ViewerServer(split_bind(args.bind, 0)[0], args.grpc_port, args.web_port)
         try:
             server.wait_ready()
         except OSError:

@@ -1,6 +1,6 @@
 """Log every gngdt stream (``gngdt/**``) to its outputs: rerun (a .rrd by default, or a viewer)
-and, when asked, an MCAP recording of every stream as it is (``--mcap``); `gngdt_io.outputs`
-has them all behind one interface.
+and, when asked, an MCAP recording of every stream as it is (``--mcap``) and a live Foxglove
+WebSocket (``--foxglove``); `gngdt_io.outputs` has them all behind one interface.
 
 The logger stops on its own once every camera it knows of (from its first message, or from its
 capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of
@@ -28,6 +28,8 @@ EXAMPLES = """examples:
   gngdt log --connect --url rerun+http://127.0.0.1:9876/proxy   # a running viewer
   gngdt log --stdout | rerun -
   gngdt log --mcap runs/all.mcap              # + every stream as it is, for Foxglove
+  gngdt log --foxglove                        # + live to Foxglove at ws://127.0.0.1:8765
+  gngdt log --foxglove --bind 0.0.0.0:8765    # ... from other machines (no authentication)
 """
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
