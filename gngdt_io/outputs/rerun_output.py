@@ -213,6 +213,8 @@ class RerunOutput(Output):
         self.max_topology_nodes = max_topology_nodes
         self.to_stdout = to_stdout
         self._cameras: list[str] = []
+        #: cameras whose poses come on their own stream (gngdt/<cam>/tf), not with the clouds
+        self._tf_cameras: set[str] = set()
         #: per camera, the last frame sequence of its stream (its end of stream)
         self._last_sequence: dict[str, int] = {}
         self._last_flush = time.monotonic()
@@ -274,6 +276,8 @@ class RerunOutput(Output):
             rerun_log.depth(paths, raw_to_image(payload))
         elif stream == "points":
             self._points(paths, payload, stamp.sequence)
+        elif stream == "tf":
+            self._transform(sample.camera, paths, payload)
         elif stream == "topology":
             self._topology(sample.camera, paths, decode_topology(
                 payload, max_nodes=self.max_topology_nodes), stamp.sequence)
@@ -284,6 +288,16 @@ class RerunOutput(Output):
         elif stream == "eos":
             self._last_sequence[sample.camera] = decode_stream_end(
                 payload).last_frame_sequence
+
+    def _transform(self, camera: str, paths: EntityPaths, payload: bytes) -> None:
+        """The camera's pose (fixed frame -> camera): its frustum and images follow it."""
+        from schemas.clouds import transform_to_pose
+
+        _, child, matrix = transform_to_pose(payload)
+        if child != camera:  # a transform of another frame: not this camera's pose
+            return
+        self._tf_cameras.add(camera)
+        self.rerun_log.camera_pose(paths, matrix)
 
     def _points(self, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
@@ -298,9 +312,10 @@ class RerunOutput(Output):
         if rerun_log.due(paths, "points", sequence, rerun_log.rates.cloud_every):
             # views: the logger decimates, so only the logged points are copied
             positions, colors = msg_to_cloud(message, copy=False)
-            rerun_log.points(paths, positions, colors, pose if moving else None)
-        elif moving:  # the camera's pose: every frame, whether its cloud is logged or not
-            rerun_log.camera_pose(paths, pose)
+            rerun_log.points(paths, positions, colors, pose if moving else None,
+                             log_pose=paths.camera not in self._tf_cameras)
+        elif moving and paths.camera not in self._tf_cameras:
+            rerun_log.camera_pose(paths, pose)  # every frame, whether its cloud is logged or not
 
     def _topology(self, camera: str, paths: EntityPaths, snapshot: Any, sequence: int) -> None:
         rerun_log = self.rerun_log
