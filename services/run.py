@@ -414,11 +414,9 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     open_source(args.recording).close()  # one capture can read (RecordingError says why not)
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
-    if args.foxglove:  # a port in use: said before anything starts
-        from gngdt_io.outputs.base import split_bind
-        from gngdt_io.outputs.foxglove import DEFAULT_FOXGLOVE_PORT, check_bindable
+    from gngdt_io.outputs.foxglove import FoxgloveOutput
 
-        check_bindable(*split_bind(args.bind, DEFAULT_FOXGLOVE_PORT))
+    FoxgloveOutput.check_args(args)  # a port in use: said before anything starts
     veil_ratio = sensor_veil_ratio(args.params)  # a wrong params file: said before starting
     topic(args.cam, "points")  # validates the camera name
     rates = rates_from_args(args)

@@ -9,8 +9,9 @@ An output takes the samples of ``gngdt/**`` in one of two ways:
 
 Both get `tick` on every loop (flush, bounds) and `close` at the end. A malformed sample raises
 ValueError from `write`; the logger counts and skips it. Options come from the command line:
-`add_arguments` declares them (no heavy import: ``gngdt --help`` stays fast) and `from_args`
-builds the output, or None when its options do not ask for it.
+`add_arguments` declares them (no heavy import: ``gngdt --help`` stays fast), `check_args` says
+what cannot work before any output opens, and `from_args` builds the output, or None when its
+options do not ask for it.
 """
 
 from __future__ import annotations
@@ -80,6 +81,12 @@ class Output(ABC):
     @abstractmethod
     def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
         """Declare this output's command-line options."""
+
+    @classmethod
+    def check_args(cls, args: argparse.Namespace) -> None:
+        """ValueError/OSError when the options cannot work (a port in use), said before any
+        output is opened."""
+        return None
 
     @classmethod
     @abstractmethod

@@ -170,11 +170,16 @@ class FoxgloveOutput(Output):
                            f"loses its oldest (default {DEFAULT_BACKLOG})")
 
     @classmethod
+    def check_args(cls, args: argparse.Namespace) -> None:
+        if args.foxglove:
+            check_bindable(*split_bind(args.bind, DEFAULT_FOXGLOVE_PORT))
+        if getattr(args, "foxglove_backlog", DEFAULT_BACKLOG) < 1:
+            raise ValueError(f"--foxglove-backlog must be >= 1, got {args.foxglove_backlog}")
+
+    @classmethod
     def from_args(cls, args: argparse.Namespace) -> FoxgloveOutput | None:
         if not args.foxglove:
             return None
-        if args.foxglove_backlog < 1:
-            raise ValueError(f"--foxglove-backlog must be >= 1, got {args.foxglove_backlog}")
         host, port = split_bind(args.bind, DEFAULT_FOXGLOVE_PORT)
         return cls(host, port, args.foxglove_backlog)
 

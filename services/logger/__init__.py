@@ -62,6 +62,8 @@ def main(args: argparse.Namespace) -> int:
         return 2
     outputs: list[Output] = []
     try:
+        for kind in OUTPUTS:  # what cannot work is said before any output opens
+            kind.check_args(args)
         for kind in OUTPUTS:
             output = kind.from_args(args)
             if output is not None:
