@@ -31,6 +31,7 @@ HERE = Path(__file__).resolve().parent
 REPO_ROOT = HERE.parent
 sys.path.insert(0, str(REPO_ROOT))
 
+from gngdt_io.outputs.rerun_sinks import rerun_binary  # noqa: E402
 from services.plumbing.session import free_tcp_port  # noqa: E402
 
 log = logging.getLogger("screenshot_viewer")
@@ -60,8 +61,10 @@ def screenshot(rrd: Path, out: Path, width: int, height: int, timeout_s: float) 
         # rerun writes its analytics config on first use: keep it out of the user's home
         env = dict(os.environ, XDG_CONFIG_HOME=config)
         server = subprocess.Popen(
-            ["rerun", "--serve-web", str(rrd), "--bind", "127.0.0.1", "--port", str(grpc_port),
-             "--web-viewer-port", str(web_port), "--hide-welcome-screen"],
+            # the binary itself: the `rerun` script would start it as a child that a terminate
+            # of the script leaves running
+            [rerun_binary(), "--serve-web", str(rrd), "--bind", "127.0.0.1", "--port",
+             str(grpc_port), "--web-viewer-port", str(web_port), "--hide-welcome-screen"],
             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         try:
             viewer = f"http://127.0.0.1:{web_port}"
