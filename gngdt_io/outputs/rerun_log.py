@@ -200,11 +200,12 @@ class RerunLog:
             self.set_up(up, "the camera poses")
         self.rec.log(paths.pinhole, rr.Transform3D(translation=pose[:3, 3], mat3x3=pose[:3, :3]))
 
-    def static_up(self, snapshot: TopologySnapshot) -> None:
+    def static_up(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
         """A static camera's up from the largest horizontal plane of its topology (in its
         frame), unless camera poses already say where up is."""
         labels = snapshot.clusterings.get("nor")
-        if self._pose_up.count or snapshot.normals is None or labels is None:
+        if (self._pose_up.count or snapshot.frame_id != paths.camera
+                or snapshot.normals is None or labels is None):
             return
         found = up_from_planes(snapshot.positions, snapshot.normals, labels)
         if found is not None:
@@ -252,7 +253,7 @@ class RerunLog:
 
         positions = snapshot.positions
         if paths.camera not in self.poses:
-            self.static_up(snapshot)
+            self.static_up(paths, snapshot)
         if paths.camera not in self.framings and snapshot.node_count >= 50:
             up = np.zeros(3)
             up[self.up_axis[0]] = self.up_axis[1]  # level views: the up axis, not the tilt

@@ -110,3 +110,31 @@ def test_the_rerun_log_states_the_up_it_found_and_never_forces_z(tmp_path: Path)
     assert [int(v) for v in np.ravel(coordinates)] == [
         v.value for v in rr.ViewCoordinates.RIGHT_HAND_Y_DOWN.coordinates]
     assert np.ravel([value for name, value in stated.items() if "up_axis" in name])[0] == "-Y"
+
+
+def test_a_static_cameras_rerun_log_takes_up_from_its_table(tmp_path: Path) -> None:
+    import rerun as rr
+
+    from gngdt_io.outputs.rerun_blueprint import EntityPaths
+    from gngdt_io.outputs.rerun_log import RerunLog
+    from schemas.topology import TopologySnapshot
+
+    rng = np.random.default_rng(2)
+    pitch = np.radians(55)  # looking down at the table steeply: its up is nearest the camera's -z
+    table_up = np.array([0.0, -np.cos(pitch), -np.sin(pitch)])
+    positions, normals = plane_nodes(table_up, np.array([0.0, 0.5, 1.2]), 200, rng)
+    empty = np.zeros((0, 2), np.uint32)
+    snapshot = TopologySnapshot(
+        positions=positions.astype(np.float32), colors=np.zeros((200, 3), np.uint8),
+        normals=normals.astype(np.float32), errors=None,
+        edges={name: empty for name in ("pos", "col", "nor")},
+        clusterings={"nor": np.zeros(200, np.int32)}, steps=0, frame_sequence=0,
+        timestamp_ns=1, frame_id="camera", cluster_counts={"nor": 1})
+    rec = rr.RecordingStream("gngdt-test")
+    rec.save(str(tmp_path / "static.rrd"))
+    rerun_log = RerunLog(rec)
+    rerun_log.topology(EntityPaths("camera"), snapshot, draw=True)
+    assert axis_name(*rerun_log.up_axis) == "-Z"
+    assert rerun_log.up_from == "the largest horizontal plane"
+    assert np.allclose(rerun_log.up_vector, table_up)
+    rec.disconnect()
