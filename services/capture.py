@@ -1,16 +1,20 @@
 """Replay a source as a camera on zenoh: colour, depth, calibration and point cloud per frame.
 
-The source is a recording (gngdt's MCAP, a ROS 2 bag), a folder of RGB-D images or a synthetic
-scene (``synth:<scene>[:<frames>]``): anything `gngdt_io.sources` opens. Each frame is stamped
-with a monotonically increasing sequence number and the wall-clock time at which it is replayed
-(its "capture time" as a live camera would give it), so latency downstream is measured against
-the moment the frame entered the pipeline. After the last frame an end-of-stream message
-(``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
+The source is a recording (gngdt's MCAP, a ROS 2 bag, a RealSense ``.db3``/``.bag``), a folder of
+RGB-D images, a synthetic scene (``synth:<scene>[:<frames>]``) or a live RealSense
+(``--realsense [SERIAL]``): anything `gngdt_io.sources` opens. A live camera paces itself; a
+camera lost mid-stream ends the stream (end of stream published, exit status 1).
+
+Each frame is stamped with a monotonically increasing sequence number and the wall-clock time
+at which it is replayed (its "capture time" as a live camera would give it), so latency
+downstream is measured against the moment the frame entered the pipeline. After the last frame
+an end-of-stream message (``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
 
 When the recording has camera poses (``/tf``, see ``gngdt_io.mcap_reader``), each cloud is
 published with its pose: points in the camera frame, ``frame_id`` the fixed frame
 (``--fixed-frame``, default the first of world/map/odom found), ``pose`` the camera's pose in
-it. A frame the transforms do not cover (the recording has poses, only not at that time)
+it, and the camera's pose on ``gngdt/<cam>/tf`` (``foxglove.FrameTransform`` fixed frame ->
+camera). A frame the transforms do not cover (the recording has poses, only not at that time)
 publishes its images but no cloud, warned: a camera-frame cloud would not fit the map.
 """
 
@@ -33,6 +37,7 @@ from schemas.clouds import MAX_CLOUD_POINTS
 from schemas.wire import (
     DEFAULT_CAMERA,
     ENCODING_CALIBRATION,
+    ENCODING_FRAME_TRANSFORM,
     ENCODING_POINT_CLOUD,
     ENCODING_RAW_IMAGE,
     ENCODING_STREAM_END,
@@ -64,6 +69,9 @@ EXAMPLES = """examples:
   gngdt capture mybag_0.mcap --topics /camera --max-skew-ms 20   # a ROS 2 bag, unsynchronised
   gngdt capture ../shared/data/rgbd/tum_fr1_xyz_dvo_examples     # a folder of RGB-D images
   gngdt capture synth:tabletop_walk:120 --fast                   # a synthetic scene
+  gngdt capture --realsense                     # the RealSense plugged in ([realsense] extra)
+  gngdt capture --realsense 123456789012 --loop # that camera (by serial number)
+  gngdt capture session.db3                     # a RealSense recording (.db3 or legacy .bag)
 """
 
 #: longest wait between two frames at the recorded rate
@@ -71,13 +79,32 @@ DEFAULT_MAX_GAP_S = 5.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", metavar="SOURCE",
-                        help="a recording (MCAP, ROS 2 bag), a folder of RGB-D images or "
-                        "synth:<scene>[:<frames>]")
+    add_source_arguments(parser)
     _add_replay_arguments(parser)
     _add_cloud_arguments(parser)
     _add_limit_arguments(parser)
     add_zenoh_arguments(parser)
+
+
+def add_source_arguments(parser: argparse.ArgumentParser) -> None:
+    """SOURCE, or ``--realsense [SERIAL]`` (shared with `gngdt run`; `source_spec` reads them)."""
+    parser.add_argument("recording", metavar="SOURCE", nargs="?",
+                        help="a recording (MCAP, ROS 2 bag, RealSense .db3/.bag), a folder of "
+                        "RGB-D images, synth:<scene>[:<frames>] or realsense:[SERIAL][:WxH@FPS]")
+    parser.add_argument("--realsense", nargs="?", const="", metavar="SERIAL",
+                        help="a live RealSense instead of SOURCE: the one plugged in, or the one "
+                        "with this serial number (depth aligned to colour, 640x480 at 30 fps; "
+                        "needs the [realsense] extra)")
+
+
+def source_spec(args: argparse.Namespace) -> str:
+    """The source SOURCE or ``--realsense`` names; ValueError unless exactly one is given."""
+    from gngdt_io.sources.realsense import live_spec
+
+    if (args.recording is None) == (args.realsense is None):
+        raise ValueError("give a SOURCE (a recording, a folder, synth:<scene>) or --realsense "
+                         "[SERIAL], not both and not neither")
+    return str(args.recording) if args.realsense is None else live_spec(args.realsense)
 
 
 def _add_replay_arguments(parser: argparse.ArgumentParser) -> None:
@@ -187,6 +214,7 @@ class CapturePublisher:
         self.depth = declare("depth", ENCODING_RAW_IMAGE, latest_wins=True)
         self.calibration = declare("calibration", ENCODING_CALIBRATION, latest_wins=False)
         self.points = declare("points", ENCODING_POINT_CLOUD, latest_wins=True)
+        self.tf = declare("tf", ENCODING_FRAME_TRANSFORM, latest_wins=False)
         self.eos = declare("eos", ENCODING_STREAM_END, latest_wins=False)
         self._last_intrinsics: CameraIntrinsics | None = None
 
@@ -200,8 +228,9 @@ class CapturePublisher:
         self, frame: Frame, stamp: FrameStamp, positions: np.ndarray | None,
         colors: np.ndarray | None
     ) -> None:
-        """Calibration (when new), colour, depth, and the cloud unless ``positions`` is None."""
-        from schemas.clouds import cloud_to_wire
+        """Calibration (when new), colour, depth, the camera's pose (posed frames) and the
+        cloud unless ``positions`` is None."""
+        from schemas.clouds import cloud_to_wire, pose_to_transform
         from schemas.images import image_to_raw, intrinsics_to_calibration
 
         attachment = stamp.to_attachment()
@@ -219,6 +248,10 @@ class CapturePublisher:
         if positions is None:  # no pose for a frame of a posed recording: images only
             return
         pose = frame.pose
+        if pose is not None:  # fixed frame -> camera (the images' frame_id), before the cloud
+            transform = pose_to_transform(pose.matrix, pose.frame_id, self.camera,
+                                          timestamp_ns=time_ns)
+            self.tf.put(transform.SerializeToString(), attachment=attachment)
         # serialised straight into one buffer: megabytes copied once more, into shared memory
         cloud = cloud_to_wire(positions, colors, timestamp_ns=time_ns,
                               frame_id=self.camera if pose is None else pose.frame_id,
@@ -321,13 +354,14 @@ def main(args: argparse.Namespace) -> int:
     from gngdt_io.sources import open_source
 
     try:
+        args.recording = source_spec(args)
         source = open_source(args.recording, options=source_options(args))
         to_cloud = FrameToCloud(
             CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None,
                          args.drop_veil),
             args.seed,
         )
-        clock = ReplayClock(None if args.fast else args.rate, args.max_gap)
+        clock = ReplayClock(None if args.fast or source.live else args.rate, args.max_gap)
     except (ValueError, RecordingError) as error:
         log.error("%s", error)
         return 2
@@ -343,7 +377,7 @@ def main(args: argparse.Namespace) -> int:
     if replay.frames_read == 0 and replay.error is not None:
         log.error("%s", replay.error)
         return 2
-    return 0
+    return 1 if source.live and replay.error is not None else 0  # a camera lost mid-stream
 
 
 def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
@@ -357,7 +391,7 @@ def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
         if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
             log.warning("no subscriber on %s after %.1f s; publishing anyway",
                         topic(args.cam, "points"), args.wait_subscribers)
-        speed = ("as fast as possible" if clock.rate is None
+        speed = ("live" if source.live else "as fast as possible" if clock.rate is None
                  else f"at {clock.rate:g}x the recorded rate")
         log.info("replaying %s %s%s", source.describe(), speed, ", looping" if args.loop else "")
         frames_sent = publish(args, replay, clock, to_cloud, publisher, stop)

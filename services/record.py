@@ -1,12 +1,14 @@
-"""Make recordings: render a synthetic scene or import real RGB-D frames into an MCAP file."""
+"""Make recordings: render a synthetic scene, import real RGB-D frames or record a RealSense
+into an MCAP file."""
 
 from __future__ import annotations
 
 import argparse
 import logging
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import Frame
@@ -22,6 +24,7 @@ EXAMPLES = """examples:
   gngdt record images --format redwood ../shared/data/rgbd/tum_fr1_xyz_dvo_examples \\
       --poses ../shared/data/rgbd/tum_fr1_xyz_dvo_examples/poses --out tum3.mcap
   gngdt record images --format pcl-tiff frames/ --out grabber.mcap --fx 525 --fy 525
+  gngdt record realsense --out desk.mcap --seconds 20   # the RealSense plugged in
   gngdt record synth --help                     # scenes and every option
 """
 
@@ -33,6 +36,13 @@ SYNTH_EXAMPLES = """examples:
   gngdt record synth --scene tabletop --frames 30 --out recordings/tabletop.mcap
   gngdt record synth --scene data2 --frames 10 --width 320 --height 240 --out small.mcap
   gngdt record synth --scene tabletop --frames 90 --fps 15 --color-format jpeg --out jpeg.mcap
+"""
+
+REALSENSE_EXAMPLES = """examples:
+  gngdt record realsense --out desk.mcap --seconds 20          # 20 s of the camera plugged in
+  gngdt record realsense --out desk.mcap                       # until Ctrl-C
+  gngdt record realsense --serial 123456789012 --mode 848x480@30 --out desk.mcap
+  gngdt record realsense --from session.db3 --out session.mcap  # a RealSense Viewer recording
 """
 
 IMAGES_EXAMPLES = """examples:
@@ -51,11 +61,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     kinds = parser.add_subparsers(dest="record_kind", required=True, metavar="KIND")
 
-    def add_output_options(sub: argparse.ArgumentParser) -> None:
+    def add_output_options(sub: argparse.ArgumentParser, fps: bool = True) -> None:
         sub.add_argument("--out", type=Path, required=True, metavar="PATH.mcap",
                          help="MCAP file to write (replaced if it exists)")
-        sub.add_argument("--fps", type=float, default=30.0,
-                         help="frame rate of the recording's stamps (default: %(default)g)")
+        if fps:
+            sub.add_argument("--fps", type=float, default=30.0,
+                             help="frame rate of the recording's stamps (default: %(default)g)")
         sub.add_argument("--compression", choices=COMPRESSIONS, default="zstd",
                          help="MCAP chunk compression (default: %(default)s)")
         sub.add_argument(
@@ -117,6 +128,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "line, e.g. pose/NNNNNN.txt)",
     )
     add_output_options(images)
+    _add_realsense(kinds, add_output_options)
+
+
+def _add_realsense(kinds: Any, add_output_options: Any) -> None:
+    realsense = kinds.add_parser(
+        "realsense", help="record a live RealSense (or convert a RealSense recording)",
+        description="Record a live RealSense into gngdt's MCAP: depth aligned to colour, the "
+        "device's own intrinsics and depth units, until --seconds or Ctrl-C. A camera lost "
+        "mid-way ends the recording with what it holds (a complete file), exit status 1. "
+        "Needs the [realsense] extra.",
+        epilog=REALSENSE_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    realsense.add_argument("--serial", metavar="SERIAL",
+                           help="the camera's serial number (default: the one plugged in)")
+    realsense.add_argument("--mode", default="640x480@30", metavar="WxH@FPS",
+                           help="what the camera streams, depth and colour alike (default "
+                           "%(default)s)")
+    realsense.add_argument("--seconds", type=float, metavar="N",
+                           help="stop after N seconds (default: at Ctrl-C)")
+    realsense.add_argument("--from", dest="from_recording", type=Path, metavar="FILE",
+                           help="convert this RealSense recording (.db3, legacy .bag) instead "
+                           "of recording a camera")
+    add_output_options(realsense, fps=False)
 
 
 def write_recording(
@@ -204,8 +237,61 @@ def _synth_metadata(args: argparse.Namespace) -> dict[str, dict[str, str]]:
     return {SCENE_METADATA: scene_metadata(build_scene(args.scene), args.fps)}
 
 
+class Take:
+    """The frames of a RealSense source for a recording: until ``seconds`` (None: no limit), a
+    stop signal or the camera's loss (kept in ``error``; the frames before it are written)."""
+
+    def __init__(self, source: Any, seconds: float | None, stop: Any) -> None:
+        self.source = source
+        self.seconds = seconds
+        self.stop = stop
+        self.error: RecordingError | None = None
+
+    def __iter__(self) -> Iterator[Frame]:
+        started = time.monotonic()
+        try:
+            for _, frame in self.source.frames():
+                yield frame
+                if self.stop.is_set() or (
+                        self.seconds is not None and time.monotonic() - started >= self.seconds):
+                    return
+        except RecordingError as error:
+            self.error = error
+            logger.error("%s; the recording keeps the frames before", error)
+
+
+def record_realsense(source: Any, args: argparse.Namespace) -> int:
+    """Record ``source`` (a `RealSenseSource`) into ``args.out``: 0, or 1 when the camera was
+    lost (the file then holds the frames before, complete)."""
+    from services.plumbing import lifecycle
+
+    if args.seconds is not None and args.seconds <= 0:
+        raise ValueError(f"--seconds must be positive, got {args.seconds}")
+    logger.info("recording %s into %s%s", source.describe(), args.out,
+                "" if args.seconds is None else f" for {args.seconds:g} s")
+    try:
+        with lifecycle.graceful() as stop:
+            take = Take(source, args.seconds, stop)
+            write_recording(take, args)
+    finally:
+        source.close()
+    return 1 if take.error is not None else 0
+
+
+def _realsense_source(args: argparse.Namespace) -> Any:
+    from gngdt_io.sources.realsense import RealSenseSource, live_spec
+
+    if args.from_recording is not None:
+        if args.serial is not None:
+            raise ValueError("--serial is for a camera, not with --from")
+        return RealSenseSource(args.from_recording)
+    return RealSenseSource(f"{live_spec(args.serial)}:{args.mode}")
+
+
 def main(args: argparse.Namespace) -> int:
     try:
+        if args.record_kind == "realsense":
+            return record_realsense(_realsense_source(args), args)
         if args.record_kind == "synth":
             frames = _synth_frames(args)
             return write_recording(frames, args, _synth_metadata(args))

@@ -1,8 +1,8 @@
 """Segment RGB-D frames into objects: a uint16 label image per frame and a JSON summary.
 
-SOURCE is an MCAP recording (gngdt's layout or a ROS 2 bag) or a folder of frames in a layout
-``gngdt record images`` reads (redwood, tum, pcl-tiff; detected, or ``--format``). Each frame is
-deprojected to an organized point array and segmented by GNG-DT
+SOURCE is a recording (gngdt's MCAP, a ROS 2 bag, a RealSense .db3/.bag) or a folder of frames
+in a layout ``gngdt record images`` reads (redwood, tum, pcl-tiff; detected, or ``--format``).
+Each frame is deprojected to an organized point array and segmented by GNG-DT
 (`gngdt_core.frame_segmenter.FrameSegmenter`): by default online, one network carried from frame
 to frame; with ``--independent`` every frame is learned from scratch (unrelated snapshots).
 
@@ -130,7 +130,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     from services.capture import add_camera_arguments
 
     parser.add_argument("source", type=Path, metavar="SOURCE",
-                        help="MCAP recording, or a folder of colour/depth frames")
+                        help="a recording (MCAP, ROS 2 bag, RealSense .db3/.bag), or a "
+                        "folder of colour/depth frames")
     parser.add_argument("--out", type=Path, required=True, metavar="DIR",
                         help="output folder (must be absent or empty unless --overwrite)")
     parser.add_argument("--independent", action="store_true",

@@ -9,8 +9,9 @@ An output takes the samples of ``gngdt/**`` in one of two ways:
 
 Both get `tick` on every loop (flush, bounds) and `close` at the end. A malformed sample raises
 ValueError from `write`; the logger counts and skips it. Options come from the command line:
-`add_arguments` declares them (no heavy import: ``gngdt --help`` stays fast) and `from_args`
-builds the output, or None when its options do not ask for it.
+`add_arguments` declares them (no heavy import: ``gngdt --help`` stays fast), `check_args` says
+what cannot work before any output opens, and `from_args` builds the output, or None when its
+options do not ask for it.
 """
 
 from __future__ import annotations
@@ -41,6 +42,27 @@ class StreamSample:
         return f"gngdt/{self.camera}/{self.stream}"
 
 
+def split_bind(address: str, default_port: int) -> tuple[str, int]:
+    """``(host, port)`` of ``HOST[:PORT]`` (``[::1]:8765`` for IPv6); ValueError naming it."""
+    host, port = address, default_port
+    if address.startswith("["):
+        host, _, rest = address[1:].partition("]")
+        if rest and not rest.startswith(":"):
+            raise ValueError(f"--bind {address!r}: expected [IPv6]:PORT")
+        port_text = rest[1:]
+    elif address.count(":") == 1:
+        host, _, port_text = address.partition(":")
+    else:  # a bare IPv4 address, host name or IPv6 address
+        port_text = ""
+    if port_text:
+        if not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
+            raise ValueError(f"--bind {address!r}: the port must be 0..65535")
+        port = int(port_text)
+    if not host:
+        raise ValueError(f"--bind {address!r}: no host (e.g. 127.0.0.1:{default_port})")
+    return host, port
+
+
 def split_key(key: str) -> tuple[str, str] | None:
     """``(camera, stream)`` of ``gngdt/<camera>/<stream>``, or None for any other key."""
     parts = key.split("/", 2)
@@ -59,6 +81,12 @@ class Output(ABC):
     @abstractmethod
     def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
         """Declare this output's command-line options."""
+
+    @classmethod
+    def check_args(cls, args: argparse.Namespace) -> None:
+        """ValueError/OSError when the options cannot work (a port in use), said before any
+        output is opened."""
+        return None
 
     @classmethod
     @abstractmethod

@@ -4,7 +4,8 @@ Every sample is written as it arrived (its protobuf bytes, never re-encoded) on 
 ``/<cam>/<stream>`` (``/camera/color``, ``/camera/points``, ``/camera/scene``, ...), with the
 protobuf schema its zenoh encoding names (``application/protobuf;foxglove.SceneUpdate``): foxglove
 schemas for images, calibration, clouds, scene and objects, gngdt's own for topology, status and
-end of stream. ``log_time`` is the frame's capture time (from the sample's attachment),
+end of stream; the camera poses (``gngdt/<cam>/tf``) go to ``/tf``, as in a recording.
+``log_time`` is the frame's capture time (from the sample's attachment),
 ``publish_time`` the time it arrived. Camera streams keep DESIGN's recording layout, so the file
 also replays with ``gngdt capture``.
 
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from gngdt_io.mcap_writer import TF_TOPIC
 from gngdt_io.outputs.base import Output
 from schemas.wire import FrameStamp
 
@@ -34,29 +36,35 @@ log = logging.getLogger(__name__)
 
 #: most bytes waiting for the writer thread (~100 full 640x480 frames)
 DEFAULT_MAX_QUEUED_BYTES = 256 * 1024 * 1024
-_PROTOBUF_PREFIX = "application/protobuf;"
+PROTOBUF_PREFIX = "application/protobuf;"
 
 
 def message_classes() -> dict[str, Any]:
     """protobuf full name -> message class of every type gngdt publishes."""
     from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
     from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+    from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
     from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
     from schemas import gngdt_pb2
 
-    classes = (CameraCalibration, CompressedImage, PointCloud, RawImage, SceneUpdate,
+    classes = (CameraCalibration, CompressedImage, FrameTransform, PointCloud, RawImage,
+               SceneUpdate,
                gngdt_pb2.Topology, gngdt_pb2.LearnerStatus, gngdt_pb2.StreamEnd)
     return {cls.DESCRIPTOR.full_name: cls for cls in classes}
 
 
 def channel_topic(key: str) -> str | None:
-    """MCAP topic of a zenoh key: ``gngdt/<cam>/<stream>`` -> ``/<cam>/<stream>``."""
+    """MCAP topic of a zenoh key: ``gngdt/<cam>/<stream>`` -> ``/<cam>/<stream>``, and every
+    camera's pose ``gngdt/<cam>/tf`` -> ``/tf`` (DESIGN's recording layout: the transforms say
+    which camera by their child frame)."""
     parts = key.split("/")
     if len(parts) < 3 or parts[0] != "gngdt":
         return None
+    if parts[2:] == ["tf"]:
+        return TF_TOPIC
     return "/" + "/".join(parts[1:])
 
 
@@ -141,9 +149,9 @@ class McapRecorder:
 
     def _write(self, item: _Sample) -> None:
         topic = channel_topic(item.key)
-        type_name = item.encoding.removeprefix(_PROTOBUF_PREFIX).split(";")[0]
+        type_name = item.encoding.removeprefix(PROTOBUF_PREFIX).split(";")[0]
         message_class = self._classes.get(type_name) if item.encoding.startswith(
-            _PROTOBUF_PREFIX) else None
+            PROTOBUF_PREFIX) else None
         if topic is None or message_class is None:
             self.skipped += 1
             log.debug("not recorded: %s (%s)", item.key, item.encoding)

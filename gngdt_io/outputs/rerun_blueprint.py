@@ -100,6 +100,8 @@ class Framing:
     depth: float = 1.5
     #: camera-to-frame pose (4, 4), row-major, as a tuple (identity: the camera's own frame)
     pose: tuple[float, ...] = tuple(np.eye(4).ravel())
+    #: the world's up in the frame (`gngdt_core.up_axis`); None: the camera's up
+    world_up: tuple[float, float, float] | None = None
 
     def _place(self, x: float, y: float, z: float) -> tuple[float, float, float]:
         pose = np.asarray(self.pose).reshape(4, 4)
@@ -119,18 +121,22 @@ class Framing:
 
     @property
     def up(self) -> tuple[float, float, float]:
-        """The camera's up (-y in RDF) in the frame."""
+        """The views' up: the world's, else the camera's (-y in RDF) in the frame."""
+        if self.world_up is not None:
+            return tuple(float(v) for v in self.world_up)
         rotation = np.asarray(self.pose).reshape(4, 4)[:3, :3]
         return tuple(float(v) for v in rotation @ (0.0, -1.0, 0.0))
 
     @classmethod
-    def of(cls, positions: np.ndarray, pose: np.ndarray | None = None) -> Framing:
+    def of(cls, positions: np.ndarray, pose: np.ndarray | None = None,
+           world_up: tuple[float, float, float] | None = None) -> Framing:
         """Framing the nodes ``positions`` (N, 3), metres, seen by a camera at ``pose``
-        (camera-to-frame (4, 4); None: the nodes are in the camera's frame)."""
+        (camera-to-frame (4, 4); None: the nodes are in the camera's frame), the views' up
+        ``world_up`` (None: the camera's)."""
         pose = np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
         local = (np.asarray(positions, dtype=np.float64) - pose[:3, 3]) @ pose[:3, :3]
         depth = float(np.median(local[:, 2]))
-        return cls(depth if depth > 0.05 else cls.depth, tuple(pose.ravel()))
+        return cls(depth if depth > 0.05 else cls.depth, tuple(pose.ravel()), world_up)
 
 
 def _spatial_view(name: str, origin: str, contents: list[str], framing: Framing,

@@ -1,12 +1,21 @@
-"""Decoded gngdt messages logged into a rerun recording stream, thinned by `DisplayRates`."""
+"""Decoded gngdt messages logged into a rerun recording stream, thinned by `DisplayRates`.
+
+The world's up axis follows the data (`gngdt_core.up_axis`): with camera poses, the cameras'
+mean up; for a static camera (the world is its frame), the largest plane that could be the
+floor or a table, else the camera's own up (-y). It is logged as the ``world`` entity's
+``ViewCoordinates`` (the frame axis nearest that up) and stated beside it (``up_axis``,
+``up_from``, ``up_vector``), and re-logged when more data moves it to another axis.
+"""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gngdt_core.up_axis import CAMERA_UP, PoseUp, axis_name, nearest_axis, up_from_planes
 from gngdt_io.outputs.rerun_blueprint import (
     CLUSTERING_VIEWS,
     EntityPaths,
@@ -22,6 +31,8 @@ if TYPE_CHECKING:
     from schemas.scene import ObjectBoxes
     from schemas.status import LearnerStatusInfo
     from schemas.topology import TopologySnapshot
+
+log = logging.getLogger(__name__)
 
 #: clusters (segments) of fewer nodes are drawn grey, as the learner's own minimum cluster size
 DISPLAY_MIN_NODES = 5
@@ -94,7 +105,6 @@ class RerunLog:
     """Writes decoded gngdt messages into one ``rr.RecordingStream``, thinned by `DisplayRates`."""
 
     def __init__(self, recording: rr.RecordingStream, rates: DisplayRates | None = None) -> None:
-        import rerun as rr
 
         self.rec = recording
         self.rates = rates or DisplayRates()
@@ -103,8 +113,32 @@ class RerunLog:
         self.framings: dict[str, Framing] = {}
         #: per camera, its latest camera-to-world pose (moving cameras only)
         self.poses: dict[str, np.ndarray] = {}
-        self.rec.log("world", rr.ViewCoordinates.RDF, static=True)
-        self._world_up = False
+        self._pose_up = PoseUp()
+        #: the world's up: the frame axis (axis, sign) nearest ``up_vector``, and what said so
+        self.up_axis: tuple[int, int] | None = None
+        self.up_vector = np.array(CAMERA_UP)
+        self.up_from = ""
+        self.set_up(self.up_vector, "the camera's own up (no camera pose, no floor seen yet)")
+
+    def set_up(self, vector: np.ndarray, source: str) -> bool:
+        """Make ``vector`` the world's up (found from ``source``); True when the axis or its
+        source changed (then ``world``'s ViewCoordinates and the statement beside them are
+        logged again)."""
+        import rerun as rr
+
+        self.up_vector = np.asarray(vector, dtype=np.float64)
+        axis = nearest_axis(vector)
+        if axis == self.up_axis and source == self.up_from:
+            return False
+        self.up_axis, self.up_from = axis, source
+        name = axis_name(*axis)
+        coordinates = getattr(rr.ViewCoordinates,
+                              f"RIGHT_HAND_{'XYZ'[axis[0]]}_{'UP' if axis[1] > 0 else 'DOWN'}")
+        self.rec.log("world", coordinates, rr.AnyValues(
+            up_axis=name, up_from=source, up_vector=[round(float(v), 4) for v in vector]),
+            static=True)
+        log.info("the world's up axis: %s (from %s)", name, source)
+        return True
 
     def due(self, paths: EntityPaths, stream: str, sequence: int, every: int) -> bool:
         """Whether frame ``sequence`` of ``stream`` is logged: ``every`` frames after the last
@@ -155,27 +189,41 @@ class RerunLog:
         self.rec.log(paths.depth, rr.DepthImage(depth_mm, meter=1000.0))
 
     def camera_pose(self, paths: EntityPaths, pose: np.ndarray) -> None:
-        """A moving camera's pose (camera-to-world (4, 4)): the camera follows it."""
+        """A moving camera's pose (camera-to-world (4, 4)): the camera (its frustum and images)
+        follows it, and the world's up follows the poses."""
         import rerun as rr
 
-        if not self._world_up:  # a fixed frame (world/map/odom): z up, as ROS and our scenes
-            self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-            self._world_up = True
         self.poses[paths.camera] = pose
+        self._pose_up.add(pose[:3, :3])
+        up = self._pose_up.up
+        if up is not None:
+            self.set_up(up, "the camera poses")
         self.rec.log(paths.pinhole, rr.Transform3D(translation=pose[:3, 3], mat3x3=pose[:3, :3]))
 
+    def static_up(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
+        """A static camera's up from the largest horizontal plane of its topology (in its
+        frame), unless camera poses already say where up is."""
+        labels = snapshot.clusterings.get("nor")
+        if (self._pose_up.count or snapshot.frame_id != paths.camera
+                or snapshot.normals is None or labels is None):
+            return
+        found = up_from_planes(snapshot.positions, snapshot.normals, labels)
+        if found is not None:
+            self.set_up(found[0], "the largest horizontal plane")
+
     def points(self, paths: EntityPaths, positions: np.ndarray, colors: np.ndarray | None,
-               pose: np.ndarray | None = None) -> None:
+               pose: np.ndarray | None = None, log_pose: bool = True) -> None:
         """The cloud at ``world/points``, at most ``max_cloud_points``; with a ``pose``
         (camera-to-world, the cloud was taken by a moving camera) the points are put in the
-        world and the camera follows the pose (`camera_pose`)."""
+        world and, with ``log_pose``, the camera follows the pose (`camera_pose`)."""
         import rerun as rr
 
         cap = self.rates.max_cloud_points or len(positions)
         stride = max(1, -(-len(positions) // cap))
         shown = positions[::stride]
         if pose is not None:
-            self.camera_pose(paths, pose)
+            if log_pose:
+                self.camera_pose(paths, pose)
             shown = shown @ pose[:3, :3].T.astype(np.float32) + pose[:3, 3].astype(np.float32)
         self.rec.log(paths.points, rr.Points3D(
             shown, colors=None if colors is None else colors[::stride],
@@ -204,9 +252,13 @@ class RerunLog:
         )
 
         positions = snapshot.positions
+        if paths.camera not in self.poses:
+            self.static_up(paths, snapshot)
         if paths.camera not in self.framings and snapshot.node_count >= 50:
+            up = np.zeros(3)
+            up[self.up_axis[0]] = self.up_axis[1]  # level views: the up axis, not the tilt
             framing = self.framings[paths.camera] = Framing.of(
-                positions, self.poses.get(paths.camera))
+                positions, self.poses.get(paths.camera), tuple(up))
             # a small frustum near the camera: the image on it stays a thumbnail in the
             # overview instead of covering the scene
             self.rec.log(paths.pinhole, rr.Pinhole.from_fields(

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gngdt_io.outputs.base import Output, StreamSample
+from gngdt_io.outputs.base import Output, StreamSample, split_bind
 from gngdt_io.outputs.rerun_blueprint import EntityPaths, blueprint
 from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
 from gngdt_io.outputs.rerun_sinks import (
@@ -76,10 +76,12 @@ def add_viewer_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
     """Where ``--serve`` listens (shared with `gngdt run`)."""
-    group = parser.add_argument_group("serving (--serve)")
-    group.add_argument("--bind", default=DEFAULT_BIND, metavar="ADDRESS",
-                       help=f"address the served viewer listens on (default {DEFAULT_BIND}, this "
-                       "machine only; 0.0.0.0 opens it to the network, with no authentication)")
+    group = parser.add_argument_group("serving (--serve, --foxglove)")
+    group.add_argument("--bind", default=DEFAULT_BIND, metavar="HOST[:PORT]",
+                       help=f"address the servers listen on (default {DEFAULT_BIND}, this "
+                       "machine only; 0.0.0.0 opens them to the network, with no "
+                       "authentication); PORT is the Foxglove server's (default 8765), rerun's "
+                       "are --grpc-port and --web-port")
     group.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, metavar="PORT",
                        help=f"port of the gRPC server logs go to (default {DEFAULT_GRPC_PORT})")
     group.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, metavar="PORT",
@@ -175,7 +177,7 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
         rec.stdout(default_blueprint=initial)
         return rec, "stdout", None, None
     if args.serve:
-        server = ViewerServer(args.bind, args.grpc_port, args.web_port)
+        server = ViewerServer(split_bind(args.bind, 0)[0], args.grpc_port, args.web_port)
         try:
             server.wait_ready()
         except OSError:
@@ -211,6 +213,8 @@ class RerunOutput(Output):
         self.max_topology_nodes = max_topology_nodes
         self.to_stdout = to_stdout
         self._cameras: list[str] = []
+        #: cameras whose poses come on their own stream (gngdt/<cam>/tf), not with the clouds
+        self._tf_cameras: set[str] = set()
         #: per camera, the last frame sequence of its stream (its end of stream)
         self._last_sequence: dict[str, int] = {}
         self._last_flush = time.monotonic()
@@ -272,6 +276,8 @@ class RerunOutput(Output):
             rerun_log.depth(paths, raw_to_image(payload))
         elif stream == "points":
             self._points(paths, payload, stamp.sequence)
+        elif stream == "tf":
+            self._transform(sample.camera, paths, payload)
         elif stream == "topology":
             self._topology(sample.camera, paths, decode_topology(
                 payload, max_nodes=self.max_topology_nodes), stamp.sequence)
@@ -282,6 +288,16 @@ class RerunOutput(Output):
         elif stream == "eos":
             self._last_sequence[sample.camera] = decode_stream_end(
                 payload).last_frame_sequence
+
+    def _transform(self, camera: str, paths: EntityPaths, payload: bytes) -> None:
+        """The camera's pose (fixed frame -> camera): its frustum and images follow it."""
+        from schemas.clouds import transform_to_pose
+
+        _, child, matrix = transform_to_pose(payload)
+        if child != camera:  # a transform of another frame: not this camera's pose
+            return
+        self._tf_cameras.add(camera)
+        self.rerun_log.camera_pose(paths, matrix)
 
     def _points(self, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
@@ -296,9 +312,10 @@ class RerunOutput(Output):
         if rerun_log.due(paths, "points", sequence, rerun_log.rates.cloud_every):
             # views: the logger decimates, so only the logged points are copied
             positions, colors = msg_to_cloud(message, copy=False)
-            rerun_log.points(paths, positions, colors, pose if moving else None)
-        elif moving:  # the camera's pose: every frame, whether its cloud is logged or not
-            rerun_log.camera_pose(paths, pose)
+            rerun_log.points(paths, positions, colors, pose if moving else None,
+                             log_pose=paths.camera not in self._tf_cameras)
+        elif moving and paths.camera not in self._tf_cameras:
+            rerun_log.camera_pose(paths, pose)  # every frame, whether its cloud is logged or not
 
     def _topology(self, camera: str, paths: EntityPaths, snapshot: Any, sequence: int) -> None:
         rerun_log = self.rerun_log

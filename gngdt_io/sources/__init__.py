@@ -1,9 +1,11 @@
 """Where frames come from, behind one interface (`base.FrameSource`): recordings (gngdt's MCAP
-and ROS 2 bags), folders of RGB-D images and synthetic scenes.
+and ROS 2 bags; RealSense ``.db3``/``.bag``), folders of RGB-D images, synthetic scenes and live
+RealSense cameras.
 
-`open_source` picks the kind from the spec: a ``<scheme>:`` prefix names one (``synth:``), else
-an MCAP file or a folder of images (its layout detected, or ``fmt``). A new kind of source is one
-module with a `FrameSource` subclass and one line in `SOURCE_TYPES`.
+`open_source` picks the kind from the spec: a ``<scheme>:`` prefix names one (``synth:``,
+``realsense:``), else a file whose suffix a kind claims (``.db3``), an MCAP file or a folder of
+images (its layout detected, or ``fmt``). A new kind of source is one module with a
+`FrameSource` subclass and one line in `SOURCE_TYPES`.
 """
 
 from __future__ import annotations
@@ -15,15 +17,17 @@ from gngdt_io.images import FORMATS, detect_format
 from gngdt_io.mcap_reader import check_recording
 from gngdt_io.sources.base import FrameSource, SourceOptions
 from gngdt_io.sources.folder import ImageFolderSource
+from gngdt_io.sources.realsense import RealSenseSource
 from gngdt_io.sources.recording import McapSource
 from gngdt_io.sources.synthetic import SyntheticSource
 
 __all__ = ["SOURCE_FORMATS", "SOURCE_TYPES", "FrameSource", "SourceOptions", "open_source"]
 
 #: every kind of source: a scheme (``synth:``) or a detector of paths, and its constructor
-SOURCE_TYPES: tuple[type[FrameSource], ...] = (SyntheticSource, McapSource, ImageFolderSource)
-#: the names ``--format`` takes: an MCAP recording or an image layout
-SOURCE_FORMATS = ("mcap", *FORMATS)
+SOURCE_TYPES: tuple[type[FrameSource], ...] = (SyntheticSource, RealSenseSource, McapSource,
+                                               ImageFolderSource)
+#: the names ``--format`` takes: a recording (MCAP, RealSense) or an image layout
+SOURCE_FORMATS = ("mcap", "realsense", *FORMATS)
 
 
 def open_source(spec: str | Path, fmt: str | None = None,
@@ -43,6 +47,10 @@ def open_source(spec: str | Path, fmt: str | None = None,
         raise RecordingError(path, None, "no such file or folder")
     if fmt in FORMATS or (fmt is None and path.is_dir()):
         return ImageFolderSource(path, fmt or _folder_layout(path), options)
+    for kind in SOURCE_TYPES:
+        if kind.suffixes and (fmt == kind.format
+                              or (fmt is None and path.suffix.lower() in kind.suffixes)):
+            return kind(path, options)
     check_recording(path)  # says why it is no recording: missing, empty, another kind of file
     return McapSource(path, options)
 

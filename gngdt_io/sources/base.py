@@ -1,9 +1,10 @@
 """The frame source interface: where frames come from, one frame at a time.
 
-A source is a recording (gngdt's MCAP, a ROS 2 bag), a folder of RGB-D images, a synthetic scene
-or, next, a live camera. Capture publishes a source's frames; ``gngdt segment`` and evaluation
-segment them. Every frame carries its recorded time (``Frame.timestamp_ns``): a replayed source
-is paced by capture at that rate, a live one (``live``) paces itself.
+A source is a recording (gngdt's MCAP, a ROS 2 bag, a RealSense recording), a folder of RGB-D
+images, a synthetic scene or a live camera (a RealSense). Capture publishes a source's frames;
+``gngdt segment`` and evaluation segment them. Every frame carries its recorded time
+(``Frame.timestamp_ns``): a replayed source is paced by capture at that rate, a live one
+(``live``) paces itself.
 """
 
 from __future__ import annotations
@@ -62,6 +63,8 @@ class FrameSource(ABC):
     live: bool = False
     #: a spec ``<scheme>:...`` names this kind of source (synthetic scenes, live cameras)
     scheme: str = ""
+    #: a file with one of these suffixes is this kind of source (``.db3``, ``.bag``)
+    suffixes: tuple[str, ...] = ()
 
     def __init__(self, path: Path | str, camera_note: str) -> None:
         self.path = Path(path) if not isinstance(path, Path) else path

@@ -1,5 +1,6 @@
 """Log every gngdt stream (gngdt/**) to rerun (a .rrd file by default, or a viewer) and, when
-asked, every stream as it is to an MCAP file (--mcap).
+asked, every stream as it is to an MCAP file (--mcap) and to a live Foxglove WebSocket
+(--foxglove).
 
 The outputs are `gngdt_io.outputs`, behind one interface.
 
@@ -33,6 +34,8 @@ EXAMPLES = """examples:
   gngdt log --connect --url rerun+http://127.0.0.1:9876/proxy   # a running viewer
   gngdt log --stdout | rerun -
   gngdt log --mcap runs/all.mcap              # + every stream as it is, for Foxglove
+  gngdt log --foxglove                        # + live to Foxglove at ws://127.0.0.1:8765
+  gngdt log --foxglove --bind 0.0.0.0:8765    # ... from other machines (no authentication)
 """
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,6 +62,8 @@ def build_outputs(args: argparse.Namespace) -> list[Output]:
     (ValueError, OSError) the ones already made are closed."""
     from gngdt_io import outputs as registry
 
+    for kind in registry.OUTPUTS:  # what cannot work is said before any output opens
+        kind.check_args(args)
     made: list[Output] = []
     try:
         for kind in registry.OUTPUTS:

@@ -1,4 +1,5 @@
-"""Run the whole pipeline on one recording: a loopback router, then learner, logger and capture.
+"""Run the whole pipeline on one source (a recording, or a live RealSense with ``--realsense``): a
+loopback router, then learner, logger and capture.
 
 The router is this process's own zenoh session (mode router, a free port on 127.0.0.1, scouting
 off) and admits only this run's children: they authenticate with a user and password made for
@@ -38,7 +39,7 @@ from gngdt_io.outputs.rerun_output import (
     unused_rrd_path,
 )
 from schemas.wire import DEFAULT_CAMERA, topic
-from services.capture import add_camera_arguments
+from services.capture import add_camera_arguments, add_source_arguments, source_spec
 from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
 from services.plumbing.session import (
@@ -66,6 +67,8 @@ EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
   gngdt run recordings/tabletop.mcap --mcap runs/tabletop.mcap   # + every stream for Foxglove
   gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
+  gngdt run --realsense                              # the RealSense plugged in, until Ctrl-C
+  gngdt run session.db3 --foxglove                   # live in Foxglove at ws://127.0.0.1:8765
 """
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -74,9 +77,7 @@ DEFAULT_MAX_POINTS = 50_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("recording", type=Path, metavar="SOURCE",
-                        help="a recording (MCAP, ROS 2 bag), a folder of RGB-D images or "
-                        "synth:<scene>[:<frames>] (see `gngdt capture --help`)")
+    add_source_arguments(parser)
     viewer = parser.add_mutually_exclusive_group()
     viewer.add_argument("--save", type=Path, metavar="PATH",
                         help="write the rerun recording here (default runs/<recording>-<time>.rrd)")
@@ -89,6 +90,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="also record every gngdt stream (images, clouds, topology, scene, "
                         "objects, status) into this MCAP file for Foxglove (rerun shows only its "
                         "images and clouds)")
+    parser.add_argument("--foxglove", action="store_true",
+                        help="also serve every stream live to Foxglove (WebSocket at --bind, "
+                        "port 8765 unless --bind names one)")
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -368,10 +372,20 @@ def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
         arguments += ["--mcap", str(mcap_path)]
     if args.connect:
         return [*arguments, "--connect", *(["--url", args.url] if args.url else [])]
+    if args.foxglove:
+        arguments += ["--foxglove", "--bind", args.bind]
     if args.serve:
         return [*arguments, "--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
                 str(args.grpc_port), "--web-port", str(args.web_port)]
     return [*arguments, "--save", str(rrd_path)]
+
+
+def run_name(spec: str) -> str:
+    """The name a run's files take from its source: a file's stem, or a spec without its
+    colons (``realsense:123`` -> ``realsense-123``)."""
+    if ":" in spec and not Path(spec).exists():
+        return "-".join(part for part in spec.split(":") if part)
+    return Path(spec).stem
 
 
 @dataclass
@@ -400,12 +414,16 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     write); ValueError or RecordingError for anything wrong, before any process starts."""
     from gngdt_io.sources import SourceOptions, open_source
 
+    args.recording = source_spec(args)
     options = SourceOptions(camera_json=args.camera_json, depth_scale=args.depth_scale)
-    open_source(args.recording, options=options)  # as capture will: RecordingError says why not
+    # as capture will open it: RecordingError says why it cannot
+    open_source(args.recording, options=options).close()
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
+    from gngdt_io.outputs.foxglove import FoxgloveOutput
     from services.learner import profile_from_args
 
+    FoxgloveOutput.check_args(args)  # a port in use: said before anything starts
     profile = profile_from_args(args)  # a wrong params file: said before anything starts
     topic(args.cam, "points")  # validates the camera name
     rates = rates_from_args(args)
@@ -414,7 +432,7 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
         mcap_path.parent.mkdir(parents=True, exist_ok=True)
     rrd_path = None
     if not (args.connect or args.serve):
-        rrd_path = unused_rrd_path(args.save or default_rrd_path(args.recording.stem))
+        rrd_path = unused_rrd_path(args.save or default_rrd_path(run_name(args.recording)))
         rrd_path.parent.mkdir(parents=True, exist_ok=True)
     return RunPlan(rates, profile, rrd_path, mcap_path)
 
@@ -485,7 +503,7 @@ def main(args: argparse.Namespace) -> int:
 
     try:
         plan = plan_run(args)
-    except (RecordingError, ValueError) as error:
+    except (RecordingError, ValueError, OSError) as error:
         log.error("%s", error)
         return 2
     log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))  # 0700: holds the run's password
@@ -520,7 +538,7 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
     starting = {learner: f"gngdt/{args.cam}/learner/alive", logger: LIVELINESS_KEY}
     silent = wait_for_startup(starting, observed, args.startup_timeout, stop, pipeline)
     ready = not silent and not stop.is_set() and pipeline.failed() is None
-    early_end = ""
+    early_end, stream_ended = "", False
     if silent:
         log.error("the %s shows no progress: no CPU time used and nothing logged for %.0f s "
                   "while starting (a hung process?); its log: %s", silent.name,
@@ -542,7 +560,9 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
             quitter = learner if learner.process.poll() is not None else logger
             early_end = (f"the {'learner' if quitter is learner else 'logger'} stopped while "
                          "capture was still replaying")
-    if stop.is_set() or pipeline.failed() is not None or early_end:
+    failure = pipeline.failed()  # a capture that failed after its end of stream (a camera lost)
+    lost = failure is not None and failure.name == "capture" and stream_ended  # lets them finish
+    if stop.is_set() or (failure is not None and not lost) or early_end:
         log.info("%s; stopping the services",
                  "interrupted" if stop.is_set() else early_end or "a service failed")
         pipeline.interrupt_all()

@@ -88,11 +88,11 @@ def summary_warnings(status: LearnerStatusInfo | None, end: StreamEndInfo | None
     return warnings
 
 
-def recorded_frames(path: Path) -> int | None:
-    """Frames in the recording by its index (None without one)."""
+def recorded_frames(spec: str) -> int | None:
+    """Frames in an MCAP recording by its index (None without one, or for another source)."""
     from gngdt_io.mcap_reader import RecordingError, recording_info
 
     try:
-        return int(recording_info(path)["frames"])
-    except RecordingError:
+        return int(recording_info(Path(spec))["frames"])
+    except (RecordingError, OSError):
         return None

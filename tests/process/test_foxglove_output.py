@@ -30,6 +30,7 @@ CAMERA_CHANNELS = {
     "/camera/objects": "foxglove.SceneUpdate",
     "/camera/scene": "foxglove.SceneUpdate",
     "/camera/eos": "gngdt.StreamEnd",
+    "/tf": "foxglove.FrameTransform",  # the synthetic camera moves: its pose, per frame
 }
 
 
@@ -71,6 +72,9 @@ def test_mcap_holds_every_stream_with_foxglove_schemas(recorded_run) -> None:
         times = [entry[0] for entry in messages[topic]]
         assert times == sorted(times), f"{topic}: log times go backwards"
     assert len(messages["/camera/color"]) == 8
+    transforms = [entry[1] for entry in messages["/tf"]]
+    assert len(transforms) == 8
+    assert {(t.parent_frame_id, t.child_frame_id) for t in transforms} == {("world", "camera")}
     scenes = [entry[1] for entry in messages["/camera/scene"]]
     objects = [entry[1] for entry in messages["/camera/objects"]]
     # one objects update per learned frame and one for the settled network: how many frames the

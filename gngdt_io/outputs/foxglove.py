@@ -1,0 +1,248 @@
+"""Serve gngdt's streams live to Foxglove: a Foxglove WebSocket server (``foxglove-sdk``) with
+the same channels as ``--mcap`` (`gngdt_io.outputs.mcap`): ``/<cam>/color``, ``/<cam>/depth``,
+``/<cam>/calibration``, ``/<cam>/points``, ``/<cam>/scene``, ``/<cam>/objects``, gngdt's own
+topology, status and end of stream, and the camera poses on ``/tf``.
+
+Every sample is forwarded as it arrived (its protobuf bytes, never re-encoded) on an SDK channel
+declared with ``message_encoding="protobuf"`` and the message's ``FileDescriptorSet`` as schema,
+``log_time`` the frame's capture time. Zenoh's callback only keeps the newest sample of each key;
+a thread hands them to the server, so a slow client never blocks a subscriber. Each client gets
+at most ``--foxglove-backlog`` (32) queued messages: beyond them the SDK drops the client's
+oldest (the SDK's default, 1024, would let one stalled client hold gigabytes of clouds).
+
+Foxglove has no latched topics: a client that connects late would never get the calibration
+(sent at start and on change) nor, once a recording has ended, anything at all. So each
+channel's last message is sent again whenever the channel has been quiet for
+``REPUBLISH_SECONDS`` and a client listens; what comes again carries its original time.
+
+The server listens on loopback unless ``--bind`` says otherwise; a port in use is an error
+before anything starts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from gngdt_io.outputs.base import Output, split_bind
+from gngdt_io.outputs.mcap import PROTOBUF_PREFIX, channel_topic, message_classes
+from schemas.wire import FrameStamp
+
+if TYPE_CHECKING:
+    import zenoh
+
+log = logging.getLogger(__name__)
+
+DEFAULT_FOXGLOVE_PORT = 8765
+#: messages queued per client before the SDK drops the oldest
+DEFAULT_BACKLOG = 32
+#: a channel quiet this long gets its last message again (late clients, ended streams)
+REPUBLISH_SECONDS = 1.0
+#: distinct keys served at most (16 cameras of ~10 streams): garbage keys make no channels
+MAX_KEYS = 256
+
+
+def check_bindable(host: str, port: int) -> None:
+    """OSError naming ``host:port`` when a server could not listen there (a port in use, an
+    address not of this machine); as the SDK's server does, with SO_REUSEADDR."""
+    try:
+        family = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)[0][0]
+        with socket.socket(family, socket.SOCK_STREAM) as probe:
+            probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            probe.bind((host, port))
+    except OSError as error:
+        raise OSError(f"cannot serve Foxglove on {host}:{port}: {error.strerror or error} "
+                      "(choose another with --bind HOST:PORT)") from None
+
+
+def file_descriptor_set(descriptor: Any) -> bytes:
+    """Serialized ``FileDescriptorSet`` of a message type and every file it depends on,
+    dependencies first (what MCAP and Foxglove take as a protobuf schema)."""
+    from google.protobuf import descriptor_pb2
+
+    files = descriptor_pb2.FileDescriptorSet()
+    seen: set[str] = set()
+
+    def add(file: Any) -> None:
+        if file.name in seen:
+            return
+        seen.add(file.name)
+        for dependency in file.dependencies:
+            add(dependency)
+        proto = descriptor_pb2.FileDescriptorProto()
+        file.CopyToProto(proto)
+        files.file.append(proto)
+
+    add(descriptor.file)
+    return files.SerializeToString()
+
+
+class FoxgloveServer:
+    """A Foxglove WebSocket server publishing pre-encoded protobuf messages, on a private
+    ``foxglove.Context`` (its channels reach no other sink). ``port`` 0 picks a free one."""
+
+    def __init__(self, host: str, port: int, backlog: int = DEFAULT_BACKLOG) -> None:
+        import foxglove
+
+        self._context = foxglove.Context()
+        self._channels: dict[str, Any] = {}
+        self._classes = message_classes()
+        try:
+            self._server = foxglove.start_server(
+                name="gngdt", host=host, port=port, context=self._context,
+                message_backlog_size=backlog)
+        except RuntimeError as error:  # "FoxgloveError: Failed to bind port: ..."
+            raise OSError(f"cannot serve Foxglove on {host}:{port}: {error}") from None
+        self.host = host
+        self.port = self._server.port
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"ws://{host}:{self.port}"
+
+    def channel(self, topic: str, type_name: str) -> Any | None:
+        """The channel of ``topic`` carrying ``type_name`` (advertised on first use); None when
+        the type is unknown or the topic already carries another."""
+        import foxglove
+
+        channel = self._channels.get(topic)
+        if channel is None:
+            message_class = self._classes.get(type_name)
+            if message_class is None:
+                return None
+            schema = foxglove.Schema(name=type_name, encoding="protobuf",
+                                     data=file_descriptor_set(message_class.DESCRIPTOR))
+            channel = self._channels[topic] = foxglove.Channel(
+                topic, schema=schema, message_encoding="protobuf", context=self._context)
+        return channel if channel.schema_name() == type_name else None
+
+    def stop(self) -> None:
+        for channel in self._channels.values():
+            channel.close()
+        self._channels.clear()
+        self._server.stop()
+
+
+@dataclass
+class _Latest:
+    """The newest sample of one key, and when it was last sent (monotonic s; 0: not yet)."""
+
+    topic: str
+    type_name: str
+    payload: bytes
+    log_time_ns: int
+    sent_at: float = 0.0
+
+
+class FoxgloveOutput(Output):
+    """``--foxglove``: every gngdt stream, live, on a Foxglove WebSocket server."""
+
+    raw = True
+
+    def __init__(self, host: str, port: int, backlog: int = DEFAULT_BACKLOG,
+                 republish_s: float = REPUBLISH_SECONDS) -> None:
+        self.server = FoxgloveServer(host, port, backlog)
+        self.republish_s = republish_s
+        self._latest: dict[str, _Latest] = {}
+        self._new: set[str] = set()
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._closing = False
+        self.sent = self.replaced = self.skipped = self.republished = 0
+        self._thread = threading.Thread(target=self._run, name="foxglove", daemon=True)
+        self._thread.start()
+
+    @classmethod
+    def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
+        group = parser.add_argument_group("Foxglove (--foxglove)")
+        group.add_argument("--foxglove", action="store_true",
+                           help="also serve every gngdt stream live to Foxglove (a Foxglove "
+                           "WebSocket, the same channels as --mcap) at --bind's address, port "
+                           f"{DEFAULT_FOXGLOVE_PORT} unless --bind names one")
+        group.add_argument("--foxglove-backlog", type=int, default=DEFAULT_BACKLOG, metavar="N",
+                           help="messages queued per Foxglove client; a client reading slower "
+                           f"loses its oldest (default {DEFAULT_BACKLOG})")
+
+    @classmethod
+    def check_args(cls, args: argparse.Namespace) -> None:
+        if args.foxglove:
+            check_bindable(*split_bind(args.bind, DEFAULT_FOXGLOVE_PORT))
+        if getattr(args, "foxglove_backlog", DEFAULT_BACKLOG) < 1:
+            raise ValueError(f"--foxglove-backlog must be >= 1, got {args.foxglove_backlog}")
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> FoxgloveOutput | None:
+        if not args.foxglove:
+            return None
+        host, port = split_bind(args.bind, DEFAULT_FOXGLOVE_PORT)
+        return cls(host, port, args.foxglove_backlog)
+
+    def describe(self) -> str:
+        return (f"serving Foxglove at {self.server.url} (Foxglove: Open connection > Foxglove "
+                "WebSocket)")
+
+    def receive(self, sample: zenoh.Sample) -> None:
+        key, encoding = str(sample.key_expr), str(sample.encoding)
+        topic = channel_topic(key)
+        if topic is None or not encoding.startswith(PROTOBUF_PREFIX):
+            self.skipped += 1
+            return
+        attachment = sample.attachment
+        try:
+            log_time = FrameStamp.from_attachment(
+                attachment.to_bytes() if attachment is not None else None).capture_time_ns
+        except ValueError:
+            log_time = time.time_ns()
+        latest = _Latest(topic, encoding.removeprefix(PROTOBUF_PREFIX).split(";")[0],
+                         sample.payload.to_bytes(), log_time)
+        with self._lock:
+            if key not in self._latest and len(self._latest) >= MAX_KEYS:
+                self.skipped += 1
+                return
+            if key in self._new:
+                self.replaced += 1  # the thread had not sent the previous one yet
+            self._latest[key] = latest
+            self._new.add(key)
+        self._wake.set()
+
+    def _run(self) -> None:
+        while not self._closing:
+            self._wake.wait(min(0.2, self.republish_s))
+            self._wake.clear()
+            with self._lock:
+                new = [self._latest[key] for key in self._new]
+                self._new.clear()
+                quiet = [item for item in self._latest.values() if item.sent_at
+                         and time.monotonic() - item.sent_at >= self.republish_s]
+            for item in new:
+                self._send(item)
+            for item in quiet:
+                if self._send(item, only_if_listened=True):
+                    self.republished += 1
+
+    def _send(self, item: _Latest, only_if_listened: bool = False) -> bool:
+        channel = self.server.channel(item.topic, item.type_name)
+        if channel is None:
+            self.skipped += 1
+            return False
+        item.sent_at = time.monotonic()
+        if only_if_listened and not channel.has_sinks():
+            return False
+        channel.log(item.payload, log_time=item.log_time_ns)
+        self.sent += 1
+        return True
+
+    def close(self) -> None:
+        self._closing = True
+        self._wake.set()
+        self._thread.join()
+        self.server.stop()
+        log.info("Foxglove: %d messages sent (%d again for late clients), %d replaced by newer "
+                 "ones before they were sent, %d skipped", self.sent, self.republished,
+                 self.replaced, self.skipped)
