@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -20,6 +21,9 @@ from processes import log_text, wait_for
 from schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
+#: the rerun CLI installed beside this Python (the venv's, even when the venv is not activated)
+RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or "rerun"
+
 CAMERA_CHANNELS = {
     "/camera/color": "foxglove.RawImage",
     "/camera/depth": "foxglove.RawImage",
@@ -155,7 +159,7 @@ def test_rerun_opens_the_mcap_and_the_rrd_shows_objects_with_ids(recorded_run, t
 
     converted = tmp_path / "from-mcap.rrd"
     completed = subprocess.run(
-        ["rerun", "mcap", "convert", str(recorded_run["mcap"]), "-o", str(converted)],
+        [RERUN, "mcap", "convert", str(recorded_run["mcap"]), "-o", str(converted)],
         capture_output=True, text=True, timeout=120, env=dict(os.environ))
     assert completed.returncode == 0, completed.stderr
     columns: dict[str, set[str]] = defaultdict(set)
