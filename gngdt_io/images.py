@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import re
 from bisect import bisect_left
 from collections.abc import Iterator
@@ -31,6 +32,7 @@ import numpy as np
 
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import CameraIntrinsics, Frame
+from gngdt_io.image_files import check_depth_dtype, is_regular_file, read_image
 
 __all__ = ["FORMATS", "CameraParameters", "count_image_frames", "iter_image_frames", "load_camera"]
 
@@ -65,6 +67,17 @@ class CameraParameters:
             cy=self.cy,
             distortion=self.distortion,
         )
+
+    def problem(self) -> str:
+        """Why these parameters cannot be a camera's (not finite, not positive), or ""."""
+        values = (self.fx, self.fy, self.cx, self.cy, self.depth_scale, *self.distortion)
+        if not all(math.isfinite(value) for value in values):
+            return "fx, fy, cx, cy, depth_scale and the distortion must be finite numbers"
+        if min(self.fx, self.fy, self.depth_scale) <= 0:
+            return "fx, fy and depth_scale must be positive"
+        if any(size is not None and size <= 0 for size in (self.width, self.height)):
+            return "width and height must be positive"
+        return ""
 
 
 #: Defaults per format: TUM freiburg1 (the TUM benchmark's published calibration) and the
@@ -141,8 +154,8 @@ def load_camera(
     except (TypeError, ValueError) as error:
         raise RecordingError(path, None, f"invalid camera parameter: {error}") from error
     camera = replace(defaults, **overrides)
-    if min(camera.fx, camera.fy, camera.depth_scale) <= 0:
-        raise RecordingError(path, None, "fx, fy and depth_scale must be positive")
+    if camera.problem():
+        raise RecordingError(path, None, camera.problem())
     return camera
 
 
@@ -155,7 +168,11 @@ class _ImagePair:
 
 
 def _seconds_to_ns(text: str) -> int:
-    return int(Decimal(text) * 1_000_000_000)
+    """Nanoseconds of a stamp in seconds; InvalidOperation unless finite, >= 0, below 2**63 ns."""
+    nanoseconds = Decimal(text) * 1_000_000_000
+    if not nanoseconds.is_finite() or not 0 <= nanoseconds < 2**63:
+        raise InvalidOperation(f"stamp {text!r} is not a finite time >= 0 in seconds")
+    return int(nanoseconds)
 
 
 def _read_tum_list(path: Path) -> list[tuple[int, Path]]:
@@ -208,7 +225,7 @@ def _pairs_pcl_tiff(directory: Path) -> list[_ImagePair]:
     found: dict[str, dict[str, Path]] = {}
     for path in directory.iterdir():
         match = _PCL_NAME.match(path.name)
-        if match:
+        if match and is_regular_file(path):
             found.setdefault(match["stamp"], {})[match["kind"]] = path
     pairs = []
     for stamp, kinds in sorted(found.items()):
@@ -229,10 +246,10 @@ def _pairs_redwood(directory: Path, fps: float) -> list[_ImagePair]:
     for folder in (color_dir, depth_dir):
         if not folder.is_dir():
             raise RecordingError(folder, None, "missing (redwood layout: color/ and depth/)")
-    colors = {
-        p.stem: p for p in color_dir.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg")
-    }
-    depths = {p.stem: p for p in depth_dir.iterdir() if p.suffix.lower() == ".png"}
+    colors = {p.stem: p for p in color_dir.iterdir()
+              if p.suffix.lower() in (".png", ".jpg", ".jpeg") and is_regular_file(p)}
+    depths = {p.stem: p for p in depth_dir.iterdir()
+              if p.suffix.lower() == ".png" and is_regular_file(p)}
     for name in sorted(colors.keys() ^ depths.keys()):
         lone = colors.get(name) or depths[name]
         raise RecordingError(
@@ -249,25 +266,16 @@ def _pairs_redwood(directory: Path, fps: float) -> list[_ImagePair]:
 def _load_color(path: Path, index: int) -> np.ndarray:
     import cv2
 
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise RecordingError(path, index, "cannot read colour image")
+    image = read_image(path, index, cv2.IMREAD_COLOR, "colour image")
     return image[..., ::-1].copy()
 
 
 def _load_depth_mm(path: Path, index: int, depth_scale: float) -> np.ndarray:
     import cv2
 
-    depth = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if depth is None:
-        raise RecordingError(path, index, "cannot read depth image")
-    if depth.ndim != 2 or depth.dtype not in (np.uint16, np.float32):
-        raise RecordingError(
-            path,
-            index,
-            f"depth must be single-channel uint16 (or float32), got {depth.dtype} {depth.shape}",
-        )
-    if depth.dtype == np.uint16 and depth_scale == MILLIMETRES_PER_METRE:
+    depth = read_image(path, index, cv2.IMREAD_UNCHANGED, "depth image")
+    check_depth_dtype(depth, path, index)
+    if depth_scale == MILLIMETRES_PER_METRE:
         return depth
     millimetres = np.nan_to_num(depth.astype(np.float64) * (MILLIMETRES_PER_METRE / depth_scale))
     return np.clip(np.rint(millimetres), 0, np.iinfo(np.uint16).max).astype(np.uint16)
