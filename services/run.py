@@ -355,6 +355,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"{status.ghost_share:.1%} (seen nodes > {status.ghost_distance_m * 100:g} cm from "
             "the last frame)",
             *([f"last frame:         {status.settled}"] if status.settled else []),
+            *pose_lines(status),
             f"clusters:           {clusters}",
             f"latency:            p50 {status.latency_p50_ms:.1f} ms, "
             f"p99 {status.latency_p99_ms:.1f} ms",
@@ -362,6 +363,21 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
     lines.append(f"rerun:              {destination}")
     lines += outputs or []
     return "\n".join(lines)
+
+
+# --- issue 24.1: frames whose pose the learner rejected --------------------------------------
+def pose_lines(status: LearnerStatusInfo) -> list[str]:
+    """The summary's line on rejected poses (none when every pose passed)."""
+    if not status.frames_pose_rejected:
+        return []
+    return [f"poses rejected:     {status.frames_pose_rejected} frames not learned; the last: "
+            f"{status.pose_problem}"]
+
+
+def mostly_rejected(status: LearnerStatusInfo | None) -> bool:
+    """Whether more frames were rejected for their pose than learned: the run failed."""
+    return status is not None and status.frames_pose_rejected > status.frames_used
+# --- end of issue 24.1 ------------------------------------------------------------------------
 
 
 def recorded_frames(path: Path) -> int | None:
@@ -491,6 +507,11 @@ def main(args: argparse.Namespace) -> int:
     shutil.rmtree(log_dir, ignore_errors=True)
     if outcome.interrupted:
         return 130
+    if mostly_rejected(outcome.status):
+        log.error("most frames were not learned: their camera poses are out of bounds or "
+                  "contradict their depth (see 'poses rejected' above; `gngdt record images "
+                  "--poses` names the usual misreadings of a pose file)")
+        return 1
     return 1 if outcome.early_end else 0
 
 
