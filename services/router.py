@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 
 from services.plumbing import lifecycle
@@ -18,7 +19,7 @@ log = logging.getLogger(__name__)
 EXAMPLES = """examples:
   gngdt router                                   # listens on tcp/127.0.0.1:7447
   gngdt router --listen tcp/127.0.0.1:7450
-  gngdt router --listen tls/127.0.0.1:7447 --zenoh-config config/secure/router.json5  # TLS, ACL
+  gngdt router --zenoh-config config/secure/router.json5   # TLS, roles: the file's endpoints
 """
 
 
@@ -27,7 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--listen",
         action="append",
         metavar="ENDPOINT",
-        help=f"endpoint to listen on (repeatable; default {DEFAULT_ENDPOINT})",
+        help=f"endpoint to listen on (repeatable; default: the --zenoh-config file's listen "
+        f"endpoints, else {DEFAULT_ENDPOINT}); a router with mutual TLS or access control "
+        "refuses any endpoint where a client needs no credentials",
     )
     parser.add_argument(
         "--zenoh-config",
@@ -37,9 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    listen = args.listen or [DEFAULT_ENDPOINT]
     try:
-        session = open_config(router_config(listen, args.zenoh_config), what="router")
+        config = router_config(args.listen, args.zenoh_config)
+        listen = json.loads(config.get_json("listen/endpoints"))
+        session = open_config(config, what="router")
     except ZenohSetupError as error:
         log.error("%s", error)
         return 1

@@ -1,11 +1,13 @@
 """Run the whole pipeline on one recording: a loopback router, then learner, logger and capture.
 
 The router is this process's own zenoh session (mode router, a free port on 127.0.0.1, scouting
-off) and admits only this run's children: they authenticate with a user and password made for
-the run (zenoh's usrpwd), so a neighbour on the machine can neither publish into the run (a
-forged end of stream) nor listen. ``run`` starts the learner and the logger, waits for their
-liveliness tokens, starts the capture, waits for the end of the stream, lets the learner finish
-its last frame and the logger flush, then prints a summary. SIGINT, SIGTERM and SIGHUP stop
+off) and admits only this run's children: each authenticates with a user and password made for
+the run for its role (zenoh's usrpwd; `RunAccess`), and the router's access control lets each
+role put only on its own streams, so a neighbour on the machine can neither publish into the
+run (a forged end of stream) nor listen, and no service can speak for another. ``run`` starts
+the learner and the logger, waits for their liveliness tokens, starts the capture, waits for
+the end of the stream, lets the learner finish its last frame and the logger flush, then
+prints a summary. SIGINT, SIGTERM and SIGHUP stop
 everything cleanly, and the children die with ``run`` however it ends. Exit status is non-zero
 when the recording is unusable, a service failed, or the stream ended before the recording did.
 """
@@ -39,6 +41,7 @@ from gngdt_io.outputs.rerun_output import (
 from schemas.wire import DEFAULT_CAMERA, topic
 from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
+from services.plumbing.roles import SERVICE_ROLES, access_control
 from services.plumbing.session import (
     ZenohSetupError,
     client_settings,
@@ -182,28 +185,39 @@ class Observed:
             return any(key.startswith(prefix) for key in self.alive)
 
 
+# --- issue 24.2: one user and password per role, access control by key expression -----------
 class RunAccess:
-    """This run's zenoh credentials: the router's password file and the children's config, in
-    the run's private (0700) folder."""
+    """This run's zenoh credentials: one user and password per role
+    (`services.plumbing.roles`), so that each service may put only on its own streams (a
+    logger or a learner cannot end the stream, a capture cannot publish objects); the router's
+    password file and each role's client configuration are written, mode 0600, into the run's
+    private folder (0700, made by ``tempfile.mkdtemp``) and removed when the run ends.
 
-    USER = "gngdt-run"
+    Other users can neither read them nor reach the router without them. A process of the same
+    user can: it may read these files while the run lasts (or a service's memory, e.g. through
+    ptrace) and then speak as that role on the run's router, e.g. end the stream with the
+    capture's credentials; roles only keep each service, or whoever holds its credentials, to
+    its own streams."""
 
     def __init__(self, endpoint: str, folder: Path) -> None:
         self.endpoint = endpoint
-        password = secrets.token_urlsafe(24)
+        passwords = {role: secrets.token_urlsafe(24) for role in SERVICE_ROLES.values()}
         self.users_file = folder / "router-users.txt"
-        self.client_file = folder / "zenoh-client.json5"
-        for path, text in (
-            (self.users_file, f"{self.USER}:{password}\n"),
-            (self.client_file, json.dumps(self._client_settings(password), indent=2)),
-        ):
-            path.touch(mode=0o600)
-            path.write_text(text)
+        self.client_files = {role: folder / f"{role}.json5" for role in passwords}
+        write_private(self.users_file,
+                      "".join(f"{role}:{password}\n" for role, password in passwords.items()))
+        for role, password in passwords.items():
+            write_private(self.client_files[role],
+                          json.dumps(self._client_settings(role, password), indent=2))
 
-    def _client_settings(self, password: str) -> dict:
-        """The children's zenoh configuration as a nested mapping (a JSON5 file's content)."""
+    def client_file(self, service: str) -> Path:
+        """The client configuration of a service (``learn``, ``log``, ``capture``)."""
+        return self.client_files[SERVICE_ROLES[service]]
+
+    def _client_settings(self, role: str, password: str) -> dict:
+        """A role's zenoh configuration as a nested mapping (a JSON5 file's content)."""
         settings = {**client_settings([self.endpoint]),
-                    "transport/auth/usrpwd": {"user": self.USER, "password": password}}
+                    "transport/auth/usrpwd": {"user": role, "password": password}}
         nested: dict = {}
         for key, value in settings.items():
             *parents, leaf = key.split("/")
@@ -217,7 +231,22 @@ class RunAccess:
         config = router_config([self.endpoint])
         config.insert_json5("transport/auth/usrpwd/dictionary_file",
                             json.dumps(str(self.users_file)))
+        config.insert_json5("access_control", json.dumps(access_control(
+            {role: {"usernames": [role]} for role in self.client_files})))
         return config
+
+    def forget(self) -> None:
+        """Remove the credentials (the logs stay, for a failed run)."""
+        for path in (self.users_file, *self.client_files.values()):
+            path.unlink(missing_ok=True)
+
+
+def write_private(path: Path, text: str) -> None:
+    """Write a new file only its owner may read (0600)."""
+    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(descriptor, "w") as file:
+        file.write(text)
+# --- end of issue 24.2 ------------------------------------------------------------------------
 
 
 class Pipeline:
@@ -234,7 +263,8 @@ class Pipeline:
         # -P: the user's current folder, which may hold its own services/ or schemas/, is not
         # put first on the children's import path
         command = [sys.executable, "-P", "-m", "services.cli", name, *arguments,
-                   "--zenoh-config", str(self.access.client_file), "--log-level", self.log_level]
+                   "--zenoh-config", str(self.access.client_file(name)),
+                   "--log-level", self.log_level]
         stderr_path = self.log_dir / f"{name}.log"
         stderr_file = open(stderr_path, "wb")  # closed in Pipeline.close()
         env = lifecycle.child_environment()  # the child dies with this process
@@ -458,6 +488,7 @@ def run_pipeline(args: argparse.Namespace, plan: RunPlan, log_dir: Path) -> RunO
         for entity in declared:
             entity.undeclare()
         router.close()
+        access.forget()
     with observed.lock:
         status, end = observed.status, observed.end
     if stop.is_set():

@@ -133,12 +133,20 @@ def client_config(
     return config
 
 
-def router_config(listen: list[str], config_file: Path | None = None) -> zenoh.Config:
-    """Configuration of a zenoh router listening on ``listen`` only, scouting off."""
+def router_config(listen: list[str] | None, config_file: Path | None = None) -> zenoh.Config:
+    """Configuration of a zenoh router listening on ``listen`` only, scouting off.
+
+    ``listen`` None: the endpoints ``config_file`` lists, else `DEFAULT_ENDPOINT`. A file that
+    asks for mutual TLS or access control makes a secure router, which never listens where a
+    client could open a session without credentials (`anonymous_listeners`): ZenohSetupError.
+    """
     import zenoh
 
     config = _load_config_file(config_file) if config_file is not None else zenoh.Config()
     config.insert_json5("mode", '"router"')
+    if listen is None:
+        listed = _setting(config, "listen/endpoints") if config_file is not None else None
+        listen = listed if isinstance(listed, list) and listed else [DEFAULT_ENDPOINT]
     config.insert_json5("listen/endpoints", json.dumps(list(listen)))
     if config_file is None:
         config.insert_json5("connect/endpoints", "[]")
@@ -147,7 +155,29 @@ def router_config(listen: list[str], config_file: Path | None = None) -> zenoh.C
         # which every message that must arrive (status, end of stream) would wait for it
         config.insert_json5("transport/link/tx/queue/congestion_control/block/wait_before_close",
                             str(BLOCKED_CLIENT_CUTOFF_US))
+    anonymous = anonymous_listeners(config)
+    if anonymous:
+        raise ZenohSetupError(
+            f"--zenoh-config {config_file} asks for authentication or access control, but a "
+            f"client could open a session on {', '.join(anonymous)} without credentials (only "
+            "tls/ and quic/ endpoints check certificates); listen on tls/ endpoints only, or "
+            "add usrpwd authentication")
     return config
+
+
+def anonymous_listeners(config: zenoh.Config) -> list[str]:
+    """The listen endpoints of a secure router (mutual TLS or access control configured) on
+    which a client needs no credentials: every endpoint but tls/ and quic/ ones under mutual
+    TLS, every endpoint without any authentication; none with usrpwd (it covers every link) or
+    on a router that asks for neither (gngdt's loopback default)."""
+    mutual_tls = _setting(config, "transport/link/tls/enable_mtls") is True
+    access_control = _setting(config, "access_control/enabled") is True
+    if not (mutual_tls or access_control) or _setting(
+            config, "transport/auth/usrpwd/dictionary_file"):
+        return []
+    endpoints = _setting(config, "listen/endpoints") or []
+    return [str(endpoint) for endpoint in endpoints
+            if not (mutual_tls and str(endpoint).split("/", 1)[0] in ("tls", "quic"))]
 
 
 def _load_config_file(path: Path) -> zenoh.Config:
