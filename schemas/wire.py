@@ -22,6 +22,10 @@ ENCODING_STATUS = "application/protobuf;gngdt.LearnerStatus"
 ENCODING_STREAM_END = "application/protobuf;gngdt.StreamEnd"
 ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
 
+#: every stream of a camera (``gngdt/<cam>/<stream>``), by who publishes it (DESIGN.md "Topics")
+CAPTURE_STREAMS = ("color", "depth", "calibration", "points", "tf", "eos")
+LEARNER_STREAMS = ("topology", "objects", "scene", "learner/status")
+
 _ATTACHMENT = struct.Struct("<Qq")
 
 #: largest frame sequence accepted (signed 64-bit, as rerun's ``sequence`` timeline)

@@ -225,8 +225,9 @@ class RerunOutput(Output):
                             help="stop writing the .rrd (a complete file) once it is this large "
                             f"and go on running (default {DEFAULT_MAX_RRD_MB}; 0: no cap)")
         limits.add_argument("--min-free-mb", type=int, default=DEFAULT_MIN_FREE_MB, metavar="MB",
-                            help="stop writing the .rrd when less than this is free on its disk "
-                            f"(default {DEFAULT_MIN_FREE_MB}); a failed write stops it too")
+                            help="stop writing the .rrd (and the --mcap file) when less than "
+                            f"this is free on its disk (default {DEFAULT_MIN_FREE_MB}); a failed "
+                            "write stops it too")
         limits.add_argument("--max-topology-nodes", type=int, default=DEFAULT_MAX_TOPOLOGY_NODES,
                             metavar="N", help="largest topology logged, in nodes (default "
                             f"{DEFAULT_MAX_TOPOLOGY_NODES:,}; a learner sends its --max-nodes)")

@@ -19,12 +19,14 @@ from __future__ import annotations
 
 from typing import Any
 
+from schemas.wire import CAPTURE_STREAMS, LEARNER_STREAMS
+
 __all__ = ["ROLES", "ROLE_STREAMS", "ROLE_TOKENS", "SERVICE_ROLES", "access_control"]
 
 #: the streams each role may put on, per camera (``gngdt/<cam>/<stream>``)
 ROLE_STREAMS: dict[str, tuple[str, ...]] = {
-    "capture": ("color", "depth", "calibration", "points", "tf", "eos"),
-    "learner": ("topology", "objects", "scene", "learner/status"),
+    "capture": CAPTURE_STREAMS,
+    "learner": LEARNER_STREAMS,
     "logger": (),
     "viewer": (),
 }
