@@ -36,8 +36,9 @@ from gngdt_io.outputs.rerun_output import (
     default_rrd_path,
     rate_arguments,
     rates_from_args,
-    unused_rrd_path,
+    reserve_path,
 )
+from gngdt_io.outputs.rerun_sinks import check_ports_free
 from schemas.wire import DEFAULT_CAMERA, topic
 from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
@@ -60,7 +61,8 @@ log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap                 # writes runs/tabletop-<time>.rrd
-  gngdt run recordings/tabletop.mcap --fast --save out.rrd   # out.1.rrd if out.rrd exists
+  gngdt run recordings/tabletop.mcap --fast --save out.rrd   # refused if out.rrd exists
+  gngdt run recordings/tabletop.mcap --save out.rrd --overwrite   # ... unless asked
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
   gngdt run recordings/tabletop.mcap --mcap runs/tabletop.mcap   # + every stream for Foxglove
   gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
@@ -84,6 +86,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mcap", type=Path, metavar="PATH",
                         help="also record every gngdt stream (images, clouds, topology, scene, "
                         "objects, status) into this MCAP file for Foxglove or rerun")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an existing --save or --mcap file (default: refused)")
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -342,7 +346,7 @@ def sensor_veil_ratio(params: Path | None) -> float | None:
 
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
                      mcap_path: Path | None = None) -> list[str]:
-    arguments = rate_arguments(args)
+    arguments = [*rate_arguments(args), "--overwrite"]
     if mcap_path is not None:
         arguments += ["--mcap", str(mcap_path)]
     if args.connect:
@@ -350,7 +354,7 @@ def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
     if args.serve:
         return [*arguments, "--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
                 str(args.grpc_port), "--web-port", str(args.web_port)]
-    return [*arguments, "--save", str(rrd_path)]
+    return [*arguments, "--save", str(rrd_path)]  # (the run reserved its paths: --overwrite)
 
 
 def file_size(path: Path | None) -> str:
@@ -435,8 +439,8 @@ class RunPlan:
 
 
 def plan_run(args: argparse.Namespace) -> RunPlan:
-    """The run's outputs, named (the logger never overwrites a file: the names it will really
-    write); ValueError or RecordingError for anything wrong, before any process starts."""
+    """The run's plan, its outputs named and reserved (`plan_outputs`); ValueError or
+    RecordingError for anything wrong, before any process starts."""
     from gngdt_io.sources import open_source
 
     open_source(args.recording)  # a source capture can read (RecordingError says why not)
@@ -445,14 +449,50 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     veil_ratio = sensor_veil_ratio(args.params)  # a wrong params file: said before starting
     topic(args.cam, "points")  # validates the camera name
     rates = rates_from_args(args)
-    mcap_path = unused_rrd_path(args.mcap) if args.mcap else None
-    if mcap_path is not None:
-        mcap_path.parent.mkdir(parents=True, exist_ok=True)
+    return RunPlan(rates, veil_ratio, *plan_outputs(args))
+
+
+# --- issue 24.4: runs that never collide -------------------------------------------------------
+def plan_outputs(args: argparse.Namespace) -> tuple[Path | None, Path | None]:
+    """The run's .rrd and MCAP paths, each reserved for this run alone (created empty at once:
+    two runs started in the same second get two names, and each summary names its own); a
+    ``--save`` or ``--mcap`` file that exists is refused unless ``--overwrite``, and a busy
+    ``--serve`` port before anything starts (ValueError)."""
+    if args.serve:
+        try:
+            check_ports_free(args.bind, {"--grpc-port": args.grpc_port,
+                                         "--web-port": args.web_port})
+        except OSError as error:
+            raise ValueError(str(error)) from error
+    for option, path in (("--save", args.save), ("--mcap", args.mcap)):
+        if path is not None and path.exists() and not args.overwrite:
+            raise ValueError(f"{option} {path}: the file exists (an earlier run's?); choose "
+                             "another path, or --overwrite to replace it")
+    mcap_path = None if args.mcap is None else claim(args.mcap, args.overwrite)
     rrd_path = None
     if not (args.connect or args.serve):
-        rrd_path = unused_rrd_path(args.save or default_rrd_path(args.recording.stem))
-        rrd_path.parent.mkdir(parents=True, exist_ok=True)
-    return RunPlan(rates, veil_ratio, rrd_path, mcap_path)
+        rrd_path = (claim(args.save, args.overwrite) if args.save
+                    else reserve_path(default_rrd_path(args.recording.stem)))
+    return rrd_path, mcap_path
+
+
+def claim(path: Path, overwrite: bool) -> Path:
+    """``path`` for this run: reserved (created empty) unless it is to be overwritten."""
+    if overwrite and path.exists():
+        return path
+    reserved = reserve_path(path)
+    if reserved != path:  # created since the check above: another run took it
+        reserved.unlink()
+        raise ValueError(f"{path}: another run created it just now; choose another path")
+    return reserved
+
+
+def drop_unwritten(plan: RunPlan) -> None:
+    """Remove the files reserved for a run that wrote nothing into them."""
+    for path in (plan.rrd_path, plan.mcap_path):
+        if path is not None and path.is_file() and path.stat().st_size == 0:
+            path.unlink()
+# --- end of issue 24.4 ------------------------------------------------------------------------
 
 
 @dataclass
@@ -531,6 +571,8 @@ def main(args: argparse.Namespace) -> int:
         if isinstance(error, ZenohSetupError):
             log.error("%s", error)
         return 1
+    finally:
+        drop_unwritten(plan)
     report(args, plan, outcome)
     if outcome.failure is not None:
         failure = outcome.failure

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -132,6 +133,21 @@ def default_rrd_path(name: str) -> Path:
     return RUNS_DIR / f"{name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}.rrd"
 
 
+def reserve_path(path: Path) -> Path:
+    """``path``, or the first free ``<stem>.<n><suffix>`` beside it, created empty at once
+    (exclusively: two runs started in the same second never get the same name); the caller
+    then writes it over."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    candidate, number = path, 0
+    while True:
+        try:
+            os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+            return candidate
+        except FileExistsError:
+            number += 1
+            candidate = path.with_name(f"{path.stem}.{number}{path.suffix}")
+
+
 def unused_rrd_path(path: Path) -> Path:
     """``path`` if no file is there, else the first free ``<stem>.<n><suffix>`` beside it."""
     if not path.exists():
@@ -188,7 +204,7 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
         rec.connect_grpc(args.url, default_blueprint=initial)
         return rec, f"connected to {args.url or 'the default viewer'}", None, None
     requested = Path(args.save) if args.save else default_rrd_path(default_name)
-    path = unused_rrd_path(requested)
+    path = requested if getattr(args, "overwrite", False) else unused_rrd_path(requested)
     if path != requested:
         log.warning("%s exists (an earlier run); writing %s instead", requested, path)
     path.parent.mkdir(parents=True, exist_ok=True)
