@@ -15,10 +15,8 @@ when the recording is unusable, a service failed, or the stream ended before the
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
-import secrets
 import shutil
 import signal
 import subprocess
@@ -42,14 +40,8 @@ from gngdt_io.outputs.rerun_sinks import check_ports_free
 from schemas.wire import DEFAULT_CAMERA, topic
 from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
-from services.plumbing.roles import SERVICE_ROLES, access_control
-from services.plumbing.session import (
-    ZenohSetupError,
-    client_settings,
-    free_tcp_port,
-    open_config,
-    router_config,
-)
+from services.plumbing.roles import RunAccess
+from services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
 
 if TYPE_CHECKING:
     import zenoh
@@ -189,68 +181,6 @@ class Observed:
             return any(key.startswith(prefix) for key in self.alive)
 
 
-# --- issue 24.2: one user and password per role, access control by key expression -----------
-class RunAccess:
-    """This run's zenoh credentials: one user and password per role
-    (`services.plumbing.roles`), so that each service may put only on its own streams (a
-    logger or a learner cannot end the stream, a capture cannot publish objects); the router's
-    password file and each role's client configuration are written, mode 0600, into the run's
-    private folder (0700, made by ``tempfile.mkdtemp``) and removed when the run ends.
-
-    Other users can neither read them nor reach the router without them. A process of the same
-    user can: it may read these files while the run lasts (or a service's memory, e.g. through
-    ptrace) and then speak as that role on the run's router, e.g. end the stream with the
-    capture's credentials; roles only keep each service, or whoever holds its credentials, to
-    its own streams."""
-
-    def __init__(self, endpoint: str, folder: Path) -> None:
-        self.endpoint = endpoint
-        passwords = {role: secrets.token_urlsafe(24) for role in SERVICE_ROLES.values()}
-        self.users_file = folder / "router-users.txt"
-        self.client_files = {role: folder / f"{role}.json5" for role in passwords}
-        write_private(self.users_file,
-                      "".join(f"{role}:{password}\n" for role, password in passwords.items()))
-        for role, password in passwords.items():
-            write_private(self.client_files[role],
-                          json.dumps(self._client_settings(role, password), indent=2))
-
-    def client_file(self, service: str) -> Path:
-        """The client configuration of a service (``learn``, ``log``, ``capture``)."""
-        return self.client_files[SERVICE_ROLES[service]]
-
-    def _client_settings(self, role: str, password: str) -> dict:
-        """A role's zenoh configuration as a nested mapping (a JSON5 file's content)."""
-        settings = {**client_settings([self.endpoint]),
-                    "transport/auth/usrpwd": {"user": role, "password": password}}
-        nested: dict = {}
-        for key, value in settings.items():
-            *parents, leaf = key.split("/")
-            branch = nested
-            for name in parents:
-                branch = branch.setdefault(name, {})
-            branch[leaf] = value
-        return nested
-
-    def router(self) -> zenoh.Config:
-        config = router_config([self.endpoint])
-        config.insert_json5("transport/auth/usrpwd/dictionary_file",
-                            json.dumps(str(self.users_file)))
-        config.insert_json5("access_control", json.dumps(access_control(
-            {role: {"usernames": [role]} for role in self.client_files})))
-        return config
-
-    def forget(self) -> None:
-        """Remove the credentials (the logs stay, for a failed run)."""
-        for path in (self.users_file, *self.client_files.values()):
-            path.unlink(missing_ok=True)
-
-
-def write_private(path: Path, text: str) -> None:
-    """Write a new file only its owner may read (0600)."""
-    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    with os.fdopen(descriptor, "w") as file:
-        file.write(text)
-# --- end of issue 24.2 ------------------------------------------------------------------------
 
 
 class Pipeline:

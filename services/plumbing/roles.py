@@ -11,17 +11,26 @@ the streams DESIGN's topics table gives it, enforced by the router's zenoh acces
 Every role may subscribe to, query and hear the liveliness of ``gngdt/**``; nothing else is
 allowed (``default_permission: deny``). `access_control` builds zenoh's ``access_control``
 section for given subjects: usernames (``gngdt run``'s own router, one user and password per
-role) or certificate common names (``config/secure/router.json5``, which a test keeps equal to
-it).
+role: `RunAccess`) or certificate common names (``config/secure/router.json5``, which a test
+keeps equal to it).
 """
 
 from __future__ import annotations
 
-from typing import Any
+import json
+import os
+import secrets
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from schemas.wire import CAPTURE_STREAMS, LEARNER_STREAMS
+from services.plumbing.session import client_settings, router_config
 
-__all__ = ["ROLES", "ROLE_STREAMS", "ROLE_TOKENS", "SERVICE_ROLES", "access_control"]
+if TYPE_CHECKING:
+    import zenoh
+
+__all__ = ["ROLES", "ROLE_STREAMS", "ROLE_TOKENS", "SERVICE_ROLES", "RunAccess",
+           "access_control"]
 
 #: the streams each role may put on, per camera (``gngdt/<cam>/<stream>``)
 ROLE_STREAMS: dict[str, tuple[str, ...]] = {
@@ -90,3 +99,65 @@ def access_control(subjects: dict[str, dict[str, list[str]]]) -> dict[str, Any]:
         "subjects": [{"id": role, **fields} for role, fields in subjects.items()],
         "policies": policies,
     }
+
+
+class RunAccess:
+    """A ``gngdt run``'s zenoh credentials: one user and password per role, so that each
+    service may put only on its own streams (a logger or a learner cannot end the stream, a
+    capture cannot publish objects); the router's
+    password file and each role's client configuration are written, mode 0600, into the run's
+    private folder (0700, made by ``tempfile.mkdtemp``) and removed when the run ends.
+
+    Other users can neither read them nor reach the router without them. A process of the same
+    user can: it may read these files while the run lasts (or a service's memory, e.g. through
+    ptrace) and then speak as that role on the run's router, e.g. end the stream with the
+    capture's credentials; roles only keep each service, or whoever holds its credentials, to
+    its own streams."""
+
+    def __init__(self, endpoint: str, folder: Path) -> None:
+        self.endpoint = endpoint
+        passwords = {role: secrets.token_urlsafe(24) for role in SERVICE_ROLES.values()}
+        self.users_file = folder / "router-users.txt"
+        self.client_files = {role: folder / f"{role}.json5" for role in passwords}
+        write_private(self.users_file,
+                      "".join(f"{role}:{password}\n" for role, password in passwords.items()))
+        for role, password in passwords.items():
+            write_private(self.client_files[role],
+                          json.dumps(self._client_settings(role, password), indent=2))
+
+    def client_file(self, service: str) -> Path:
+        """The client configuration of a service (``learn``, ``log``, ``capture``)."""
+        return self.client_files[SERVICE_ROLES[service]]
+
+    def _client_settings(self, role: str, password: str) -> dict:
+        """A role's zenoh configuration as a nested mapping (a JSON5 file's content)."""
+        settings = {**client_settings([self.endpoint]),
+                    "transport/auth/usrpwd": {"user": role, "password": password}}
+        nested: dict = {}
+        for key, value in settings.items():
+            *parents, leaf = key.split("/")
+            branch = nested
+            for name in parents:
+                branch = branch.setdefault(name, {})
+            branch[leaf] = value
+        return nested
+
+    def router(self) -> zenoh.Config:
+        config = router_config([self.endpoint])
+        config.insert_json5("transport/auth/usrpwd/dictionary_file",
+                            json.dumps(str(self.users_file)))
+        config.insert_json5("access_control", json.dumps(access_control(
+            {role: {"usernames": [role]} for role in self.client_files})))
+        return config
+
+    def forget(self) -> None:
+        """Remove the credentials (the logs stay, for a failed run)."""
+        for path in (self.users_file, *self.client_files.values()):
+            path.unlink(missing_ok=True)
+
+
+def write_private(path: Path, text: str) -> None:
+    """Write a new file only its owner may read (0600)."""
+    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(descriptor, "w") as file:
+        file.write(text)

@@ -10,9 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from services.plumbing.roles import ROLE_STREAMS, ROLES, access_control
+from services.plumbing.roles import ROLE_STREAMS, ROLES, RunAccess, access_control
 from services.plumbing.session import ZenohSetupError, router_config
-from services.run import RunAccess
 
 SECURE = Path(__file__).resolve().parents[2] / "config" / "secure"
 
