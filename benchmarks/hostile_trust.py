@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import socket
 import subprocess
@@ -95,13 +96,14 @@ def attack(label: str, ran: dict[str, Ran], note: str = "",
 
 
 def line_with(text: str, *needles: str) -> str:
-    """The first line of ``text`` holding one of ``needles``, after its log prefix, with the
-    benchmark's folders left out of the file names it gives."""
+    """The first line of ``text`` holding one of ``needles``, after its log prefix and the
+    file it names."""
     for line in text.splitlines():
         if any(needle in line for needle in needles):
             if " ERROR " in line or " WARNING " in line or " INFO " in line:
                 line = line.split(": ", 1)[-1]
-            return line.replace(tempfile.gettempdir() + "/", "").strip()
+            # the reason, without the file it names (the benchmark made it)
+            return re.sub(r"^(?:gngdt segment: |checkpoint )?(?:\S*/\S*: )+", "", line).strip()
     return ""
 
 

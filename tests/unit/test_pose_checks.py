@@ -159,3 +159,15 @@ def test_checking_a_frame_costs_milliseconds(walk) -> None:
     for stamp, points, pose in walk[1:]:
         checker.check(points, pose, stamp)
     assert (time.perf_counter() - started) / (len(walk) - 1) < 0.1
+
+
+def test_a_wild_transform_sample_does_not_move_its_neighbours() -> None:
+    """A /tf sample of 1e18 m between good ones: the frames at the good samples' stamps get
+    exactly those poses (interpolating across the wild one cancelled them to 0 before)."""
+    from gngdt_io.tf_tree import TransformTree
+
+    tree = TransformTree()
+    for stamp, x in ((0, 1.5), (100, 1e18), (200, 1.6), (300, 1.7)):
+        tree.add("world", "camera", stamp, [x, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0])
+    assert tree.lookup("world", "camera", 200)[0, 3] == 1.6
+    assert tree.lookup("world", "camera", 250)[0, 3] == pytest.approx(1.65)
