@@ -341,6 +341,13 @@ def pose_lines(status: LearnerStatusInfo) -> list[str]:
 def mostly_rejected(status: LearnerStatusInfo | None) -> bool:
     """Whether more frames were rejected for their pose than learned: the run failed."""
     return status is not None and status.frames_pose_rejected > status.frames_used
+
+
+def learned_nothing(outcome: RunOutcome) -> bool:
+    """Whether the stream ended without the learner learning a single frame (issue 24.6: depth
+    in the wrong unit leaves every cloud empty)."""
+    return (outcome.end is not None and outcome.status is None and outcome.failure is None
+            and not outcome.interrupted)
 # --- end of issue 24.1 ------------------------------------------------------------------------
 
 
@@ -510,6 +517,11 @@ def main(args: argparse.Namespace) -> int:
     shutil.rmtree(log_dir, ignore_errors=True)
     if outcome.interrupted:
         return 130
+    if learned_nothing(outcome):
+        log.error("the learner learned nothing: no frame's cloud had a point it could learn "
+                  "(depth in another unit than millimetres? `gngdt record images` prints the "
+                  "depth range it found)")
+        return 1
     if mostly_rejected(outcome.status):
         log.error("most frames were not learned: their camera poses are out of bounds or "
                   "contradict their depth (see 'poses rejected' above; `gngdt record images "
