@@ -19,6 +19,15 @@ uncalibrated 2000x2000 frames, a zstd chunk inflating to 256 MB, an lz4 chunk hi
 first five (exit 2, naming file and frame: issue 15.11) and reads the first million transforms
 of the last (exit 0, warned), within its limits. Target: no process above 1 GB, no service
 exits non-zero, every refusal counted in the learner's status or the logger's log.
+
+Then issue 24's attacks (``hostile_trust.py``; ``--only issue24`` runs them alone): misread and
+absurd camera poses, crafted checkpoints, forgeries with another role's credentials inside
+``gngdt run``, a scene flood, 100,000 camera names and a full disk against ``--mcap``, runs on a
+busy port, one MCAP path or in the same second, odd files (a 10-million-line pose file, stamps
+of Infinity, images claiming 10^10 pixels, a FIFO, NaN camera parameters, 8x8 frames) and depth
+in the wrong unit. Per attack: exit codes, peak RSS, whether a traceback reached the user, and
+what was recorded that a role may not publish. Target: no process above 1 GB, no traceback,
+nothing recorded that a role may not publish.
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ from hostile_recordings import (  # noqa: E402  (benchmarks/, beside this script
     overlapping_chunks,
     zstd_bomb,
 )
+from hostile_trust import print_trust, trust_attacks  # noqa: E402  (benchmarks/, beside this)
 from procstat import gngdt, status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
 from schemas.clouds import cloud_to_msg  # noqa: E402
@@ -376,16 +386,27 @@ def print_report(folder: Path, run: ServiceRun, capture_rows: list[CaptureRow],
 
 
 def main() -> None:
-    folder = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    peaks = Peaks()
-    processes = start_services(folder, endpoint, peaks)
-    run = feed_services(folder, endpoint, processes)
-    run.codes = stop_services(processes)
-    capture_rows = replay_recordings(folder, endpoint, peaks)
-    time.sleep(0.2)
-    peaks.stop()
-    print_report(folder, run, capture_rows, peaks.peaks)
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", choices=("issue15", "issue24"),
+                        help="run only issue 15's services and recordings, or issue 24's "
+                        "attacks (default: both)")
+    args = parser.parse_args()
+    if args.only != "issue24":
+        folder = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
+        endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+        peaks = Peaks()
+        processes = start_services(folder, endpoint, peaks)
+        run = feed_services(folder, endpoint, processes)
+        run.codes = stop_services(processes)
+        capture_rows = replay_recordings(folder, endpoint, peaks)
+        time.sleep(0.2)
+        peaks.stop()
+        print_report(folder, run, capture_rows, peaks.peaks)
+    if args.only != "issue15":
+        print("\nissue 24's attacks:", flush=True)
+        print_trust(trust_attacks())
 
 
 if __name__ == "__main__":

@@ -138,9 +138,11 @@ class BenchPipeline:
         endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
         self.access = RunAccess(endpoint, workdir)
         shared = {"transport/shared_memory/enabled": transport.shared_memory}
-        client = json.loads(self.access.client_file.read_text())
-        client.setdefault("transport", {})["shared_memory"] = {"enabled": transport.shared_memory}
-        self.access.client_file.write_text(json.dumps(client, indent=2))
+        for client_file in self.access.client_files.values():
+            client = json.loads(client_file.read_text())
+            client.setdefault("transport", {})["shared_memory"] = {
+                "enabled": transport.shared_memory}
+            client_file.write_text(json.dumps(client, indent=2))
         router_file = workdir / "router.json5"
         router_file.write_text(settings_file_text({
             **router_settings([endpoint]), **shared,
@@ -150,7 +152,7 @@ class BenchPipeline:
         self.router = self._spawn("router", ["router", "--zenoh-config", str(router_file)])
         self.observer: Observer | None = None
         try:
-            self.observer = Observer(self.access.client_file)
+            self.observer = Observer(self.access.client_file("log"))  # puts nothing
         except Exception:
             self.close()
             raise
@@ -158,7 +160,7 @@ class BenchPipeline:
     def start(self, command: str, arguments: list[str], label: str | None = None) -> Child:
         """``gngdt COMMAND ARGUMENTS`` as a client of the run; its output in ``LABEL.log``."""
         child = self._spawn(label or command, [
-            command, *arguments, "--zenoh-config", str(self.access.client_file)])
+            command, *arguments, "--zenoh-config", str(self.access.client_file(command))])
         self.children.append(child)
         return child
 

@@ -8,16 +8,19 @@ what is evaluated is what is deployed. Pure computation: clouds in, network and 
 The network lives in the frame of the first cloud it learns (its ``frame_id``): a cloud whose
 pose places it in a fixed frame (``world``, ``map``) is learned there, pose applied, so a moving
 camera builds one map; a cloud without a pose is learned in the camera frame as it is. A later
-cloud in another frame raises `OtherFrameError` (counted). With a frame schedule (a sensor
-profile's ``[frames]`` table) frames go through `StreamLearner` (attention, scene cuts, a first
-frame learned longer); without one, ``samples_per_frame`` steps of `GNGDT.partial_fit` each.
+cloud in another frame raises `OtherFrameError` (counted). A posed cloud is learned only when
+its pose passes `gngdt_core.pose_checks` (within the workspace, moving as a camera can, agreeing
+with the depth of an earlier frame); else `PoseRejectedError` (counted). With a frame
+schedule (a sensor profile's ``[frames]`` table) frames go through `StreamLearner` (attention,
+scene cuts, a first frame learned longer); without one, ``samples_per_frame`` steps of
+`GNGDT.partial_fit` each.
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -28,6 +31,7 @@ from gngdt_core.metrics import ghost_nodes
 from gngdt_core.model import GNGDT
 from gngdt_core.objects import ObjectSet, ObjectTracker
 from gngdt_core.parameters import Interval, OneOf, check_fields, param
+from gngdt_core.pose_checks import PoseChecker, PoseLimits
 from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_core.segmentation import SegmentationParams
 
@@ -48,6 +52,12 @@ MAX_COUNTER = 2**63 - 1
 MAX_SEQUENCE_GAP = 30 * 3600 * 24 * 365
 #: largest cloud a learner accepts by default (the wire's own limit, schemas' MAX_CLOUD_POINTS)
 DEFAULT_MAX_POINTS = 2_000_000
+
+
+def _pose_limit(name: str) -> Any:
+    """A learner option ``pose_<name>`` declared as `PoseLimits` declares ``name``."""
+    item = next(item for item in fields(PoseLimits) if item.name == name)
+    return param(item.default, item.metadata["constraint"], item.metadata["doc"])
 
 
 @dataclass(frozen=True)
@@ -89,9 +99,19 @@ class LearnerOptions:
     scene_every_frames: int = param(3, Interval(int, 0),
                                     "publish the foxglove scene every this many learned frames; "
                                     "0: never")
+    pose_workspace_m: float = _pose_limit("workspace_m")
+    pose_rotation_tolerance: float = _pose_limit("rotation_tolerance")
+    pose_max_speed_m_s: float = _pose_limit("max_speed_m_s")
+    pose_max_turn_deg_s: float = _pose_limit("max_turn_deg_s")
+    pose_max_residual: float = _pose_limit("max_residual")
 
     def __post_init__(self) -> None:
         check_fields(self, "learner option")
+
+    def pose_limits(self) -> PoseLimits:
+        """The `PoseLimits` of the ``pose_*`` options."""
+        return PoseLimits(**{item.name: getattr(self, f"pose_{item.name}")
+                             for item in fields(PoseLimits)})
 
 
 @dataclass(frozen=True)
@@ -122,6 +142,8 @@ class Counters:
     malformed_messages: int = 0
     #: clouds skipped because their frame is not the one the network is learned in
     frames_other_frame: int = 0
+    #: posed clouds skipped because their pose was out of bounds or contradicted their depth
+    frames_pose_rejected: int = 0
     learning_seconds: float = 0.0
     #: learning steps run in ``learning_seconds`` (frames differ: a new scene learns longer)
     learning_steps: int = 0
@@ -145,6 +167,10 @@ class Counters:
 
 class OtherFrameError(ValueError):
     """A cloud is in another frame than the one the network is learned in."""
+
+
+class PoseRejectedError(ValueError):
+    """A cloud's pose is out of bounds or contradicts its depth (`gngdt_core.pose_checks`)."""
 
 
 @dataclass
@@ -196,6 +222,8 @@ class FrameLearner:
         #: the pose of the last cloud learned (None: it was in the network's frame as it is)
         self.last_pose: np.ndarray | None = None
         self.ghosts = Ghosts()
+        #: checks every posed cloud before it is learned
+        self.poses = PoseChecker(config.options.pose_limits())
         self._rng = np.random.default_rng(seed)
         self._trackers = {name: ObjectTracker(name, config.options.min_cluster_size,
                                               config.options.object_confirm_frames)
@@ -208,11 +236,18 @@ class FrameLearner:
         return self._model
 
     def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
-              pose: np.ndarray | None = None) -> None:
+              pose: np.ndarray | None = None, stamp_ns: int | None = None) -> None:
         """Learn one cloud: (N, 3) f32 m, (N, 3) u8, in its own (camera) frame; ``pose``
-        (4, 4) maps it into ``frame_id``. Raises `OtherFrameError` (counted) for a cloud in
-        another frame than the network's."""
+        (4, 4) maps it into ``frame_id``; ``stamp_ns`` its capture time. Raises
+        `OtherFrameError` for a cloud in another frame than the network's and
+        `PoseRejectedError` for a pose the checks refuse (both counted)."""
         self._check_frame(frame_id or self.camera, pose)
+        if pose is not None:
+            verdict = self.poses.check(positions, pose, stamp_ns)
+            if not verdict.accepted:
+                self.counters.frames_pose_rejected = min(
+                    self.counters.frames_pose_rejected + 1, MAX_COUNTER)
+                raise PoseRejectedError(verdict.problem)
         self.last_pose = pose
         started = time.perf_counter()
         if self.stream is None:

@@ -10,7 +10,7 @@ images and writing label files is the caller's.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -20,7 +20,31 @@ from gngdt_core.model import GNGDT
 from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_core.segmentation import SegmentationParams
 
-__all__ = ["FrameResult", "FrameSchedule", "FrameSegmenter", "veil_pixels"]
+__all__ = ["FrameResult", "FrameSchedule", "FrameSegmenter", "node_budget", "veil_pixels"]
+
+#: a network learned from a frame gets at most one node per this many learnable pixels (a
+#: 640x480 frame keeps a profile's 4,000 nodes; an 8x8 one gets 4, not 4,000 for 64 points)
+PIXELS_PER_NODE = 16
+
+
+#: a scaled-down schedule still learns at least this many steps from scratch, and per frame
+MIN_STEPS_FIRST_FRAME, MIN_STEPS_PER_FRAME = 2_000, 200
+
+
+def node_budget(max_nodes: int, learnable_pixels: int) -> int:
+    """The node budget of a network learned from a frame of ``learnable_pixels``."""
+    return max(2, min(max_nodes, learnable_pixels // PIXELS_PER_NODE))
+
+
+def scaled_schedule(schedule: FrameSchedule, share: float) -> FrameSchedule:
+    """``schedule`` with its steps scaled by ``share`` (a smaller budget's share of the
+    profile's), down to ``MIN_STEPS_FIRST_FRAME`` / ``MIN_STEPS_PER_FRAME`` at least."""
+    def steps(value: int, least: int) -> int:
+        return max(min(value, least), round(value * share))
+
+    return replace(schedule, steps_first_frame=steps(schedule.steps_first_frame,
+                                                     MIN_STEPS_FIRST_FRAME),
+                   steps_per_frame=steps(schedule.steps_per_frame, MIN_STEPS_PER_FRAME))
 
 
 @dataclass
@@ -48,6 +72,9 @@ class FrameSegmenter:
                  segmentation: SegmentationParams | None = None,
                  schedule: FrameSchedule | None = None, random_state: int | None = 0) -> None:
         self.stream = StreamLearner(model_params, segmentation, schedule, random_state)
+        #: the profile's node budget and schedule; a small frame gets a share of them
+        self.max_nodes = int(self.stream.model_params.get("max_nodes", GNGDT().max_nodes))
+        self.schedule = self.stream.schedule
         #: (H, W) bool: the last frame's pixels on large flat surfaces (attention's prior)
         self._surface_pixels: np.ndarray | None = None
 
@@ -80,6 +107,11 @@ class FrameSegmenter:
             model = self.model_
             return FrameResult(np.zeros((height, width), dtype=np.int32),
                                model.n_nodes_ if model else 0, 0, 0, False, clock.laps)
+        # a network learned from scratch on this frame gets a budget its pixels can fill, and
+        # steps in proportion
+        budget = node_budget(self.max_nodes, len(positions))
+        self.stream.model_params["max_nodes"] = budget
+        self.stream.schedule = scaled_schedule(self.schedule, budget / self.max_nodes)
         surface = self._surface_pixels
         prior = (None if surface is None or surface.shape != (height, width)
                  else np.compress(learnable, surface.reshape(-1)))

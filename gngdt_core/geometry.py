@@ -21,6 +21,7 @@ __all__ = [
     "matrix_to_pose",
     "pose_to_matrix",
     "quaternion_to_rotation",
+    "quaternions_to_rotations",
     "rigid_inverse",
     "rotation_to_quaternion",
     "slerp",
@@ -83,12 +84,17 @@ def checked_translation(translation: object, what: str) -> np.ndarray:
 # turn a few quaternions into matrices (tests check these against scipy).
 def quaternion_to_rotation(q: np.ndarray) -> np.ndarray:
     """(3, 3) float64 rotation of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = q
-    return np.array([
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-    ])
+    return quaternions_to_rotations(np.asarray(q, dtype=np.float64)[None])[0]
+
+
+def quaternions_to_rotations(q: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) float64 rotations of (N, 4) unit quaternions (x, y, z, w)."""
+    x, y, z, w = (q[:, i] for i in range(4))
+    return np.stack([
+        np.stack([1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)], -1),
+        np.stack([2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)], -1),
+        np.stack([2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)], -1),
+    ], axis=1)
 
 
 def rotation_to_quaternion(r: np.ndarray) -> np.ndarray:

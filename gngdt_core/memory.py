@@ -16,6 +16,10 @@ import numpy as np
 
 from gngdt_core.view import SensorView
 
+#: the offered counter stops here (an int64, with room to spare): a uniform sample of 2**62
+#: samples and of more is the same sample
+MAX_OFFERED = 2**62
+
 
 class SampleMemory:
     """Up to ``capacity`` samples in the model's frame.
@@ -66,7 +70,7 @@ class SampleMemory:
             slots = rng.integers(self.count, size=kept.size)  # a later sample wins a shared slot
             self._positions[slots] = positions[kept]
             self._colors[slots] = colors[kept]
-        self.offered += len(positions)
+        self.offered = min(self.offered + len(positions), MAX_OFFERED)
 
     def carve(self, view: SensorView, camera_from_model: np.ndarray, margin: float) -> int:
         """Drop the samples ``view`` saw through (see `SensorView.seen_through`); returns how

@@ -17,6 +17,12 @@ Model = TypeVar("Model")
 STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
 # a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
 
+#: largest counter (steps, node ids, samples offered, ...) a state may hold: far below 2**63,
+#: so that the counters can go on counting for ever without overflowing an int64
+MAX_STATE_COUNTER = 2**62
+#: float dtypes of a state's arrays (float16 loses what was learned; others are not ours)
+_FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+
 _FLOAT_ARRAYS = ("pos", "col", "nor", "err")
 _INT_ARRAYS = ("nbr", "age", "emask", "rev", "deg")
 
@@ -74,6 +80,8 @@ def _array(state: dict[str, np.ndarray], key: str, shape: tuple[int, ...], kind:
         raise ValueError(f"state[{key!r}] has shape {value.shape}, expected {shape}")
     if value.dtype.kind not in kind:
         raise ValueError(f"state[{key!r}] has dtype {value.dtype}, expected kind {kind!r}")
+    if value.dtype.kind == "f" and value.dtype not in _FLOAT_DTYPES:
+        raise ValueError(f"state[{key!r}] has dtype {value.dtype}, expected float32 or float64")
     return value
 
 
@@ -87,6 +95,11 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     name = _scalar_text(state, "model")
     if name != cls.__name__:
         raise ValueError(f"state holds a {name} model, not a {cls.__name__}")
+    if "version" in state:  # states saved before versions had none
+        version = _scalar_int(state, "version")
+        if not 1 <= version <= STATE_VERSION:
+            raise ValueError(f"state version {version}; this gngdt reads versions "
+                             f"1..{STATE_VERSION}")
     try:
         params: dict[str, Any] = json.loads(_scalar_text(state, "params"))
         rng_state = json.loads(_scalar_text(state, "rng_state"))
@@ -111,8 +124,8 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     scalars = _scalars(state)
     if dim not in (0, 2, 3):
         raise ValueError(f"state dim must be 0 (unfitted), 2 or 3, got {dim}")
-    if has_col not in (0, 1) or n_invalid < 0:
-        raise ValueError("state has_colors must be 0/1 and n_invalid >= 0")
+    if has_col not in (0, 1) or not 0 <= n_invalid <= MAX_STATE_COUNTER:
+        raise ValueError("state has_colors must be 0/1 and n_invalid in 0..2**62")
     n = int(counters[K.I_NODES])
     if counters[K.I_STEPS] < 0 or counters[K.I_GRID] not in (0, 1):
         raise ValueError(f"state counters are invalid: {counters.tolist()}")
@@ -184,8 +197,10 @@ def _restore_memory(memory: Any, state: dict[str, np.ndarray]) -> None:
     positions = _array(state, "memory_positions", (count, 3), "f")
     colors = _array(state, "memory_colors", (count, 3), "f")
     offered = _scalar_int(state, "memory_offered")
-    if not (np.isfinite(positions).all() and np.isfinite(colors).all()) or offered < count:
-        raise ValueError("state memory must be finite, with memory_offered >= its samples")
+    if (not (np.isfinite(positions).all() and np.isfinite(colors).all())
+            or not count <= offered <= MAX_STATE_COUNTER):
+        raise ValueError("state memory must be finite, with memory_offered from its samples "
+                         "to 2**62")
     memory.restore(positions, colors, offered)
 
 
@@ -211,6 +226,8 @@ def _counters(state: dict[str, np.ndarray]) -> np.ndarray:
     if counters.shape not in ((3,), (4,), (5,)) or counters.dtype.kind not in "iu":
         raise ValueError(f"state['counters'] has {counters.dtype} {counters.shape}, "
                          "expected 3 to 5 integers")
+    if (counters > MAX_STATE_COUNTER).any():
+        raise ValueError(f"state counters beyond 2**62: {counters.tolist()}")
     full = np.array([-1, -1, -1, -1, 0], dtype=np.int64)
     full[: counters.size] = counters
     if full[K.I_FORGOTTEN] < 0:

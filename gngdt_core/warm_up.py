@@ -61,6 +61,8 @@ def warm_up_learner(config: LearnerConfig, progress: Progress | None = None) -> 
         ("nearest nodes", lambda: learner.quantization_error(positions, colors)),
         ("normals and segmentation", learner.learned_frame),
         ("sensor view", lambda: learner.measure_ghosts(positions, pose)),
+        # a reference and a comparison: loads scipy's k-d tree now
+        ("pose checks", lambda: [learner.poses.check(positions, pose) for _ in range(2)]),
     ]
     run_groups(groups, progress)
     return learner

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig
+from gngdt_core.frame_learner import FrameLearner, LearnerConfig, PoseRejectedError
 from gngdt_core.geometry import apply_pose
 from gngdt_eval.dynamics import (
     CameraView,
@@ -138,6 +138,8 @@ class FramePoints:
     view: CameraView | None = None
     #: the frame the points are learned in (the pose's fixed frame, else the camera's)
     frame_id: str = "camera"
+    #: capture time, nanoseconds (the learner's pose checks take the camera's speed from it)
+    timestamp_ns: int | None = None
 
 
 def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
@@ -164,7 +166,7 @@ def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoint
         k = frame.intrinsics
         view = CameraView(frame.depth / 1000.0, k.fx, k.fy, k.cx, k.cy, pose)
         yield FramePoints(frame.index, apply_pose(positions, pose), colors, labels, positions,
-                          pose, view, frame.pose.frame_id)
+                          pose, view, frame.pose.frame_id, frame.timestamp_ns)
 
 
 def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intrinsics: Any):
@@ -206,7 +208,8 @@ class MethodReplay:
             return {"+".join(props): np.asarray(self.model.clusters(
                 *props, min_size=settings.min_cluster_size))
                 for props in clusterings_of(self.method, 3)}
-        self.learner.learn(points.camera_positions, points.colors, points.frame_id, points.pose)
+        self.learner.learn(points.camera_positions, points.colors, points.frame_id, points.pose,
+                           points.timestamp_ns)
         self.model = self.learner.model
         return self.learner.learned_frame().labels
 
@@ -250,7 +253,11 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
             tracker = DynamicsTracker(settings.dynamics, changes, posed=points.pose is not None)
         tracker.before_learning(points.index, points.positions, points.labels)
         started = time.perf_counter()
-        labels = run.learn(points)
+        try:
+            labels = run.learn(points)
+        except PoseRejectedError as error:  # counted by the learner, as live
+            log.warning("%s: frame %d not learned: %s", path, points.index, error)
+            continue
         record = _frame_record(run.model, points, labels, identity,
                                time.perf_counter() - started)
         record["dynamics"] = tracker.after_learning(

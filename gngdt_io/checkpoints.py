@@ -184,11 +184,18 @@ class CheckpointLock:
         self._file: Any = None
 
     def acquire(self) -> CheckpointLock:
-        """Take the lock; ``CheckpointError`` naming the holder's pid when another has it."""
+        """Take the lock; ``CheckpointError`` naming the holder's pid when another has it, or
+        the folder when it cannot be written (read-only, missing permissions)."""
         import fcntl
 
-        self.lock_path.parent.mkdir(parents=True, exist_ok=True)
-        file = open(self.lock_path, "a+")  # kept open while the lock is held
+        try:
+            self.lock_path.parent.mkdir(parents=True, exist_ok=True)
+            file = open(self.lock_path, "a+")  # kept open while the lock is held
+        except OSError as error:
+            raise CheckpointError(
+                f"checkpoint {self.path}: its folder cannot be written ({error.strerror or error});"
+                " the learner saves its checkpoint there: give a --checkpoint in a writable "
+                "folder") from error
         try:
             fcntl.flock(file.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

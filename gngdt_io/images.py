@@ -32,6 +32,7 @@ import numpy as np
 
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import CameraIntrinsics, Frame
+from gngdt_io.image_files import check_depth_dtype, is_regular_file, read_image
 
 __all__ = ["FORMATS", "CameraParameters", "count_image_frames", "iter_image_frames", "load_camera"]
 
@@ -66,6 +67,17 @@ class CameraParameters:
             cy=self.cy,
             distortion=self.distortion,
         )
+
+    def problem(self) -> str:
+        """Why these parameters cannot be a camera's (not finite, not positive), or ""."""
+        values = (self.fx, self.fy, self.cx, self.cy, self.depth_scale, *self.distortion)
+        if not all(math.isfinite(value) for value in values):
+            return "fx, fy, cx, cy, depth_scale and the distortion must be finite numbers"
+        if min(self.fx, self.fy, self.depth_scale) <= 0:
+            return "fx, fy and depth_scale must be positive"
+        if any(size is not None and size <= 0 for size in (self.width, self.height)):
+            return "width and height must be positive"
+        return ""
 
 
 #: Defaults per format: TUM freiburg1 (the TUM benchmark's published calibration) and the
@@ -124,7 +136,7 @@ def load_camera(
     path = Path(camera_json) if camera_json is not None else Path(directory) / "camera.json"
     if camera_json is None and not path.is_file():
         return defaults
-    return replace(defaults, **_camera_values(path))
+    return _checked(path, replace(defaults, **_camera_values(path)))
 
 
 #: the depth units of a recording's 16-bit depth when nothing says otherwise (millimetres)
@@ -140,11 +152,11 @@ def read_camera_json(path: str | Path) -> CameraParameters:
     missing = [key for key in ("fx", "fy", "cx", "cy") if key not in values]
     if missing:
         raise RecordingError(path, None, f"camera parameters lack {', '.join(missing)}")
-    return CameraParameters(**{"depth_scale": RECORDING_DEPTH_SCALE, **values})
+    return _checked(path, CameraParameters(**{"depth_scale": RECORDING_DEPTH_SCALE, **values}))
 
 
 def _camera_values(path: Path) -> dict:
-    """The camera parameters a JSON file sets, checked (finite; fx, fy, depth_scale > 0)."""
+    """The camera parameters a JSON file sets (numbers; `_checked` judges the camera)."""
     try:
         values = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as error:
@@ -159,12 +171,14 @@ def _camera_values(path: Path) -> dict:
             found["distortion"] = tuple(float(v) for v in values["distortion_k1_k2_p1_p2_k3"])
     except (TypeError, ValueError) as error:
         raise RecordingError(path, None, f"invalid camera parameter: {error}") from error
-    numbers = [value for key, value in found.items() if key != "distortion"]
-    if not all(math.isfinite(value) for value in numbers):
-        raise RecordingError(path, None, "camera parameters must be finite numbers")
-    if min(found.get(key, 1.0) for key in ("fx", "fy", "depth_scale")) <= 0:
-        raise RecordingError(path, None, "fx, fy and depth_scale must be positive")
     return found
+
+
+def _checked(path: Path, camera: CameraParameters) -> CameraParameters:
+    """``camera`` when it can be a camera's, else RecordingError naming ``path`` and why."""
+    if camera.problem():
+        raise RecordingError(path, None, camera.problem())
+    return camera
 
 
 # ------------------------------------------------------------------------------------ pairing
@@ -176,7 +190,11 @@ class _ImagePair:
 
 
 def _seconds_to_ns(text: str) -> int:
-    return int(Decimal(text) * 1_000_000_000)
+    """Nanoseconds of a stamp in seconds; InvalidOperation unless finite, >= 0, below 2**63 ns."""
+    nanoseconds = Decimal(text) * 1_000_000_000
+    if not nanoseconds.is_finite() or not 0 <= nanoseconds < 2**63:
+        raise InvalidOperation(f"stamp {text!r} is not a finite time >= 0 in seconds")
+    return int(nanoseconds)
 
 
 def _read_tum_list(path: Path) -> list[tuple[int, Path]]:
@@ -250,7 +268,7 @@ def _pairs_pcl_tiff(directory: Path) -> list[_ImagePair]:
     found: dict[str, dict[str, Path]] = {}
     for path in directory.iterdir():
         match = _PCL_NAME.match(path.name)
-        if match:
+        if match and is_regular_file(path):
             found.setdefault(match["stamp"], {})[match["kind"]] = path
     pairs = []
     for stamp, kinds in sorted(found.items()):
@@ -271,10 +289,10 @@ def _pairs_redwood(directory: Path, fps: float) -> list[_ImagePair]:
     for folder in (color_dir, depth_dir):
         if not folder.is_dir():
             raise RecordingError(folder, None, "missing (redwood layout: color/ and depth/)")
-    colors = {
-        p.stem: p for p in color_dir.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg")
-    }
-    depths = {p.stem: p for p in depth_dir.iterdir() if p.suffix.lower() == ".png"}
+    colors = {p.stem: p for p in color_dir.iterdir()
+              if p.suffix.lower() in (".png", ".jpg", ".jpeg") and is_regular_file(p)}
+    depths = {p.stem: p for p in depth_dir.iterdir()
+              if p.suffix.lower() == ".png" and is_regular_file(p)}
     for name in sorted(colors.keys() ^ depths.keys()):
         lone = colors.get(name) or depths[name]
         raise RecordingError(
@@ -291,25 +309,16 @@ def _pairs_redwood(directory: Path, fps: float) -> list[_ImagePair]:
 def _load_color(path: Path, index: int) -> np.ndarray:
     import cv2
 
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise RecordingError(path, index, "cannot read colour image")
+    image = read_image(path, index, cv2.IMREAD_COLOR, "colour image")
     return image[..., ::-1].copy()
 
 
 def _load_depth_mm(path: Path, index: int, depth_scale: float) -> np.ndarray:
     import cv2
 
-    depth = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if depth is None:
-        raise RecordingError(path, index, "cannot read depth image")
-    if depth.ndim != 2 or depth.dtype not in (np.uint16, np.float32):
-        raise RecordingError(
-            path,
-            index,
-            f"depth must be single-channel uint16 (or float32), got {depth.dtype} {depth.shape}",
-        )
-    if depth.dtype == np.uint16 and depth_scale == MILLIMETRES_PER_METRE:
+    depth = read_image(path, index, cv2.IMREAD_UNCHANGED, "depth image")
+    check_depth_dtype(depth, path, index)
+    if depth_scale == MILLIMETRES_PER_METRE:
         return depth
     millimetres = np.nan_to_num(depth.astype(np.float64) * (MILLIMETRES_PER_METRE / depth_scale))
     return np.clip(np.rint(millimetres), 0, np.iinfo(np.uint16).max).astype(np.uint16)

@@ -13,13 +13,16 @@ Every pose is camera-to-world (the camera's pose in the fixed frame ``world``), 
 
 Quaternions are (x, y, z, w); one whose norm is off by more than tf2's tolerance is an error (a
 sign of a different field order), nearly-unit ones are normalised. Matrices must be rigid.
-A file or folder with fewer poses than frames is an error; with more, a warning.
+A file or folder with fewer poses than frames is an error; with more, a warning. Files are read
+as a stream, line by line: at most ``MAX_POSES`` (1,000,000) poses and ``MAX_LINE_CHARS`` a
+line; every number must be finite and every stamp fit a 64-bit count of nanoseconds.
 """
 
 from __future__ import annotations
 
 import logging
 import re
+from array import array
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, replace
 from decimal import Decimal, InvalidOperation
@@ -27,7 +30,14 @@ from pathlib import Path
 
 import numpy as np
 
-from gngdt_core.geometry import TransformError, matrix_to_pose, pose_to_matrix
+from gngdt_core.geometry import (
+    QUATERNION_TOLERANCE,
+    TransformError,
+    matrix_to_pose,
+    pose_to_matrix,
+    quaternions_to_rotations,
+)
+from gngdt_core.pose_checks import PoseLimits
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import DEFAULT_FIXED_FRAME, CameraPose, Frame
 from gngdt_io.tf_tree import TransformTree
@@ -39,8 +49,13 @@ logger = logging.getLogger(__name__)
 #: a trajectory's first/last pose may serve a frame this far outside its span (TUM's
 #: associate.py pairs stamps up to 20 ms apart)
 TRAJECTORY_TOLERANCE_NS = 20_000_000
-#: largest deviation of a pose matrix's rotation from orthonormal, and of its last row
-MATRIX_TOLERANCE = 1e-3
+#: largest deviation of a pose matrix's rotation from orthonormal, and of its last row (the
+#: learner's own tolerance, `PoseLimits.rotation_tolerance`)
+MATRIX_TOLERANCE = PoseLimits().rotation_tolerance
+#: most poses read from a file or folder (~128 MB of matrices; 2.8 hours of a 100 Hz
+#: trajectory), and the longest line of a pose file
+MAX_POSES = 1_000_000
+MAX_LINE_CHARS = 4096
 _SEPARATORS = re.compile(r"[\s,]+")
 
 
@@ -58,14 +73,26 @@ class PoseFile:
 
 
 def _numbers(text: str, where: str) -> list[Decimal]:
-    """The numbers on one line, exactly (a TUM timestamp has more digits than a float keeps)."""
+    """The numbers on one line, exactly (a TUM timestamp has more digits than a float keeps);
+    each must be finite."""
     try:
-        return [Decimal(token) for token in _SEPARATORS.split(text.strip()) if token]
+        numbers = [Decimal(token) for token in _SEPARATORS.split(text.strip()) if token]
     except InvalidOperation as error:
         raise RecordingError(where, None, f"not a list of numbers: {text.strip()!r}") from error
+    if not all(number.is_finite() for number in numbers):
+        raise RecordingError(where, None, f"not finite numbers: {text.strip()!r}")
+    return numbers
 
 
-def _pose_from_seven(values: list[Decimal], where: str) -> np.ndarray:
+def _stamp_ns(seconds: Decimal, where: str) -> int:
+    """A trajectory stamp (seconds) as nanoseconds; it must fit a signed 64-bit stamp."""
+    nanoseconds = int(seconds * 1_000_000_000)
+    if not 0 <= nanoseconds < 2**63:
+        raise RecordingError(where, None, f"timestamp {seconds} s is outside 0 .. 2**63 ns")
+    return nanoseconds
+
+
+def _pose_from_seven(values: list, where: str) -> np.ndarray:
     numbers = [float(value) for value in values]
     try:
         return pose_to_matrix(numbers[:3], numbers[3:7], "pose")
@@ -89,35 +116,81 @@ def _rigid_matrix(values: list[Decimal], where: str) -> np.ndarray:
     return matrix
 
 
-def _read_pose_file(path: Path) -> PoseFile:
-    rows: list[tuple[str, list[Decimal]]] = []
+def _rows(path: Path) -> Iterator[tuple[str, list[Decimal]]]:
+    """(where, numbers) of every line of a pose file holding numbers, read as a stream: at most
+    ``MAX_LINE_CHARS`` a line and ``MAX_POSES`` such lines."""
+    count = 0
     try:
-        lines = path.read_text().splitlines()
+        with open(path, encoding="utf-8") as file:
+            for number, line in enumerate(iter(lambda: file.readline(MAX_LINE_CHARS + 1), ""),
+                                          start=1):
+                where = f"{path}:{number}"
+                if len(line) > MAX_LINE_CHARS:
+                    raise RecordingError(where, None, f"a line longer than {MAX_LINE_CHARS} "
+                                         "characters; not a pose file")
+                if not line.strip() or line.lstrip().startswith("#"):
+                    continue
+                count += 1
+                if count > MAX_POSES:
+                    raise RecordingError(path, None, f"more than {MAX_POSES:,} poses (the "
+                                         "limit); split the trajectory or thin it out")
+                yield where, _numbers(line, where)
     except (OSError, UnicodeDecodeError) as error:
         raise RecordingError(path, None, f"cannot read poses: {error}") from error
-    for number, line in enumerate(lines, start=1):
-        if line.strip() and not line.lstrip().startswith("#"):
-            where = f"{path}:{number}"
-            rows.append((where, _numbers(line, where)))
-    if not rows:
-        raise RecordingError(path, None, "no poses in the file")
-    widths = {len(values) for _, values in rows}
-    if widths == {16} or (widths == {4} and len(rows) == 4):  # a single 4x4 matrix
-        return PoseFile(path, _rigid_matrix([v for _, row in rows for v in row], str(path))[None])
-    width = len(rows[0][1])
-    for where, values in rows:
-        if len(values) != width or width not in (7, 8):
+
+
+def _read_pose_file(path: Path) -> PoseFile:
+    values = array("d")  # tx ty tz qx qy qz qw of each pose, compactly
+    stamps = array("q")
+    lines = array("q")
+    width = None
+    matrix_values: list[Decimal] = []
+    for where, numbers in _rows(path):
+        if width is None:
+            width = len(numbers)
+        if width in (16, 4):  # a single 4x4 matrix, on one line or four
+            matrix_values += numbers
+            if len(matrix_values) > 16 or len(numbers) != width:
+                raise RecordingError(where, None, "a 4x4 matrix file holds 16 numbers")
+            continue
+        if len(numbers) != width or width not in (7, 8):
             raise RecordingError(
                 where, None,
                 f"expected 8 numbers (timestamp tx ty tz qx qy qz qw) or 7 (tx ty tz qx qy qz "
-                f"qw) on every line, got {len(values)}",
+                f"qw) on every line, got {len(numbers)}",
             )
-    timestamped = width == 8
-    matrices = np.stack([_pose_from_seven(v[1:] if timestamped else v, w) for w, v in rows])
-    if not timestamped:
+        if width == 8:
+            stamps.append(_stamp_ns(numbers[0], where))
+        values.extend(float(number) for number in numbers[-7:])
+        lines.append(int(where.rsplit(":", 1)[1]))
+    if width is None:
+        raise RecordingError(path, None, "no poses in the file")
+    if width in (16, 4):
+        if len(matrix_values) != 16:
+            raise RecordingError(path, None, "a 4x4 matrix file holds 16 numbers")
+        return PoseFile(path, _rigid_matrix(matrix_values, str(path))[None])
+    matrices = _poses_from_rows(np.frombuffer(values, dtype=np.float64).reshape(-1, 7), path,
+                                np.frombuffer(lines, dtype=np.int64))
+    if width == 7:
         return PoseFile(path, matrices)
-    stamps = np.array([int(v[0] * 1_000_000_000) for _, v in rows], dtype=np.int64)
-    return PoseFile(path, matrices, stamps)
+    return PoseFile(path, matrices, np.frombuffer(stamps, dtype=np.int64).copy())
+
+
+def _poses_from_rows(rows: np.ndarray, path: Path, lines: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) poses of (N, 7) rows tx ty tz qx qy qz qw; the first row whose quaternion is
+    not unit is an error naming its line (as `_pose_from_seven` words it)."""
+    quaternions = rows[:, 3:]
+    norms = np.sqrt(np.einsum("ij,ij->i", quaternions, quaternions))
+    bad = np.flatnonzero(np.abs(norms * norms - 1.0) > QUATERNION_TOLERANCE)
+    if bad.size:
+        row = int(bad[0])
+        _pose_from_seven(list(rows[row]),
+                         f"{path}:{int(lines[row])}")
+    matrices = np.zeros((len(rows), 4, 4))
+    matrices[:, :3, :3] = quaternions_to_rotations(quaternions / norms[:, None])
+    matrices[:, :3, 3] = rows[:, :3]
+    matrices[:, 3, 3] = 1.0
+    return matrices
 
 
 def _natural_key(path: Path) -> tuple:
@@ -130,9 +203,13 @@ def load_poses(path: str | Path) -> PoseFile:
     and line for anything unreadable."""
     path = Path(path)
     if path.is_dir():
-        files = sorted((p for p in path.iterdir() if p.suffix == ".txt"), key=_natural_key)
+        files = sorted((p for p in path.iterdir() if p.suffix == ".txt" and p.is_file()),
+                       key=_natural_key)
         if not files:
             raise RecordingError(path, None, "no .txt pose files in the folder")
+        if len(files) > MAX_POSES:
+            raise RecordingError(path, None, f"{len(files):,} pose files, more than the "
+                                 f"{MAX_POSES:,} read")
         poses = [_read_pose_file(file) for file in files]
         for file, pose in zip(files, poses, strict=True):
             if len(pose) != 1 or pose.stamps_ns is not None:

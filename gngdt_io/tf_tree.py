@@ -102,7 +102,9 @@ class _Link:
         fraction = (stamp_ns - t0) / (t1 - t0) if t1 > t0 else 1.0
         matrix = np.eye(4)
         matrix[:3, :3] = quaternion_to_rotation(slerp(v0[3:], v1[3:], fraction))
-        matrix[:3, 3] = v0[:3] + fraction * (v1[:3] - v0[:3])
+        # weighted, not v0 + f (v1 - v0): a sample exactly at the stamp is returned exactly,
+        # whatever its neighbour (1e18 beside 1.5 cancelled to 0 before)
+        matrix[:3, 3] = (1.0 - fraction) * v0[:3] + fraction * v1[:3]
         return matrix
 
 

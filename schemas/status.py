@@ -47,6 +47,9 @@ class LearnerStatusInfo:
     ghost_distance_m: float = 0.0
     nodes_forgotten: int = 0
     frames_other_frame: int = 0
+    frames_pose_rejected: int = 0
+    #: why the last rejected pose was rejected ("" while none was)
+    pose_problem: str = ""
 
 
 @dataclass

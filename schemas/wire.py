@@ -23,6 +23,10 @@ ENCODING_STREAM_END = "application/protobuf;gngdt.StreamEnd"
 ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
 ENCODING_FRAME_TRANSFORM = "application/protobuf;foxglove.FrameTransform"
 
+#: every stream of a camera (``gngdt/<cam>/<stream>``), by who publishes it (DESIGN.md "Topics")
+CAPTURE_STREAMS = ("color", "depth", "calibration", "points", "tf", "eos")
+LEARNER_STREAMS = ("topology", "objects", "scene", "learner/status")
+
 _ATTACHMENT = struct.Struct("<Qq")
 
 #: largest frame sequence accepted (signed 64-bit, as rerun's ``sequence`` timeline)

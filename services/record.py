@@ -5,13 +5,17 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gngdt_io.errors import RecordingError
 from gngdt_io.frame import Frame
+
+if TYPE_CHECKING:
+    from gngdt_io.import_checks import ImportChecks
 
 logger = logging.getLogger(__name__)
 
@@ -56,6 +60,7 @@ IMAGES_EXAMPLES = """examples:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``synth`` and ``images`` sub-subcommands."""
     from gngdt_io.images import FORMATS
+    from gngdt_io.import_checks import add_pose_limit_arguments
     from gngdt_io.mcap_writer import COLOR_FORMATS, COMPRESSIONS
     from gngdt_io.synth.render import SCENES
 
@@ -125,8 +130,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="camera-to-world poses, written as /tf from 'world': a TUM trajectory (timestamp "
         "tx ty tz qx qy qz qw per line, interpolated at each frame's time), one 'tx ty tz qx "
         "qy qz qw' line per frame, or a folder with one file per frame (a 4x4 matrix or such a "
-        "line, e.g. pose/NNNNNN.txt)",
+        "line, e.g. pose/NNNNNN.txt); at most 1,000,000 poses. Each posed frame is checked "
+        "against its depth as the learner checks it; when most contradict it, nothing is "
+        "written and the likely cause is named (quaternion order, inverted transform, units)",
     )
+    add_pose_limit_arguments(images)
     add_output_options(images)
     _add_realsense(kinds, add_output_options)
 
@@ -156,25 +164,57 @@ def write_recording(
     frames: Iterable[Frame],
     args: argparse.Namespace,
     metadata: dict[str, dict[str, str]] | None = None,
+    checks: ImportChecks | None = None,
 ) -> int:
     """Write ``frames`` to ``args.out`` with a progress line every ``PROGRESS_EVERY`` frames;
-    ``metadata``: named MCAP metadata records."""
+    ``metadata``: named MCAP metadata records; ``checks``: what the frames are checked for on
+    their way (an import's depth and poses). The file is written beside ``args.out`` and takes
+    its place only when complete and its poses usable (else exit 2, ``args.out`` untouched)."""
     from gngdt_io.mcap_writer import RecordingWriter
 
     started = time.perf_counter()
-    with RecordingWriter(
-        args.out, compression=args.compression, color_format=args.color_format
-    ) as writer:
-        for name, data in (metadata or {}).items():
-            writer.add_metadata(name, data)
-        for frame in frames:
-            writer.write_frame(frame)
-            if writer.frames_written % PROGRESS_EVERY == 0:
-                logger.info("%d frames written", writer.frames_written)
+    partial = args.out.with_name(f".{args.out.name}.partial-{os.getpid()}")
+    try:
+        with RecordingWriter(
+            partial, compression=args.compression, color_format=args.color_format
+        ) as writer:
+            for name, data in (metadata or {}).items():
+                writer.add_metadata(name, data)
+            for frame in frames if checks is None else checks.watch(frames):
+                writer.write_frame(frame)
+                if writer.frames_written % PROGRESS_EVERY == 0:
+                    logger.info("%d frames written", writer.frames_written)
+        if checks is not None and not report_checks(checks):
+            logger.error("nothing written to %s", args.out)
+            return 2
+        os.replace(partial, args.out)
+    finally:
+        partial.unlink(missing_ok=True)
     elapsed = time.perf_counter() - started
     size_mb = args.out.stat().st_size / 1e6
     print(f"wrote {writer.frames_written} frames to {args.out} ({size_mb:.1f} MB, {elapsed:.1f} s)")
     return 0
+
+
+def report_checks(checks: ImportChecks) -> bool:
+    """Say what the import's checks found (depth range, poses); False when the poses are
+    unusable (most frames rejected)."""
+    print(checks.depth.describe(), flush=True)
+    problem = checks.depth.problem()
+    if problem:
+        logger.warning("%s; check depth_scale (camera.json or --depth-scale: depth units per "
+                       "metre, 1000 for millimetres)", problem)
+    report = checks.pose_report()
+    if report is None:
+        return True
+    if report.failed:
+        logger.error("%s", report.text)
+        return False
+    if report.rejected:
+        logger.warning("%s", report.text)
+    else:
+        print(report.text, flush=True)
+    return True
 
 
 def _synth_frames(args: argparse.Namespace) -> Iterable[Frame]:
@@ -295,7 +335,11 @@ def main(args: argparse.Namespace) -> int:
         if args.record_kind == "synth":
             frames = _synth_frames(args)
             return write_recording(frames, args, _synth_metadata(args))
-        return write_recording(_image_frames(args), args)
+        from gngdt_core.pose_checks import PoseLimits
+        from gngdt_io.import_checks import ImportChecks, pose_limit_values
+
+        checks = ImportChecks(PoseLimits(**pose_limit_values(args)))
+        return write_recording(_image_frames(args), args, checks=checks)
     except (RecordingError, ValueError) as error:
         logger.error("%s", error)
         return 2

@@ -19,7 +19,7 @@ log = logging.getLogger(__name__)
 EXAMPLES = """examples:
   gngdt router                                   # listens on tcp/127.0.0.1:7447
   gngdt router --listen tcp/127.0.0.1:7450
-  gngdt router --listen tls/127.0.0.1:7447 --zenoh-config config/secure/router.json5  # TLS, ACL
+  gngdt router --zenoh-config config/secure/router.json5   # TLS, roles: the file's endpoints
   gngdt router --zenoh-config config/hosts/router-b.json5  # listen, link to host A's router
 """
 
@@ -29,8 +29,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--listen",
         action="append",
         metavar="ENDPOINT",
-        help="endpoint to listen on (repeatable); default: the --zenoh-config file's "
-        f"listen endpoints, else {DEFAULT_ENDPOINT}",
+        help=f"endpoint to listen on (repeatable; default: the --zenoh-config file's listen "
+        f"endpoints, else {DEFAULT_ENDPOINT}); a router with mutual TLS or access control "
+        "refuses any endpoint where a client needs no credentials",
     )
     parser.add_argument(
         "--zenoh-config",

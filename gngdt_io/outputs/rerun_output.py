@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import time
 from datetime import datetime, timedelta
 from pathlib import Path
@@ -134,6 +135,21 @@ def default_rrd_path(name: str) -> Path:
     return RUNS_DIR / f"{name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}.rrd"
 
 
+def reserve_path(path: Path) -> Path:
+    """``path``, or the first free ``<stem>.<n><suffix>`` beside it, created empty at once
+    (exclusively: two runs started in the same second never get the same name); the caller
+    then writes it over."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    candidate, number = path, 0
+    while True:
+        try:
+            os.close(os.open(candidate, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+            return candidate
+        except FileExistsError:
+            number += 1
+            candidate = path.with_name(f"{path.stem}.{number}{path.suffix}")
+
+
 def unused_rrd_path(path: Path) -> Path:
     """``path`` if no file is there, else the first free ``<stem>.<n><suffix>`` beside it."""
     if not path.exists():
@@ -190,7 +206,7 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
         rec.connect_grpc(args.url, default_blueprint=initial)
         return rec, f"connected to {args.url or 'the default viewer'}", None, None
     requested = Path(args.save) if args.save else default_rrd_path(default_name)
-    path = unused_rrd_path(requested)
+    path = requested if getattr(args, "overwrite", False) else unused_rrd_path(requested)
     if path != requested:
         log.warning("%s exists (an earlier run); writing %s instead", requested, path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -229,8 +245,9 @@ class RerunOutput(Output):
                             help="stop writing the .rrd (a complete file) once it is this large "
                             f"and go on running (default {DEFAULT_MAX_RRD_MB}; 0: no cap)")
         limits.add_argument("--min-free-mb", type=int, default=DEFAULT_MIN_FREE_MB, metavar="MB",
-                            help="stop writing the .rrd when less than this is free on its disk "
-                            f"(default {DEFAULT_MIN_FREE_MB}); a failed write stops it too")
+                            help="stop writing the .rrd (and the --mcap file) when less than "
+                            f"this is free on its disk (default {DEFAULT_MIN_FREE_MB}); a failed "
+                            "write stops it too")
         limits.add_argument("--max-topology-nodes", type=int, default=DEFAULT_MAX_TOPOLOGY_NODES,
                             metavar="N", help="largest topology logged, in nodes (default "
                             f"{DEFAULT_MAX_TOPOLOGY_NODES:,}; a learner sends its --max-nodes)")

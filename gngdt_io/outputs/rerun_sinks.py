@@ -144,6 +144,7 @@ class ViewerServer:
         self.bind = bind
         self.grpc_port = grpc_port
         self.web_port = web_port
+        check_ports_free(bind, {"--grpc-port": grpc_port, "--web-port": web_port})
         self._output = tempfile.TemporaryFile()
         command = [rerun_binary(), "--serve-web", "--bind", bind,
                    "--port", str(grpc_port), "--web-viewer-port", str(web_port),
@@ -208,6 +209,29 @@ def rerun_binary() -> str:
     if not binary.exists():
         raise OSError(f"the rerun CLI binary is missing: {binary}")
     return str(binary)
+
+
+def port_in_use(host: str, port: int) -> bool:
+    """Whether a process listens on ``port`` of ``host`` already (binding it as a server would:
+    a port left in TIME_WAIT is free)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((host, port))
+        except OSError:
+            return True
+    return False
+
+
+def check_ports_free(host: str, ports: dict[str, int]) -> None:
+    """OSError naming the option of the first port (``{"--web-port": 9090}``) something already
+    listens on: a viewer server started there would fail, and the logger would stream into
+    whatever holds it (another run's viewer)."""
+    for option, port in ports.items():
+        if port_in_use(host, port):
+            raise OSError(f"port {port} on {host} is in use (another `gngdt run --serve` or a "
+                          f"rerun viewer?); choose a free one with {option}")
 
 
 def _accepts(host: str, port: int) -> bool:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from gngdt_core.clustering import CLUSTERINGS
+from gngdt_io.import_checks import add_pose_limit_arguments, pose_limit_values
 from schemas.wire import DEFAULT_CAMERA, topic
 from services.plumbing.session import ZenohSetupError, add_zenoh_arguments, open_session
 
@@ -34,6 +35,7 @@ EXAMPLES = """examples:
   gngdt learn --params config/learner.toml --checkpoint runs/learner.npz
   gngdt learn --cam left --samples-per-frame 20000 --max-nodes 2000
   gngdt learn --params config/kinect.toml --print-params   # effective values, and from where
+  gngdt learn --workspace-m 50 --max-speed 2     # a room-sized robot: tighter pose checks
 """
 
 
@@ -66,6 +68,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scene-every", type=int, metavar="FRAMES",
                         help="publish the foxglove scene on gngdt/<cam>/scene every this many "
                         "learned frames (default 3; 0: never)")
+    add_pose_limit_arguments(parser)
     parser.add_argument("--exit-on-eos", action="store_true",
                         help="exit after learning the last frame of a stream (used by `gngdt run`)")
     add_zenoh_arguments(parser)
@@ -82,6 +85,7 @@ def profile_from_args(args: argparse.Namespace) -> Profile:
              "scene_every_frames": "scene_every"}
     # `gngdt run` has some of these options (and passes them to its learner), not all
     options = {name: getattr(args, flag, None) for name, flag in flags.items()}
+    options.update({f"pose_{name}": value for name, value in pose_limit_values(args).items()})
     return load_profile(args.params).with_overrides(
         {"max_nodes": getattr(args, "max_nodes", None)}, options, "command line")
 

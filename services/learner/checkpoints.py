@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from gngdt_core.frame_learner import MAX_COUNTER, Counters, FrameLearner, LearnerConfig
+from gngdt_core.frame_learner import Counters, FrameLearner, LearnerConfig
 from gngdt_core.model import GNGDT
+from gngdt_core.pose_checks import points_beyond_workspace
 from gngdt_io.checkpoints import (
     CheckpointError,
     load_checkpoint,
@@ -19,6 +21,10 @@ from gngdt_io.checkpoints import (
 )
 
 log = logging.getLogger(__name__)
+
+#: largest counter a checkpoint may hold: a quarter of the status's and the checkpoint's
+#: 64-bit range, so a resumed learner counts on for ever without overflowing
+MAX_LOADED_COUNTER = 2**62
 
 
 def save(learner: FrameLearner, path: Path) -> bool:
@@ -29,7 +35,7 @@ def save(learner: FrameLearner, path: Path) -> bool:
         save_checkpoint(path, learner.model.get_state(),
                         {"camera": learner.camera, "counters": counters,
                          "frame_id": learner.frame_id})
-    except OSError as error:
+    except (OSError, ValueError, OverflowError) as error:  # a full disk; a state out of range
         log.error("checkpoint %s not written: %s", path, error)
         return False
     log.debug("checkpoint %s: %d nodes, %d steps", path, learner.model.n_nodes_,
@@ -49,6 +55,7 @@ def resume(path: Path, camera: str, config: LearnerConfig) -> FrameLearner:
         model = GNGDT.from_state(state)
     except (KeyError, ValueError, TypeError) as error:
         raise CheckpointError(f"checkpoint {path}: not a GNG-DT state ({error})") from error
+    check_workspace(path, state, config)
     counters = counters_from_metadata(path, metadata.get("counters", {}))
     counters.last_sequence = -1  # a new capture restarts its sequence numbers
     saved_params = json.loads(str(state["params"]))
@@ -63,6 +70,19 @@ def resume(path: Path, camera: str, config: LearnerConfig) -> FrameLearner:
     log.info("resumed from %s: %d nodes, %d steps, in frame %r", path, model.n_nodes_,
              model.n_steps_, frame_id)
     return FrameLearner(camera, config, model=model, counters=counters, frame_id=frame_id)
+
+
+def check_workspace(path: Path, state: dict, config: LearnerConfig) -> None:
+    """The nodes and the rehearsal memory of a checkpoint must lie in the workspace the
+    learner's poses may span (`PoseLimits.workspace_m`): anything beyond is a forged or broken
+    file, and would be learned from."""
+    limits = config.options.pose_limits()
+    for key, what in (("pos", "nodes"), ("memory_positions", "remembered samples")):
+        beyond = points_beyond_workspace(state[key], limits) if key in state else 0
+        if beyond:
+            raise CheckpointError(
+                f"checkpoint {path}: {beyond} {what} lie beyond the workspace of "
+                f"{limits.workspace_m:g} m (pose_workspace_m); not a map this learner made")
 
 
 def counters_from_metadata(path: Path, saved: Any) -> Counters:
@@ -80,9 +100,9 @@ def counters_from_metadata(path: Path, saved: Any) -> Counters:
             raise CheckpointError(
                 f"checkpoint {path}: counter {item.name} is {value!r}, expected a number")
         low = -1 if item.name == "last_sequence" else 0
-        if not low <= value <= MAX_COUNTER:
+        if not (low <= value <= MAX_LOADED_COUNTER and math.isfinite(value)):
             raise CheckpointError(
-                f"checkpoint {path}: counter {item.name} is {value!r}, outside {low}..2**63-1")
+                f"checkpoint {path}: counter {item.name} is {value!r}, outside {low}..2**62")
         values[item.name] = expected(value)
     return Counters(**values)
 

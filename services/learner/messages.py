@@ -65,23 +65,24 @@ def scene_message(learner: FrameLearner, stamp: FrameStamp, learned: LearnedFram
 
 
 def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
-                   latency_percentiles: tuple[float, float], topology: Any,
+                   latency_percentiles: tuple[float, float], topology: Any | None,
                    settled: str = "") -> Any:
-    """The ``gngdt.LearnerStatus`` after publishing ``topology``; ``latency_percentiles``: p50
-    and p99 of the recent frames (ms); ``settled``: how learning on the stream's last frame
-    stopped."""
+    """The ``gngdt.LearnerStatus`` after publishing ``topology`` (None: after a frame that was
+    not learned, e.g. its pose was rejected); ``latency_percentiles``: p50 and p99 of the
+    recent frames (ms); ``settled``: how learning on the stream's last frame stopped."""
     from schemas.status import encode_status
 
     counters = learner.counters
     seconds = counters.learning_seconds
     model = learner.model
+    steps, nodes = (int(model.n_steps_), int(model.n_nodes_)) if model is not None else (0, 0)
     return encode_status(
         timestamp_ns=stamp.capture_time_ns,
         frame_sequence=stamp.sequence,
         frame_id=learner.camera,
-        steps=int(model.n_steps_),
+        steps=steps,
         steps_per_second=counters.learning_steps / seconds if seconds > 0 else 0.0,
-        nodes=int(model.n_nodes_),
+        nodes=nodes,
         frames_received=counters.frames_received,
         frames_used=counters.frames_used,
         frames_dropped=counters.frames_dropped,
@@ -89,13 +90,16 @@ def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
         latency_ms=latency_ms,
         latency_p50_ms=latency_percentiles[0],
         latency_p99_ms=latency_percentiles[1],
-        quantization_error=dict(topology.quantization_error),
-        cluster_counts={c.name: c.cluster_count for c in topology.clusterings},
+        quantization_error=dict(topology.quantization_error) if topology is not None else {},
+        cluster_counts=({c.name: c.cluster_count for c in topology.clusterings}
+                        if topology is not None else {}),
         seen_nodes=learner.ghosts.seen_nodes,
         ghost_share=learner.ghosts.ghost_share,
         ghost_distance_m=learner.options.ghost_distance_m,
         nodes_forgotten=int(getattr(model, "n_forgotten_", 0)),
         frames_other_frame=counters.frames_other_frame,
+        frames_pose_rejected=counters.frames_pose_rejected,
+        pose_problem=learner.poses.last_problem,
         settled=settled,
     )
 

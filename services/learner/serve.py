@@ -19,7 +19,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig, OtherFrameError
+from gngdt_core.frame_learner import (
+    FrameLearner,
+    LearnerConfig,
+    OtherFrameError,
+    PoseRejectedError,
+)
 from schemas.wire import (
     ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
@@ -163,8 +168,9 @@ def attachment_bytes(sample: zenoh.Sample) -> bytes | None:
     return attachment.to_bytes()
 
 
-def warn_other_frame(error: OtherFrameError, count: int) -> None:
-    """Warn about clouds in another frame: the first, then every 100th (counted in status)."""
+def warn_sparingly(error: ValueError, count: int) -> None:
+    """Warn about skipped clouds of one kind (another frame, a rejected pose): the first, then
+    every 100th (each counted in the status)."""
     if count == 1 or count % 100 == 0:
         log.warning("points message skipped (%d so far): %s", count, error)
 
@@ -244,6 +250,13 @@ class LearnerService:
             self._scene.put(scene.SerializeToString(), attachment=attachment)
         return latency_ms
 
+    def _publish_status(self, stamp: FrameStamp) -> None:
+        """A status after a frame that was not learned (its counters moved, the network not)."""
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
+        status = status_message(self.learner, stamp, latency_ms, percentiles, None)
+        self._status.put(status.SerializeToString(), attachment=stamp.to_attachment())
+
     def handle(self, sample: zenoh.Sample) -> None:
         """Decode, learn and publish one points sample; a bad one is counted and skipped."""
         counters = self.learner.counters
@@ -255,9 +268,13 @@ class LearnerService:
                 self.options.max_points)
             counters.note_sequence(stamp.sequence)
             received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-            self.learner.learn(positions, colors, frame_id, pose)
+            self.learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns)
         except OtherFrameError as error:  # counted by the learner, warned sparingly
-            warn_other_frame(error, counters.frames_other_frame)
+            warn_sparingly(error, counters.frames_other_frame)
+            return
+        except PoseRejectedError as error:  # counted by the learner; the status says so
+            warn_sparingly(error, counters.frames_pose_rejected)
+            self._publish_status(stamp)
             return
         except ValueError as error:  # MessageError is a ValueError
             counters.malformed_messages += 1

@@ -48,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "topology (default 10)")
     parser.add_argument("--keep-running", action="store_true",
                         help="do not stop at end-of-stream (only on SIGINT/SIGTERM)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="write --save and --mcap over existing files (default: an existing "
+                        "file is kept and <name>.1.rrd / .1.mcap written beside it)")
     limits = parser.add_argument_group("limits (what arrives beyond them is refused, counted)")
     limits.add_argument("--max-cameras", type=int, default=DEFAULT_MAX_CAMERAS, metavar="N",
                         help=f"cameras logged at most (default {DEFAULT_MAX_CAMERAS})")

@@ -136,7 +136,9 @@ def router_config(listen: list[str] | None, config_file: Path | None = None) -> 
     Where it listens: ``listen`` when given (``--listen`` wins); else the file's own
     ``listen/endpoints``; else the loopback default ``DEFAULT_ENDPOINT`` -- never zenoh's own
     default, every interface (a file that sets no listen endpoints opens nothing more than
-    loopback). A file's ``connect/endpoints`` (links to other routers) are kept.
+    loopback). A file's ``connect/endpoints`` (links to other routers) are kept. A file that
+    asks for mutual TLS or access control makes a secure router, which never listens where a
+    client could open a session without credentials (`anonymous_listeners`): ZenohSetupError.
     """
     import zenoh
 
@@ -153,6 +155,13 @@ def router_config(listen: list[str] | None, config_file: Path | None = None) -> 
     if config_file is None:
         _insert(config, {key: value for key, value in router_settings([]).items()
                          if key not in ("mode", "listen/endpoints")})
+    anonymous = anonymous_listeners(config)
+    if anonymous:
+        raise ZenohSetupError(
+            f"--zenoh-config {config_file} asks for authentication or access control, but a "
+            f"client could open a session on {', '.join(anonymous)} without credentials (only "
+            "tls/ and quic/ endpoints check certificates); listen on tls/ endpoints only, or "
+            "add usrpwd authentication")
     return config
 
 
@@ -199,6 +208,20 @@ def router_endpoints(config: zenoh.Config, key: str = "listen/endpoints") -> lis
     if isinstance(value, dict):
         value = value.get("router", [])
     return [str(endpoint) for endpoint in value]
+
+
+def anonymous_listeners(config: zenoh.Config) -> list[str]:
+    """The listen endpoints of a secure router (mutual TLS or access control configured) on
+    which a client needs no credentials: every endpoint but tls/ and quic/ ones under mutual
+    TLS, every endpoint without any authentication; none with usrpwd (it covers every link) or
+    on a router that asks for neither (gngdt's loopback default)."""
+    mutual_tls = _setting(config, "transport/link/tls/enable_mtls") is True
+    access_control = _setting(config, "access_control/enabled") is True
+    if not (mutual_tls or access_control) or _setting(
+            config, "transport/auth/usrpwd/dictionary_file"):
+        return []
+    return [endpoint for endpoint in router_endpoints(config)
+            if not (mutual_tls and str(endpoint).split("/", 1)[0] in ("tls", "quic"))]
 
 
 def _load_config_file(path: Path) -> zenoh.Config:

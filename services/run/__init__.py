@@ -2,11 +2,13 @@
 loopback router, then learner, logger and capture.
 
 The router is this process's own zenoh session (mode router, a free port on 127.0.0.1, scouting
-off) and admits only this run's children: they authenticate with a user and password made for
-the run (zenoh's usrpwd), so a neighbour on the machine can neither publish into the run (a
-forged end of stream) nor listen. ``run`` starts the learner and the logger, waits for their
-liveliness tokens, starts the capture, waits for the end of the stream, lets the learner finish
-its last frame and the logger flush, then prints a summary. SIGINT, SIGTERM and SIGHUP stop
+off) and admits only this run's children: each authenticates with a user and password made for
+the run for its role (zenoh's usrpwd; `RunAccess`), and the router's access control lets each
+role put only on its own streams, so a neighbour on the machine can neither publish into the
+run (a forged end of stream) nor listen, and no service can speak for another. ``run`` starts
+the learner and the logger, waits for their liveliness tokens, starts the capture, waits for
+the end of the stream, lets the learner finish its last frame and the logger flush, then
+prints a summary. SIGINT, SIGTERM and SIGHUP stop
 everything cleanly, and the children die with ``run`` however it ends. Exit status is non-zero
 when the recording is unusable, a service failed, or the stream ended before the recording did.
 """
@@ -14,10 +16,8 @@ when the recording is unusable, a service failed, or the stream ended before the
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import os
-import secrets
 import shutil
 import signal
 import subprocess
@@ -33,37 +33,28 @@ from gngdt_core.warm_up import PROGRESS_PHRASE
 from gngdt_io.outputs.rerun_output import (
     add_rate_arguments,
     add_serve_arguments,
-    default_rrd_path,
     rate_arguments,
-    rates_from_args,
-    unused_rrd_path,
 )
 from schemas.wire import DEFAULT_CAMERA, topic
-from services.capture import add_camera_arguments, add_source_arguments, source_spec
+from services.capture import add_camera_arguments, add_source_arguments
 from services.logger import LIVELINESS_KEY
 from services.plumbing import lifecycle
-from services.plumbing.session import (
-    ZenohSetupError,
-    client_settings,
-    free_tcp_port,
-    open_config,
-    router_config,
-    settings_file_text,
-)
-from services.run.summary import file_size, format_summary, recorded_frames
+from services.plumbing.roles import RunAccess
+from services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
+from services.run.plan import RunPlan, drop_unwritten, plan_run
+from services.run.summary import file_size, format_summary, mostly_rejected, recorded_frames
 
 if TYPE_CHECKING:
     import zenoh
 
-    from gngdt_io.outputs.rerun_log import DisplayRates
-    from gngdt_io.profiles import Profile
     from schemas.status import LearnerStatusInfo, StreamEndInfo
 
 log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap                 # writes runs/tabletop-<time>.rrd
-  gngdt run recordings/tabletop.mcap --fast --save out.rrd   # out.1.rrd if out.rrd exists
+  gngdt run recordings/tabletop.mcap --fast --save out.rrd   # refused if out.rrd exists
+  gngdt run recordings/tabletop.mcap --save out.rrd --overwrite   # ... unless asked
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
   gngdt run recordings/tabletop.mcap --mcap runs/tabletop.mcap   # + every stream for Foxglove
   gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
@@ -93,6 +84,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--foxglove", action="store_true",
                         help="also serve every stream live to Foxglove (WebSocket at --bind, "
                         "port 8765 unless --bind names one)")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace an existing --save or --mcap file (default: refused)")
     speed = parser.add_mutually_exclusive_group()
     speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
@@ -198,34 +191,6 @@ class Observed:
             return any(key.startswith(prefix) for key in self.alive)
 
 
-class RunAccess:
-    """This run's zenoh credentials: the router's password file and the children's config, in
-    the run's private (0700) folder."""
-
-    USER = "gngdt-run"
-
-    def __init__(self, endpoint: str, folder: Path) -> None:
-        self.endpoint = endpoint
-        password = secrets.token_urlsafe(24)
-        self.users_file = folder / "router-users.txt"
-        self.client_file = folder / "zenoh-client.json5"
-        for path, text in (
-            (self.users_file, f"{self.USER}:{password}\n"),
-            (self.client_file, settings_file_text(self._client_settings(password))),
-        ):
-            path.touch(mode=0o600)
-            path.write_text(text)
-
-    def _client_settings(self, password: str) -> dict:
-        """The children's zenoh configuration, by key path."""
-        return {**client_settings([self.endpoint]),
-                "transport/auth/usrpwd": {"user": self.USER, "password": password}}
-
-    def router(self) -> zenoh.Config:
-        config = router_config([self.endpoint])
-        config.insert_json5("transport/auth/usrpwd/dictionary_file",
-                            json.dumps(str(self.users_file)))
-        return config
 
 
 class Pipeline:
@@ -242,7 +207,8 @@ class Pipeline:
         # -P: the user's current folder, which may hold its own services/ or schemas/, is not
         # put first on the children's import path
         command = [sys.executable, "-P", "-m", "services.cli", name, *arguments,
-                   "--zenoh-config", str(self.access.client_file), "--log-level", self.log_level]
+                   "--zenoh-config", str(self.access.client_file(name)),
+                   "--log-level", self.log_level]
         stderr_path = self.log_dir / f"{name}.log"
         stderr_file = open(stderr_path, "wb")  # closed in Pipeline.close()
         env = lifecycle.child_environment()  # the child dies with this process
@@ -367,7 +333,7 @@ def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None)
 
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
                      mcap_path: Path | None = None) -> list[str]:
-    arguments = rate_arguments(args)
+    arguments = [*rate_arguments(args), "--overwrite"]
     if mcap_path is not None:
         arguments += ["--mcap", str(mcap_path)]
     if args.connect:
@@ -377,64 +343,14 @@ def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
     if args.serve:
         return [*arguments, "--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
                 str(args.grpc_port), "--web-port", str(args.web_port)]
-    return [*arguments, "--save", str(rrd_path)]
+    return [*arguments, "--save", str(rrd_path)]  # (the run reserved its paths: --overwrite)
 
 
-def run_name(spec: str) -> str:
-    """The name a run's files take from its source: a file's stem, or a spec without its
-    colons (``realsense:123`` -> ``realsense-123``)."""
-    if ":" in spec and not Path(spec).exists():
-        return "-".join(part for part in spec.split(":") if part)
-    return Path(spec).stem
-
-
-@dataclass
-class RunPlan:
-    """What a run will learn with and write, checked before anything starts."""
-
-    rates: DisplayRates
-    #: the learner's parameters, as the learner will read them (a wrong file fails here)
-    profile: Profile
-    rrd_path: Path | None
-    mcap_path: Path | None
-
-    @property
-    def veil_ratio(self) -> float | None:
-        """The sensor profile's veil ratio (capture drops those pixels), if it has a schedule."""
-        schedule = self.profile.config.schedule
-        return None if schedule is None else schedule.veil_ratio
-
-    @property
-    def destination(self) -> str:
-        return "rerun viewer" if self.rrd_path is None else str(self.rrd_path)
-
-
-def plan_run(args: argparse.Namespace) -> RunPlan:
-    """The run's outputs, named (the logger never overwrites a file: the names it will really
-    write); ValueError or RecordingError for anything wrong, before any process starts."""
-    from gngdt_io.sources import SourceOptions, open_source
-
-    args.recording = source_spec(args)
-    options = SourceOptions(camera_json=args.camera_json, depth_scale=args.depth_scale)
-    # as capture will open it: RecordingError says why it cannot
-    open_source(args.recording, options=options).close()
-    if args.url and not args.connect:
-        raise ValueError("--url needs --connect")
-    from gngdt_io.outputs.foxglove import FoxgloveOutput
-    from services.learner import profile_from_args
-
-    FoxgloveOutput.check_args(args)  # a port in use: said before anything starts
-    profile = profile_from_args(args)  # a wrong params file: said before anything starts
-    topic(args.cam, "points")  # validates the camera name
-    rates = rates_from_args(args)
-    mcap_path = unused_rrd_path(args.mcap) if args.mcap else None
-    if mcap_path is not None:
-        mcap_path.parent.mkdir(parents=True, exist_ok=True)
-    rrd_path = None
-    if not (args.connect or args.serve):
-        rrd_path = unused_rrd_path(args.save or default_rrd_path(run_name(args.recording)))
-        rrd_path.parent.mkdir(parents=True, exist_ok=True)
-    return RunPlan(rates, profile, rrd_path, mcap_path)
+def learned_nothing(outcome: RunOutcome) -> bool:
+    """Whether the stream ended without the learner learning a single frame (issue 24.6: depth
+    in the wrong unit leaves every cloud empty)."""
+    return (outcome.end is not None and outcome.status is None and outcome.failure is None
+            and not outcome.interrupted)
 
 
 @dataclass
@@ -470,6 +386,7 @@ def run_pipeline(args: argparse.Namespace, plan: RunPlan, log_dir: Path) -> RunO
         for entity in declared:
             entity.undeclare()
         router.close()
+        access.forget()
     with observed.lock:
         status, end = observed.status, observed.end
     if stop.is_set():
@@ -513,6 +430,8 @@ def main(args: argparse.Namespace) -> int:
         if isinstance(error, ZenohSetupError):
             log.error("%s", error)
         return 1
+    finally:
+        drop_unwritten(plan)
     report(args, plan, outcome)
     if outcome.failure is not None:
         failure = outcome.failure
@@ -520,6 +439,16 @@ def main(args: argparse.Namespace) -> int:
     shutil.rmtree(log_dir, ignore_errors=True)
     if outcome.interrupted:
         return 130
+    if learned_nothing(outcome):
+        log.error("the learner learned nothing: no frame's cloud had a point it could learn "
+                  "(depth in another unit than millimetres? `gngdt record images` prints the "
+                  "depth range it found)")
+        return 1
+    if mostly_rejected(outcome.status):
+        log.error("most frames were not learned: their camera poses are out of bounds or "
+                  "contradict their depth (see 'poses rejected' above; `gngdt record images "
+                  "--poses` names the usual misreadings of a pose file)")
+        return 1
     return 1 if outcome.early_end else 0
 
 

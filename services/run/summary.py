@@ -43,6 +43,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"{status.ghost_share:.1%} (seen nodes > {status.ghost_distance_m * 100:g} cm from "
             "the last frame)",
             *([f"last frame:         {status.settled}"] if status.settled else []),
+            *pose_lines(status),
             f"clusters:           {clusters}",
             f"latency:            p50 {status.latency_p50_ms:.1f} ms, "
             f"p99 {status.latency_p99_ms:.1f} ms",
@@ -96,3 +97,16 @@ def recorded_frames(spec: str) -> int | None:
         return int(recording_info(Path(spec))["frames"])
     except (RecordingError, OSError):
         return None
+
+
+def pose_lines(status: LearnerStatusInfo) -> list[str]:
+    """The summary's line on rejected poses (none when every pose passed)."""
+    if not status.frames_pose_rejected:
+        return []
+    return [f"poses rejected:     {status.frames_pose_rejected} frames not learned; the last: "
+            f"{status.pose_problem}"]
+
+
+def mostly_rejected(status: LearnerStatusInfo | None) -> bool:
+    """Whether more frames were rejected for their pose than learned: the run failed."""
+    return status is not None and status.frames_pose_rejected > status.frames_used

@@ -9,7 +9,7 @@ import pytest
 from processes import wait_for
 
 from schemas.status import encode_stream_end
-from schemas.wire import FrameStamp
+from schemas.wire import ENCODING_RAW_IMAGE, FrameStamp
 
 
 # ---------------------------------------------------------------------------- the inbox
@@ -66,7 +66,8 @@ class ImageFlood:
             now = time.time_ns()
             self.session.put("gngdt/camera/color", image_to_raw(image, timestamp_ns=now)
                              .SerializeToString(), attachment=FrameStamp(self.sent, now)
-                             .to_attachment(), congestion_control=zenoh.CongestionControl.BLOCK)
+                             .to_attachment(), encoding=ENCODING_RAW_IMAGE,
+                             congestion_control=zenoh.CongestionControl.BLOCK)
             self.sent += 1
             time.sleep(0.05)
 

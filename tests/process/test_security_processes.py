@@ -92,15 +92,19 @@ def test_every_listener_of_run_serve_and_its_services_is_on_loopback(
 
 
 # ------------------------------------------------------------------ TLS + access control
+ROLES = ("capture", "learner", "logger", "viewer")
+
+
 @pytest.fixture(scope="module")
 def certificates(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """CA, router and client certificates made by ``config/secure/make-certs.sh``: one allowed
-    service (``gngdt-service``) and one signed by the same CA but not in the ACL."""
+    """CA, router and client certificates made by ``config/secure/make-certs.sh``: one per role
+    and one signed by the same CA but in no role (``intruder``)."""
     if shutil.which("openssl") is None:
         pytest.skip("the openssl command is needed to make test certificates")
     directory = tmp_path_factory.mktemp("certs")
     subprocess.run(["sh", str(SECURE / "make-certs.sh"), str(directory), "localhost",
-                    "gngdt-service", "intruder"], check=True, capture_output=True, timeout=60)
+                    *(f"gngdt-{role}" for role in ROLES), "intruder"],
+                   check=True, capture_output=True, timeout=60)
     return directory
 
 
@@ -112,79 +116,92 @@ def _with_certificates(source: Path, certificates: Path, target: Path) -> Path:
     return target
 
 
-def _client(config_file: Path, endpoint: str, *, name: str | None = "gngdt-service",
-            certificates: Path | None = None):
+def _client(certificates: Path, endpoint: str, role: str | None, tmp_path: Path,
+            certificate: str | None = None):
+    """A session with ``role``'s shipped client file (``certificate``: another certificate's
+    name in it; None role: the CA but no certificate of its own)."""
+    config_file = _with_certificates(SECURE / "client-capture.json5", certificates,
+                                     tmp_path / f"client-{role}.json5")
     config = client_config([endpoint], config_file)
     config.insert_json5("connect/timeout_ms", "3000")
-    if name is None:  # the client has the CA but no certificate of its own
-        config.insert_json5("transport/link/tls/connect_certificate", "null")
-        config.insert_json5("transport/link/tls/connect_private_key", "null")
-    elif name != "gngdt-service":
-        config.insert_json5("transport/link/tls/connect_certificate",
-                            json.dumps(f"{certificates}/{name}.pem"))
-        config.insert_json5("transport/link/tls/connect_private_key",
-                            json.dumps(f"{certificates}/{name}.key"))
+    name = certificate or (f"gngdt-{role}" if role else None)
+    for key, suffix in (("connect_certificate", "pem"), ("connect_private_key", "key")):
+        value = None if name is None else f"{certificates}/{name}.{suffix}"
+        config.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
     return open_config(config)
 
 
 @pytest.mark.timeout(120)
-def test_tls_router_with_access_control_admits_only_certified_services(
+def test_a_secure_router_refuses_a_plain_tcp_listener(certificates: Path, free_port: int,
+                                                      spawn: Callable, tmp_path: Path) -> None:
+    router_file = _with_certificates(SECURE / "router.json5", certificates,
+                                     tmp_path / "router.json5")
+    router = spawn("router", "--listen", f"tcp/127.0.0.1:{free_port}", "--zenoh-config",
+                   str(router_file))
+    assert router.wait(60) == 1
+    text = Path(router.log_path).read_text()
+    assert "without credentials" in text and "Traceback" not in text
+
+
+@pytest.mark.timeout(120)
+def test_tls_router_with_access_control_keeps_each_role_to_its_streams(
     certificates: Path, free_port: int, spawn: Callable, tmp_path: Path
 ) -> None:
     import zenoh
 
-    router_file = _with_certificates(SECURE / "router.json5", certificates,
-                                     tmp_path / "router.json5")
-    client_file = _with_certificates(SECURE / "client.json5", certificates,
-                                     tmp_path / "client.json5")
+    text = _with_certificates(SECURE / "router.json5", certificates, tmp_path / "r.json5")
     endpoint = f"tls/127.0.0.1:{free_port}"
-    router = spawn("router", "--listen", endpoint, "--zenoh-config", str(router_file))
+    router_file = tmp_path / "router.json5"
+    router_file.write_text(text.read_text().replace("tls/127.0.0.1:7447", endpoint))
+    router = spawn("router", "--zenoh-config", str(router_file))  # the file's endpoint
     deadline = time.monotonic() + 30
     while "listening on" not in Path(router.log_path).read_text():
         assert time.monotonic() < deadline and router.poll() is None, \
             Path(router.log_path).read_text()
         time.sleep(0.1)
+    assert bound_sockets(router.pid) == [("tcp", f"127.0.0.1:{free_port}", "listen")]
 
     # no client certificate: the mutual-TLS handshake fails, no session at all
     with pytest.raises(ZenohSetupError):
-        _client(client_file, endpoint, name=None)
+        _client(certificates, endpoint, None, tmp_path)
     # plain TCP to the TLS port: no session either
     plain = client_config([endpoint.replace("tls/", "tcp/")])
     plain.insert_json5("connect/timeout_ms", "3000")
     with pytest.raises(ZenohSetupError):
         open_config(plain)
 
-    publisher = _client(client_file, endpoint)
-    listener = _client(client_file, endpoint)
-    intruder = _client(client_file, endpoint, name="intruder", certificates=certificates)
-    received: dict[str, list[bytes]] = {"service": [], "intruder": []}
-    subscribers = [
-        listener.declare_subscriber("gngdt/**", lambda s: received["service"].append(
-            s.payload.to_bytes())),
-        intruder.declare_subscriber("gngdt/**", lambda s: received["intruder"].append(
-            s.payload.to_bytes())),
-    ]
-    intruder_put_seen: list[bytes] = []
-    subscribers.append(listener.declare_subscriber(
-        "gngdt/camera/eos", lambda s: intruder_put_seen.append(s.payload.to_bytes())))
+    sessions = {role: _client(certificates, endpoint, role, tmp_path) for role in ROLES}
+    sessions["intruder"] = _client(certificates, endpoint, "intruder", tmp_path, "intruder")
+    heard: dict[str, list[tuple[str, bytes]]] = {name: [] for name in sessions}
+    subscribers = [session.declare_subscriber("gngdt/**", lambda sample, name=name: heard[
+        name].append((str(sample.key_expr), sample.payload.to_bytes())))
+        for name, session in sessions.items()]
+    forgeries = [("logger", "gngdt/camera/eos"), ("viewer", "gngdt/camera/eos"),
+                 ("learner", "gngdt/camera/eos"), ("capture", "gngdt/camera/objects"),
+                 ("logger", "gngdt/camera/objects"), ("intruder", "gngdt/camera/points")]
     try:
         time.sleep(0.5)
         deadline = time.monotonic() + 10
-        while len(received["service"]) < 5 and time.monotonic() < deadline:
-            publisher.put("gngdt/camera/points", b"cloud",
-                          congestion_control=zenoh.CongestionControl.BLOCK)
+        while len(heard["learner"]) < 5 and time.monotonic() < deadline:
+            sessions["capture"].put("gngdt/camera/points", b"cloud",
+                                    congestion_control=zenoh.CongestionControl.BLOCK)
+            sessions["learner"].put("gngdt/camera/objects", b"objects",
+                                    congestion_control=zenoh.CongestionControl.BLOCK)
             time.sleep(0.05)
-        for _ in range(10):  # the intruder may not publish into the pipeline either
-            intruder.put("gngdt/camera/eos", b"forged end of stream")
-            time.sleep(0.05)
-        time.sleep(0.5)
+        for name, key in forgeries:
+            for _ in range(5):
+                sessions[name].put(key, f"forged by {name}".encode())
+        time.sleep(1.0)
     finally:
         for subscriber in subscribers:
             subscriber.undeclare()
-        for session in (publisher, listener, intruder):
+        for session in sessions.values():
             session.close()
-    assert len(received["service"]) >= 5 and set(received["service"]) == {b"cloud"}
-    assert b"cloud" not in received["intruder"]  # (its own puts are delivered to it locally)
-    assert intruder_put_seen == []
-
-
+    for role in ROLES:  # each hears the capture and the learner, and no forgery
+        received = heard[role]
+        assert ("gngdt/camera/points", b"cloud") in received, role
+        assert ("gngdt/camera/objects", b"objects") in received, role
+        foreign = [item for item in received if item[1].startswith(b"forged")
+                   and item[1] != f"forged by {role}".encode()]  # its own puts stay local
+        assert foreign == [], (role, foreign)
+    assert all(payload.startswith(b"forged by intruder") for _, payload in heard["intruder"])

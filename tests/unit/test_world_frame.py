@@ -19,9 +19,10 @@ from services.learner.messages import decode_points, status_message, topology_me
 
 
 def posed_cloud(pose: np.ndarray | None, frame_id: str, seed: int = 0) -> bytes:
-    """A 2,000-point coloured cloud 1.5-2.5 m in front of the camera."""
+    """A 2,000-point coloured cloud of a wall 2 m in front of the camera (one wall for every
+    pose that only slides the camera along it, as `pose_at`'s do)."""
     rng = np.random.default_rng(seed)
-    positions = rng.uniform([-0.5, -0.4, 1.5], [0.5, 0.4, 2.5], (2000, 3)).astype(np.float32)
+    positions = rng.uniform([-0.5, -0.4, 2.0], [0.5, 0.4, 2.0], (2000, 3)).astype(np.float32)
     colors = rng.integers(0, 256, (2000, 3), dtype=np.uint8)
     return cloud_to_msg(positions, colors, timestamp_ns=1, frame_id=frame_id,
                         pose=pose).SerializeToString()

@@ -1,0 +1,106 @@
+"""What an import of frames checks while it reads them (``gngdt record images``): the depth each
+frame holds (its range, said at the end; implausible units warned about) and, with poses, every
+posed frame against its own depth, as the learner checks them (`gngdt_core.pose_checks`). When
+poses are rejected, the usual misreadings of a pose file (quaternion order, inverted
+transforms, units) are tried on the same frames to name the likely cause.
+
+The pose limits are command-line options shared by ``gngdt learn`` and ``gngdt record images``
+(`add_pose_limit_arguments`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+from gngdt_core.depth import DepthRange
+from gngdt_core.pose_checks import PoseAudit, PoseLimits
+from gngdt_io.deproject import Deprojector
+from gngdt_io.frame import Frame
+
+#: command-line option -> the `PoseLimits` field it sets
+POSE_LIMIT_OPTIONS = {"workspace_m": "workspace_m", "max_speed": "max_speed_m_s",
+                      "max_turn_rate": "max_turn_deg_s"}
+
+
+def add_pose_limit_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--workspace-m``, ``--max-speed`` and ``--max-turn-rate``: what a camera pose may be."""
+    defaults = PoseLimits()
+    group = parser.add_argument_group(
+        "camera poses (a frame whose pose breaks these, or contradicts its own depth, is "
+        "counted and not learned)")
+    group.add_argument("--workspace-m", type=float, metavar="M",
+                       help="a camera farther than this from the fixed frame's origin has a "
+                       f"wrong pose (default {defaults.workspace_m:g} m)")
+    group.add_argument("--max-speed", type=float, metavar="M_PER_S",
+                       help="fastest camera move between two frames (default "
+                       f"{defaults.max_speed_m_s:g} m/s; at least 0.1 s is assumed between "
+                       "two frames)")
+    group.add_argument("--max-turn-rate", type=float, metavar="DEG_PER_S",
+                       help="fastest camera turn between two frames (default "
+                       f"{defaults.max_turn_deg_s:g} degrees/s)")
+
+
+def pose_limit_values(args: argparse.Namespace) -> dict[str, float]:
+    """The `PoseLimits` fields the command line sets (options not given are left out)."""
+    return {field: getattr(args, option) for option, field in POSE_LIMIT_OPTIONS.items()
+            if getattr(args, option, None) is not None}
+
+
+@dataclass
+class PoseReport:
+    """What the pose checks of an import found: a line to show, and how many of the posed
+    frames were rejected."""
+
+    text: str
+    rejected: int
+    checked: int
+
+    @property
+    def failed(self) -> bool:
+        """Most frames rejected: the poses are unusable."""
+        return self.rejected > self.checked / 2
+
+
+class ImportChecks:
+    """Watches the frames of an import go by (`watch`), checking depth and poses."""
+
+    def __init__(self, limits: PoseLimits | None = None) -> None:
+        self.depth = DepthRange()
+        self.poses = PoseAudit(limits)
+        self.first_rejection = ""
+        # metres, as the learner's clouds hold them (capture's own deprojection range)
+        self._deproject = Deprojector()
+
+    def watch(self, frames: Iterable[Frame]) -> Iterator[Frame]:
+        """``frames`` unchanged, each checked on its way."""
+        for frame in frames:
+            self.add(frame)
+            yield frame
+
+    def add(self, frame: Frame) -> None:
+        self.depth.add(frame.depth)
+        if frame.pose is None:
+            return
+        points, _ = self._deproject(frame.depth, None, frame.intrinsics)
+        verdict = self.poses.check(points, frame.pose.matrix, frame.timestamp_ns)
+        if not verdict.accepted and not self.first_rejection:
+            self.first_rejection = f"frame {frame.index}: {verdict.problem}"
+
+    def pose_report(self) -> PoseReport | None:
+        """The poses' verdict (None: no frame had a pose)."""
+        given = self.poses.given
+        if given.checked == 0:
+            return None
+        if given.rejected == 0:
+            return PoseReport(f"poses: all {given.checked} agree with the depth", 0,
+                              given.checked)
+        text = (f"poses: {given.rejected} of {given.checked} frames have a pose out of bounds or "
+                f"contradicting their depth (first, {self.first_rejection})")
+        misreading = self.poses.likely_misreading()
+        if misreading:
+            rejected = self.poses.readings[misreading].rejected
+            text += (f"; likely cause: {misreading} (read so, {rejected} of {given.checked} "
+                     "would be rejected): fix the pose file")
+        return PoseReport(text, given.rejected, given.checked)
