@@ -1,0 +1,232 @@
+"""`gngdt ros2` end to end through a router: a robot side written by others (zenoh-ros2-sdk, see
+tests/ros2_sdk.py) publishes real Kinect frames as a ROS 2 camera driver would (sensor_msgs/Image
+colour and depth + CameraInfo, with its liveliness tokens) and receives, through the bridge and
+a real learner, gngdt's clouds, nodes and objects as ROS 2 messages; it also lists gngdt's
+node and topics as ROS 2's graph does."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from ros2_sdk import message_class, sdk_session
+
+from services.plumbing.session import client_config, open_config
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+#: three consecutive real Kinect frames (PCL's ImageGrabber test data), outside the repository
+FRAMES_DIR = REPO_ROOT.parent / "shared" / "data" / "rgbd" / "pcl_grabber_sequence"
+#: realsense2_camera's topics, the bridge's defaults
+COLOR, DEPTH, INFO = ("/camera/camera/color/image_raw",
+                      "/camera/camera/aligned_depth_to_color/image_raw",
+                      "/camera/camera/color/camera_info")
+
+
+def real_frames() -> tuple[list[tuple[np.ndarray, np.ndarray]], dict]:
+    """(colour (H, W, 3) uint8 RGB, depth (H, W) uint16 mm) of each frame, and camera.json;
+    read with OpenCV, not gngdt's readers."""
+    import cv2
+
+    if not FRAMES_DIR.is_dir():
+        pytest.skip(f"real RGB-D frames not found: {FRAMES_DIR} (../shared beside the clone)")
+    camera = json.loads((FRAMES_DIR / "camera.json").read_text())
+    assert camera["depth_scale"] == 1000.0  # depth already in millimetres
+    frames = []
+    for rgb_path in sorted(FRAMES_DIR.glob("*_rgb.tiff")):
+        bgr = cv2.imread(str(rgb_path), cv2.IMREAD_COLOR)
+        depth = cv2.imread(str(rgb_path).replace("_rgb.", "_depth."), cv2.IMREAD_UNCHANGED)
+        assert depth.dtype == np.uint16
+        frames.append((np.ascontiguousarray(bgr[..., ::-1]), depth))
+    assert len(frames) == 3
+    return frames, camera
+
+
+def wait_for(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{what} not within {timeout_s} s")
+        time.sleep(0.05)
+
+
+def gngdt_tokens(endpoint: str, camera: str = "camera") -> set[str]:
+    session = open_config(client_config([endpoint]))
+    try:
+        return {str(reply.ok.key_expr) for reply in
+                session.liveliness().get(f"gngdt/{camera}/**", timeout=2.0) if reply.ok}
+    finally:
+        session.close()
+
+
+class Received:
+    """Messages the robot side received, per topic (SDK callbacks run on zenoh's threads)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.messages: dict[str, list] = {}
+
+    def callback(self, name: str) -> Callable:
+        def on_message(message: object) -> None:
+            with self.lock:
+                self.messages.setdefault(name, []).append(message)
+        return on_message
+
+    def get(self, name: str) -> list:
+        with self.lock:
+            return list(self.messages.get(name, []))
+
+
+class CameraDriver:
+    """A ROS 2 camera driver's three publishers (SDK), one node 'camera'."""
+
+    def __init__(self, sdk, port: int, camera: dict) -> None:
+        self.camera = camera
+        self.publishers = {topic: sdk.ROS2Publisher(topic, kind, router_port=port,
+                                                    node_name="camera")
+                           for topic, kind in ((INFO, "sensor_msgs/msg/CameraInfo"),
+                                               (COLOR, "sensor_msgs/msg/Image"),
+                                               (DEPTH, "sensor_msgs/msg/Image"))}
+        self.header = message_class("std_msgs/msg/Header")
+        self.time = message_class("builtin_interfaces/msg/Time")
+        self.region = message_class("sensor_msgs/msg/RegionOfInterest")
+
+    def publish(self, color: np.ndarray, depth: np.ndarray, stamp_ns: int) -> None:
+        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+        header = self.header(stamp=self.time(sec=sec, nanosec=nanosec),
+                             frame_id="camera_color_optical_frame")
+        c = self.camera
+        height, width = depth.shape
+        self.publishers[INFO].publish(
+            header=header, height=height, width=width, distortion_model="plumb_bob",
+            d=np.zeros(5), k=np.array([c["fx"], 0, c["cx"], 0, c["fy"], c["cy"], 0, 0, 1.0]),
+            r=np.eye(3).reshape(-1),
+            p=np.array([c["fx"], 0, c["cx"], 0, 0, c["fy"], c["cy"], 0, 0, 0, 1.0, 0]),
+            binning_x=0, binning_y=0,
+            roi=self.region(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+        self.publishers[COLOR].publish(header=header, height=height, width=width,
+                                       encoding="rgb8", is_bigendian=0, step=width * 3,
+                                       data=color.reshape(-1))
+        self.publishers[DEPTH].publish(header=header, height=height, width=width,
+                                       encoding="16UC1", is_bigendian=0, step=width * 2,
+                                       data=depth.reshape(-1).view(np.uint8))
+
+    def close(self) -> None:
+        for publisher in self.publishers.values():
+            publisher.close()
+
+
+def expected_cloud(color: np.ndarray, depth: np.ndarray, camera: dict
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The frame's pixels with depth in [0.1, 10] m (the bridge's defaults) as points, row by
+    row: (N, 3) metres (pinhole model) and (N, 3) uint8 colours."""
+    rows, cols = np.nonzero((depth >= 100) & (depth <= 10_000))
+    z = depth[rows, cols] / 1000.0
+    points = np.stack([(cols - camera["cx"]) / camera["fx"] * z,
+                       (rows - camera["cy"]) / camera["fy"] * z, z], axis=1)
+    return points, color[rows, cols]
+
+
+def cloud_fields(message) -> dict[str, np.ndarray]:
+    """A PointCloud2 (rosbags object) as per-field arrays, read with numpy from its fields."""
+    kinds = {6: "<u4", 7: "<f4"}
+    count = message.width * message.height
+    raw = np.asarray(message.data, dtype=np.uint8).reshape(count, message.point_step)
+    return {field.name: raw[:, field.offset:field.offset + 4].copy().view(
+        kinds[field.datatype])[:, 0] for field in message.fields}
+
+
+def test_robot_camera_in_results_out(router_endpoint: str, spawn: Callable,
+                                     tmp_path: Path) -> None:
+    frames, camera = real_frames()
+    port = int(router_endpoint.rsplit(":", 1)[1])
+    learner = spawn("learn", "--zenoh-connect", router_endpoint, "--object-confirm-frames", "1",
+                    "--samples-per-frame", "5000")
+    bridge = spawn("ros2", "--zenoh-connect", router_endpoint)
+    wait_for(lambda: {"gngdt/camera/learner/alive", "gngdt/camera/ros2/alive",
+                      "gngdt/camera/capture/alive"} <= gngdt_tokens(router_endpoint), 120,
+             "learner and bridge up")
+    received = Received()
+    with sdk_session(port, tmp_path) as sdk:
+        subscribers = [sdk.ROS2Subscriber(f"/gngdt/camera/{name}", kind,
+                                          callback=received.callback(name), router_port=port)
+                       for name, kind in (("points", "sensor_msgs/msg/PointCloud2"),
+                                          ("nodes", "sensor_msgs/msg/PointCloud2"),
+                                          ("objects", "visualization_msgs/msg/MarkerArray"),
+                                          ("graph", "visualization_msgs/msg/MarkerArray"),
+                                          ("status", "diagnostic_msgs/msg/DiagnosticArray"))]
+        # ROS 2's graph, as `ros2 topic list -t` builds it from the liveliness tokens
+        graph = dict(sdk.get_topic_names_and_types(router_port=port, timeout=1.0))
+        driver = CameraDriver(sdk, port, camera)
+        sent: dict[int, int] = {}
+        try:
+            deadline = time.monotonic() + 120
+            index = 0
+            while not all(received.get(name) for name in ("points", "nodes", "objects")):
+                assert time.monotonic() < deadline, (
+                    f"received {({k: len(v) for k, v in received.messages.items()})}; bridge "
+                    f"log:\n{Path(bridge.log_path).read_text()[-3000:]}")
+                assert bridge.poll() is None and learner.poll() is None
+                stamp = time.time_ns()
+                sent[stamp] = index % len(frames)
+                driver.publish(*frames[index % len(frames)], stamp)
+                index += 1
+                time.sleep(0.2)  # a slow camera: 5 frames a second
+            topic_info = sdk.get_topic_info(COLOR, router_port=port, timeout=1.0, verbose=True)
+        finally:
+            driver.close()
+            for subscriber in subscribers:
+                subscriber.close()
+
+    assert graph["/gngdt/camera/points"] == ["sensor_msgs/msg/PointCloud2"]
+    assert graph["/gngdt/camera/nodes"] == ["sensor_msgs/msg/PointCloud2"]
+    assert graph["/gngdt/camera/graph"] == ["visualization_msgs/msg/MarkerArray"]
+    assert graph["/gngdt/camera/objects"] == ["visualization_msgs/msg/MarkerArray"]
+    assert graph["/gngdt/camera/status"] == ["diagnostic_msgs/msg/DiagnosticArray"]
+    assert graph["/tf"] == ["tf2_msgs/msg/TFMessage"]
+    assert graph[COLOR] == graph[DEPTH] == ["sensor_msgs/msg/Image"]
+    assert graph[INFO] == ["sensor_msgs/msg/CameraInfo"]
+    # the bridge's subscription to the colour topic, as `ros2 topic info -v` shows it
+    assert "gngdt_camera" in {endpoint.node_name for endpoint in topic_info.subscribers}
+    assert "camera" in {endpoint.node_name for endpoint in topic_info.publishers}
+
+    # the cloud of one of the real frames, point for point
+    cloud = received.get("points")[0]
+    stamp = cloud.header.stamp.sec * 1_000_000_000 + cloud.header.stamp.nanosec
+    color, depth = frames[sent[stamp]]
+    points, colors = expected_cloud(color, depth, camera)
+    fields = cloud_fields(cloud)
+    assert [field.name for field in cloud.fields] == ["x", "y", "z", "rgb"]
+    assert cloud.header.frame_id == "camera" and cloud.width == len(points) > 200_000
+    np.testing.assert_allclose(np.stack([fields["x"], fields["y"], fields["z"]], axis=1),
+                               points, atol=1e-5)
+    rgb = fields["rgb"].view(np.uint32)
+    np.testing.assert_array_equal(
+        np.stack([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255], axis=1), colors)
+
+    nodes = received.get("nodes")[-1]
+    node_fields = cloud_fields(nodes)
+    assert list(node_fields)[:7] == ["x", "y", "z", "rgb", "normal_x", "normal_y", "normal_z"]
+    assert {"label_pos", "label_col", "label_nor", "label_col_nor"} <= set(node_fields)
+    assert 0 < nodes.width <= 1000  # the learner's default node budget
+    learned = np.stack([node_fields[axis] for axis in "xyz"], axis=1)
+    low, high = points.min(axis=0) - 0.05, points.max(axis=0) + 0.05
+    assert ((learned >= low) & (learned <= high)).all()  # nodes lie where the points are
+    normals = np.stack([node_fields[f"normal_{axis}"] for axis in "xyz"], axis=1)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-3)
+
+    objects = received.get("objects")[-1].markers
+    cubes = [(m.id, m.type) for m in objects if m.ns == "objects" and m.action == 0]
+    labels = [(m.id, m.type) for m in objects if m.ns == "object_labels" and m.action == 0]
+    assert cubes and all(kind == 1 for _, kind in cubes)  # CUBE
+    assert [i for i, _ in labels] == [i for i, _ in cubes] and all(k == 9 for _, k in labels)
+    for marker in objects:
+        if marker.ns == "objects" and marker.action == 0:
+            centre = np.array([marker.pose.position.x, marker.pose.position.y,
+                               marker.pose.position.z])
+            assert ((centre >= low) & (centre <= high)).all()
+            assert min(marker.scale.x, marker.scale.y, marker.scale.z) > 0
