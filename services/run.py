@@ -61,11 +61,14 @@ EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap --connect       # to a running rerun viewer
   gngdt run recordings/tabletop.mcap --mcap runs/tabletop.mcap   # + every stream for Foxglove
   gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
+  gngdt run recordings/tabletop.mcap --ros2          # + ROS 2 topics, via rmw_zenohd on 7447
 """
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: capture's point cap under `gngdt run`: a uniform random subset, as the learner's own sampling
 DEFAULT_MAX_POINTS = 50_000
+#: where `--ros2` finds ROS 2 by default: rmw_zenohd listens there
+ROS2_ROUTER = "tcp/127.0.0.1:7447"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -103,6 +106,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="after the stream ends, how long learner and logger may take to "
                         "finish before they are interrupted (default 30)")
     add_rate_arguments(parser)
+    parser.add_argument("--ros2", nargs="?", const=ROS2_ROUTER, metavar="ENDPOINT",
+                        help="also run `gngdt ros2 --no-input`: the results as ROS 2 topics on the "
+                        f"ROS 2 router at ENDPOINT (default {ROS2_ROUTER}, rmw_zenohd's)")
 
 
 @dataclass
@@ -506,9 +512,13 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
              "learning kernels, ~20 s)")
     learner = pipeline.start("learn", learner_arguments(args))
     logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
+    if args.ros2:  # the results into ROS 2 as well (see `gngdt ros2`)
+        pipeline.start("ros2", ["--cam", args.cam, "--no-input", "--ros2-connect", args.ros2,
+                                "--router-wait", str(args.startup_timeout)])
     ready = wait_until(
         lambda: observed.has_alive(f"gngdt/{args.cam}/learner/alive")
-        and observed.has_alive(LIVELINESS_KEY),
+        and observed.has_alive(LIVELINESS_KEY)
+        and (not args.ros2 or observed.has_alive(f"gngdt/{args.cam}/ros2/alive")),
         args.startup_timeout, stop, pipeline)
     early_end = ""
     if not ready and not stop.is_set() and pipeline.failed() is None:
@@ -536,5 +546,7 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
                  "interrupted" if stop.is_set() else early_end or "a service failed")
         pipeline.interrupt_all()
     for child in pipeline.children:
+        if child.name == "ros2":  # bridges until told to stop: once the others are done
+            child.interrupt()
         child.stop(args.drain_timeout)
     return early_end

@@ -230,3 +230,158 @@ def test_robot_camera_in_results_out(router_endpoint: str, spawn: Callable,
                                marker.pose.position.z])
             assert ((centre >= low) & (centre <= high)).all()
             assert min(marker.scale.x, marker.scale.y, marker.scale.z) > 0
+
+
+def gngdt_clouds(endpoint: str) -> tuple[object, list]:
+    """A gngdt-side client keeping every ``gngdt/camera/points`` cloud's frame_id and pose."""
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+    from schemas.clouds import cloud_pose
+
+    session = open_config(client_config([endpoint]))
+    clouds: list = []
+
+    def on_points(sample) -> None:
+        message = PointCloud.FromString(sample.payload.to_bytes())
+        clouds.append((message.frame_id, cloud_pose(message)))
+
+    session.declare_subscriber("gngdt/camera/points", on_points)
+    return session, clouds
+
+
+def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
+        router_endpoint: str, spawn: Callable, tmp_path: Path) -> None:
+    """Garbage, an unsupported encoding, an image over the size limit and an uncalibrated
+    CameraInfo are skipped and counted in /gngdt/<cam>/status; good frames go on, posed from
+    /tf in --fixed-frame; a stop signal ends the bridge cleanly, its tokens gone."""
+    import signal
+
+    frames, camera = real_frames()
+    port = int(router_endpoint.rsplit(":", 1)[1])
+    bridge = spawn("ros2", "--zenoh-connect", router_endpoint, "--fixed-frame", "world",
+                   "--max-frame-pixels", str(640 * 480))
+    wait_for(lambda: "gngdt/camera/ros2/alive" in gngdt_tokens(router_endpoint), 60, "bridge up")
+    session, clouds = gngdt_clouds(router_endpoint)
+    received = Received()
+    try:
+        with sdk_session(port, tmp_path) as sdk:
+            status = sdk.ROS2Subscriber("/gngdt/camera/status",
+                                        "diagnostic_msgs/msg/DiagnosticArray",
+                                        callback=received.callback("status"), router_port=port)
+            tf = sdk.ROS2Publisher("/tf", "tf2_msgs/msg/TFMessage", router_port=port,
+                                   node_name="robot_state_publisher")
+            driver = CameraDriver(sdk, port, camera)
+            transform_type = message_class("geometry_msgs/msg/TransformStamped")
+            color, depth = frames[0]
+            try:
+                # garbage where the colour images go, on the SDK's own key for them
+                noise = sdk.ZenohSession.get_instance().session
+                for garbage in (b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3):
+                    noise.put(driver.publishers[COLOR].keyexpr, garbage)
+                driver.publishers[COLOR].publish(  # an encoding the bridge does not take
+                    header=driver.header(stamp=driver.time(sec=1, nanosec=0), frame_id="x"),
+                    height=1, width=2, encoding="yuv422", is_bigendian=0, step=4,
+                    data=np.zeros(4, np.uint8))
+                big = np.zeros((481, 640, 3), np.uint8)  # one row over --max-frame-pixels
+                driver.publish(big, np.zeros((481, 640), np.uint16), time.time_ns())
+                uncalibrated = dict(camera, fx=0.0, fy=0.0)
+                CameraDriver.publish(driver_with(driver, uncalibrated), color, depth, 1)
+                deadline = time.monotonic() + 60
+                while not any(frame_id == "world" for frame_id, _ in clouds):
+                    assert time.monotonic() < deadline and bridge.poll() is None, \
+                        Path(bridge.log_path).read_text()[-3000:]
+                    stamp = time.time_ns()
+                    sec, nanosec = divmod(stamp, 1_000_000_000)
+                    header = driver.header(stamp=driver.time(sec=sec, nanosec=nanosec),
+                                           frame_id="world")
+                    tf.publish(transforms=[transform_type(
+                        header=header, child_frame_id="camera_color_optical_frame",
+                        transform=message_class("geometry_msgs/msg/Transform")(
+                            translation=message_class("geometry_msgs/msg/Vector3")(
+                                x=1.0, y=2.0, z=3.0),
+                            rotation=message_class("geometry_msgs/msg/Quaternion")(
+                                x=0.0, y=0.0, z=0.0, w=1.0)))])
+                    driver.publish(color, depth, stamp)
+                    time.sleep(0.2)
+
+                def status_values() -> dict[str, str]:
+                    latest = received.get("status")
+                    ours = [s for s in latest[-1].status if s.name == "gngdt/camera/ros2"] \
+                        if latest else []
+                    return {kv.key: kv.value for kv in ours[0].values} if ours else {}
+
+                # 3 garbage, yuv422, the big colour and depth, the uncalibrated CameraInfo
+                wait_for(lambda: int(status_values().get("camera/images/malformed", 0)) >= 7,
+                         10, "the bad messages counted in the status")
+            finally:
+                driver.close()
+                tf.close()
+                status.close()
+        pose = next(pose for frame_id, pose in clouds if frame_id == "world")
+        np.testing.assert_allclose(pose[:3, 3], [1.0, 2.0, 3.0])
+        assert bridge.poll() is None  # alive after all that
+        bridge.send_signal(signal.SIGINT)
+        assert bridge.wait(30) == 0
+        assert not gngdt_tokens(router_endpoint)
+        ros_tokens = [reply for reply in session.liveliness().get("@ros2_lv/0/**", timeout=2.0)
+                      if reply.ok is not None and "gngdt_camera" in str(reply.ok.key_expr)]
+        assert not ros_tokens
+    finally:
+        session.close()
+    log = Path(bridge.log_path).read_text()
+    assert "Traceback" not in log
+    assert "yuv422" in log and "exceeds the limit" in log  # each refusal says why
+
+
+def driver_with(driver: CameraDriver, camera: dict) -> CameraDriver:
+    """The same publishers, other intrinsics in the CameraInfo."""
+    other = CameraDriver.__new__(CameraDriver)
+    other.__dict__.update(driver.__dict__, camera=camera)
+    return other
+
+
+def test_bad_options_are_refused_before_starting(spawn: Callable) -> None:
+    for options, said in ((["--cam", "cam-0"], "--cam 'cam-0'"),
+                          (["--domain", "999"], "--domain"),
+                          (["--voxel", "-1"], "--voxel")):
+        process = spawn("ros2", *options, "--router-wait", "0")
+        assert process.wait(60) == 2
+        assert said in Path(process.log_path).read_text()
+
+
+def test_run_with_ros2_publishes_the_results_into_ros(
+        router_endpoint: str, spawn: Callable, tmp_path: Path) -> None:
+    """`gngdt run --ros2 ENDPOINT` on a recording whose camera moves: the bridge joins the ROS 2
+    router, the robot side gets nodes, clouds in the camera frame and the camera's pose on
+    /tf (one of the recording's poses), and run ends as usual."""
+    from conftest import _render_recording
+
+    from gngdt_io.mcap_reader import read_frames
+
+    recording = _render_recording(tmp_path, "tabletop_walk", 6)
+    poses = [frame.pose.matrix for frame in read_frames(recording)]
+    port = int(router_endpoint.rsplit(":", 1)[1])
+    received = Received()
+    with sdk_session(port, tmp_path) as sdk:
+        subscribers = [sdk.ROS2Subscriber(name, kind, callback=received.callback(name),
+                                          router_port=port)
+                       for name, kind in (("/gngdt/camera/nodes", "sensor_msgs/msg/PointCloud2"),
+                                          ("/gngdt/camera/points", "sensor_msgs/msg/PointCloud2"),
+                                          ("/tf", "tf2_msgs/msg/TFMessage"))]
+        try:
+            run = spawn("run", str(recording), "--rate", "0.5", "--ros2", router_endpoint,
+                        "--save", str(tmp_path / "run.rrd"))
+            assert run.wait(300) == 0, Path(run.log_path).read_text()[-3000:]
+        finally:
+            for subscriber in subscribers:
+                subscriber.close()
+    assert received.get("/gngdt/camera/nodes")
+    clouds = received.get("/gngdt/camera/points")
+    assert clouds and {cloud.header.frame_id for cloud in clouds} == {"camera"}
+    transforms = [t for message in received.get("/tf") for t in message.transforms]
+    assert transforms and {(t.header.frame_id, t.child_frame_id) for t in transforms} == {
+        ("world", "camera")}
+    for t in transforms:
+        translation = [t.transform.translation.x, t.transform.translation.y,
+                       t.transform.translation.z]
+        assert min(np.abs(pose[:3, 3] - translation).max() for pose in poses) < 1e-6
