@@ -54,7 +54,6 @@ DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 
 #: sensor_msgs/PointField datatypes (PointField.msg constants) and their numpy types
 UINT32, FLOAT32 = 6, 7
-_FIELD_DTYPES = {UINT32: "<u4", FLOAT32: "<f4"}
 
 #: diagnostic_msgs/DiagnosticStatus levels
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
@@ -170,19 +169,20 @@ def encode_pointcloud2(
     names = [name for name, _, _ in columns]
     if len(set(names)) != len(names):
         raise ValueError(f"duplicate PointCloud2 field names: {names}")
-    point = np.dtype({"names": names, "formats": [_FIELD_DTYPES[kind] for _, kind, _ in columns],
-                      "offsets": [4 * k for k in range(len(columns))],
-                      "itemsize": 4 * len(columns)})
-    cloud = np.empty(count, point)
-    for name, _, values in columns:
-        cloud[name] = values
+    # one row of 4-byte words per point (a numpy structured array is ~5x slower to fill)
+    table = np.empty((count, len(columns)), np.dtype("<u4"))
+    floats = table.view(np.dtype("<f4"))
+    floats[:, :3] = positions
+    for k, (_, kind, values) in enumerate(columns[3:], start=3):
+        (floats if kind == FLOAT32 else table)[:, k] = values
+    point_step = 4 * len(columns)
     point_field = msg_type("sensor_msgs/msg/PointField")
     message = msg_type(POINT_CLOUD2)(
         header=header(stamp_ns, frame_id), height=1, width=count,
         fields=[point_field(name=name, offset=4 * k, datatype=kind, count=1)
                 for k, (name, kind, _) in enumerate(columns)],
-        is_bigendian=False, point_step=point.itemsize, row_step=point.itemsize * count,
-        data=cloud.view(np.uint8), is_dense=bool(np.isfinite(positions).all()))
+        is_bigendian=False, point_step=point_step, row_step=point_step * count,
+        data=table.reshape(-1).view(np.uint8), is_dense=bool(np.isfinite(positions).all()))
     return serialize(message, POINT_CLOUD2)
 
 
