@@ -140,6 +140,65 @@ def cloud_fields(message) -> dict[str, np.ndarray]:
         kinds[field.datatype])[:, 0] for field in message.fields}
 
 
+def check_graph(graph: dict, topic_info) -> None:
+    """ROS 2's graph lists gngdt's topics with their types, and who is behind them."""
+    assert graph["/gngdt/camera/points"] == ["sensor_msgs/msg/PointCloud2"]
+    assert graph["/gngdt/camera/nodes"] == ["sensor_msgs/msg/PointCloud2"]
+    assert graph["/gngdt/camera/graph"] == ["visualization_msgs/msg/MarkerArray"]
+    assert graph["/gngdt/camera/objects"] == ["visualization_msgs/msg/MarkerArray"]
+    assert graph["/gngdt/camera/status"] == ["diagnostic_msgs/msg/DiagnosticArray"]
+    assert graph["/tf"] == ["tf2_msgs/msg/TFMessage"]
+    assert graph[COLOR] == graph[DEPTH] == ["sensor_msgs/msg/Image"]
+    assert graph[INFO] == ["sensor_msgs/msg/CameraInfo"]
+    # the bridge's subscription to the colour topic, as `ros2 topic info -v` shows it
+    assert "gngdt_camera" in {endpoint.node_name for endpoint in topic_info.subscribers}
+    assert "camera" in {endpoint.node_name for endpoint in topic_info.publishers}
+
+
+def check_points(cloud, frames: list, sent: dict[int, int], camera: dict) -> np.ndarray:
+    """The cloud of the real frame its stamp names, point for point; the expected points."""
+    stamp = cloud.header.stamp.sec * 1_000_000_000 + cloud.header.stamp.nanosec
+    color, depth = frames[sent[stamp]]
+    points, colors = expected_cloud(color, depth, camera)
+    fields = cloud_fields(cloud)
+    assert [field.name for field in cloud.fields] == ["x", "y", "z", "rgb"]
+    assert cloud.header.frame_id == "camera" and cloud.width == len(points) > 200_000
+    np.testing.assert_allclose(np.stack([fields["x"], fields["y"], fields["z"]], axis=1),
+                               points, atol=1e-5)
+    rgb = fields["rgb"].view(np.uint32)
+    np.testing.assert_array_equal(
+        np.stack([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255], axis=1), colors)
+    return points
+
+
+def inside(points: np.ndarray, xyz: np.ndarray, margin: float = 0.05) -> bool:
+    low, high = points.min(axis=0) - margin, points.max(axis=0) + margin
+    return bool(((xyz >= low) & (xyz <= high)).all())
+
+
+def check_nodes(nodes, points: np.ndarray) -> None:
+    """Learned nodes: their fields, where the points are, unit normals."""
+    node_fields = cloud_fields(nodes)
+    assert list(node_fields)[:7] == ["x", "y", "z", "rgb", "normal_x", "normal_y", "normal_z"]
+    assert {"label_pos", "label_col", "label_nor", "label_col_nor"} <= set(node_fields)
+    assert 0 < nodes.width <= 1000  # the learner's default node budget
+    assert inside(points, np.stack([node_fields[axis] for axis in "xyz"], axis=1))
+    normals = np.stack([node_fields[f"normal_{axis}"] for axis in "xyz"], axis=1)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-3)
+
+
+def check_objects(markers: list, points: np.ndarray) -> None:
+    """A CUBE and a TEXT_VIEW_FACING label per object, same id, boxes where the points are."""
+    cubes = [m for m in markers if m.ns == "objects" and m.action == 0]
+    labels = [m for m in markers if m.ns == "object_labels" and m.action == 0]
+    assert cubes and all(marker.type == 1 for marker in cubes)
+    assert [m.id for m in labels] == [m.id for m in cubes] and all(m.type == 9 for m in labels)
+    for marker in cubes:
+        position = marker.pose.position
+        assert inside(points, np.array([[position.x, position.y, position.z]]))
+        assert min(marker.scale.x, marker.scale.y, marker.scale.z) > 0
+
+
 def test_robot_camera_in_results_out(router_endpoint: str, spawn: Callable,
                                      tmp_path: Path) -> None:
     frames, camera = real_frames()
@@ -182,54 +241,10 @@ def test_robot_camera_in_results_out(router_endpoint: str, spawn: Callable,
             for subscriber in subscribers:
                 subscriber.close()
 
-    assert graph["/gngdt/camera/points"] == ["sensor_msgs/msg/PointCloud2"]
-    assert graph["/gngdt/camera/nodes"] == ["sensor_msgs/msg/PointCloud2"]
-    assert graph["/gngdt/camera/graph"] == ["visualization_msgs/msg/MarkerArray"]
-    assert graph["/gngdt/camera/objects"] == ["visualization_msgs/msg/MarkerArray"]
-    assert graph["/gngdt/camera/status"] == ["diagnostic_msgs/msg/DiagnosticArray"]
-    assert graph["/tf"] == ["tf2_msgs/msg/TFMessage"]
-    assert graph[COLOR] == graph[DEPTH] == ["sensor_msgs/msg/Image"]
-    assert graph[INFO] == ["sensor_msgs/msg/CameraInfo"]
-    # the bridge's subscription to the colour topic, as `ros2 topic info -v` shows it
-    assert "gngdt_camera" in {endpoint.node_name for endpoint in topic_info.subscribers}
-    assert "camera" in {endpoint.node_name for endpoint in topic_info.publishers}
-
-    # the cloud of one of the real frames, point for point
-    cloud = received.get("points")[0]
-    stamp = cloud.header.stamp.sec * 1_000_000_000 + cloud.header.stamp.nanosec
-    color, depth = frames[sent[stamp]]
-    points, colors = expected_cloud(color, depth, camera)
-    fields = cloud_fields(cloud)
-    assert [field.name for field in cloud.fields] == ["x", "y", "z", "rgb"]
-    assert cloud.header.frame_id == "camera" and cloud.width == len(points) > 200_000
-    np.testing.assert_allclose(np.stack([fields["x"], fields["y"], fields["z"]], axis=1),
-                               points, atol=1e-5)
-    rgb = fields["rgb"].view(np.uint32)
-    np.testing.assert_array_equal(
-        np.stack([(rgb >> 16) & 255, (rgb >> 8) & 255, rgb & 255], axis=1), colors)
-
-    nodes = received.get("nodes")[-1]
-    node_fields = cloud_fields(nodes)
-    assert list(node_fields)[:7] == ["x", "y", "z", "rgb", "normal_x", "normal_y", "normal_z"]
-    assert {"label_pos", "label_col", "label_nor", "label_col_nor"} <= set(node_fields)
-    assert 0 < nodes.width <= 1000  # the learner's default node budget
-    learned = np.stack([node_fields[axis] for axis in "xyz"], axis=1)
-    low, high = points.min(axis=0) - 0.05, points.max(axis=0) + 0.05
-    assert ((learned >= low) & (learned <= high)).all()  # nodes lie where the points are
-    normals = np.stack([node_fields[f"normal_{axis}"] for axis in "xyz"], axis=1)
-    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-3)
-
-    objects = received.get("objects")[-1].markers
-    cubes = [(m.id, m.type) for m in objects if m.ns == "objects" and m.action == 0]
-    labels = [(m.id, m.type) for m in objects if m.ns == "object_labels" and m.action == 0]
-    assert cubes and all(kind == 1 for _, kind in cubes)  # CUBE
-    assert [i for i, _ in labels] == [i for i, _ in cubes] and all(k == 9 for _, k in labels)
-    for marker in objects:
-        if marker.ns == "objects" and marker.action == 0:
-            centre = np.array([marker.pose.position.x, marker.pose.position.y,
-                               marker.pose.position.z])
-            assert ((centre >= low) & (centre <= high)).all()
-            assert min(marker.scale.x, marker.scale.y, marker.scale.z) > 0
+    check_graph(graph, topic_info)
+    points = check_points(received.get("points")[0], frames, sent, camera)
+    check_nodes(received.get("nodes")[-1], points)
+    check_objects(received.get("objects")[-1].markers, points)
 
 
 def gngdt_clouds(endpoint: str) -> tuple[object, list]:
@@ -247,6 +262,35 @@ def gngdt_clouds(endpoint: str) -> tuple[object, list]:
 
     session.declare_subscriber("gngdt/camera/points", on_points)
     return session, clouds
+
+
+def publish_bad_input(sdk, driver: CameraDriver, color: np.ndarray, depth: np.ndarray) -> None:
+    """Seven messages the bridge must refuse: three of garbage on the colour key, a yuv422
+    image, a frame over 640x480 (colour and depth), an uncalibrated CameraInfo."""
+    noise = sdk.ZenohSession.get_instance().session
+    for garbage in (b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3):
+        noise.put(driver.publishers[COLOR].keyexpr, garbage)
+    driver.publishers[COLOR].publish(
+        header=driver.header(stamp=driver.time(sec=1, nanosec=0), frame_id="x"),
+        height=1, width=2, encoding="yuv422", is_bigendian=0, step=4, data=np.zeros(4, np.uint8))
+    big = np.zeros((481, 640, 3), np.uint8)  # one row over --max-frame-pixels
+    driver.publish(big, np.zeros((481, 640), np.uint16), time.time_ns())
+    CameraDriver.publish(driver_with(driver, dict(driver.camera, fx=0.0, fy=0.0)), color, depth,
+                         1)
+
+
+def camera_in_world(stamp_ns: int, translation: tuple[float, float, float]):
+    """A geometry_msgs/TransformStamped world -> camera_color_optical_frame (SDK classes)."""
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    x, y, z = translation
+    return message_class("geometry_msgs/msg/TransformStamped")(
+        header=message_class("std_msgs/msg/Header")(
+            stamp=message_class("builtin_interfaces/msg/Time")(sec=sec, nanosec=nanosec),
+            frame_id="world"),
+        child_frame_id="camera_color_optical_frame",
+        transform=message_class("geometry_msgs/msg/Transform")(
+            translation=message_class("geometry_msgs/msg/Vector3")(x=x, y=y, z=z),
+            rotation=message_class("geometry_msgs/msg/Quaternion")(x=0.0, y=0.0, z=0.0, w=1.0)))
 
 
 def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
@@ -271,36 +315,15 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
             tf = sdk.ROS2Publisher("/tf", "tf2_msgs/msg/TFMessage", router_port=port,
                                    node_name="robot_state_publisher")
             driver = CameraDriver(sdk, port, camera)
-            transform_type = message_class("geometry_msgs/msg/TransformStamped")
             color, depth = frames[0]
             try:
-                # garbage where the colour images go, on the SDK's own key for them
-                noise = sdk.ZenohSession.get_instance().session
-                for garbage in (b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3):
-                    noise.put(driver.publishers[COLOR].keyexpr, garbage)
-                driver.publishers[COLOR].publish(  # an encoding the bridge does not take
-                    header=driver.header(stamp=driver.time(sec=1, nanosec=0), frame_id="x"),
-                    height=1, width=2, encoding="yuv422", is_bigendian=0, step=4,
-                    data=np.zeros(4, np.uint8))
-                big = np.zeros((481, 640, 3), np.uint8)  # one row over --max-frame-pixels
-                driver.publish(big, np.zeros((481, 640), np.uint16), time.time_ns())
-                uncalibrated = dict(camera, fx=0.0, fy=0.0)
-                CameraDriver.publish(driver_with(driver, uncalibrated), color, depth, 1)
+                publish_bad_input(sdk, driver, color, depth)
                 deadline = time.monotonic() + 60
                 while not any(frame_id == "world" for frame_id, _ in clouds):
                     assert time.monotonic() < deadline and bridge.poll() is None, \
                         Path(bridge.log_path).read_text()[-3000:]
                     stamp = time.time_ns()
-                    sec, nanosec = divmod(stamp, 1_000_000_000)
-                    header = driver.header(stamp=driver.time(sec=sec, nanosec=nanosec),
-                                           frame_id="world")
-                    tf.publish(transforms=[transform_type(
-                        header=header, child_frame_id="camera_color_optical_frame",
-                        transform=message_class("geometry_msgs/msg/Transform")(
-                            translation=message_class("geometry_msgs/msg/Vector3")(
-                                x=1.0, y=2.0, z=3.0),
-                            rotation=message_class("geometry_msgs/msg/Quaternion")(
-                                x=0.0, y=0.0, z=0.0, w=1.0)))])
+                    tf.publish(transforms=[camera_in_world(stamp, (1.0, 2.0, 3.0))])
                     driver.publish(color, depth, stamp)
                     time.sleep(0.2)
 
