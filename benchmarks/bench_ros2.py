@@ -1,12 +1,13 @@
 """`gngdt ros2` at 30 fps with 640x480 frames: messages/s, added latency p50/p99, frames lost.
 
-Run: ``python benchmarks/bench_ros2.py [--seconds 10] [--fps 30]``. A loopback router, the real
-bridge process (`gngdt ros2`), and this process as both ends:
+Run: ``python benchmarks/bench_ros2.py [--seconds 10] [--fps 30] [--max-points N]``. A loopback
+router, the real bridge process (`gngdt ros2`), and this process as both ends:
 
 - in: a ROS 2 camera (gngdt's node: colour rgb8, depth 16UC1, CameraInfo per frame) -> bridge
   -> ``gngdt/camera/points`` (+ colour, depth, calibration);
-- out: ``gngdt/camera/points`` (a full 640x480 cloud, 307,200 points) -> bridge ->
-  ``/gngdt/camera/points`` sensor_msgs/PointCloud2.
+- out: ``gngdt/camera/points`` (a full 640x480 cloud, 307,200 points; ``--max-points N``: N of
+  them, and the bridge caps its clouds in to N, as `gngdt run` caps capture's to 50,000) ->
+  bridge -> ``/gngdt/camera/points`` sensor_msgs/PointCloud2.
 
 Added latency = the bridge path minus the same payload's direct path through the router (this
 process hears its own colour images / clouds too): per frame, p50 and p99. Frames lost: sent
@@ -150,7 +151,8 @@ def bench_in(session, node: Ros2Node, args: argparse.Namespace) -> None:
     time.sleep(0.5)
     sent = pace(args.fps, args.seconds, send)
     time.sleep(1.0)
-    report(f"in  (camera {args.fps:g} fps -> gngdt)", sent, bridged, direct, args.seconds, 4)
+    report(f"in  (camera {args.fps:g} fps -> gngdt, clouds of "
+           f"{args.max_points or 'all the'} points)", sent, bridged, direct, args.seconds, 4)
     for subscriber in subscribers:
         subscriber.undeclare()
 
@@ -163,6 +165,9 @@ def bench_out(session, node: Ros2Node, args: argparse.Namespace) -> None:
     positions = np.stack([(cols - 319.5) / 525 * z, (rows - 239.5) / 525 * z, z],
                          1).astype(np.float32)
     colors = color.reshape(-1, 3)
+    if args.max_points:
+        keep = np.random.default_rng(2).choice(len(positions), args.max_points, replace=False)
+        positions, colors = positions[np.sort(keep)], colors[np.sort(keep)]
     bridged, direct = Arrivals(), Arrivals()
 
     def on_ros_cloud(payload: bytes, _attachment) -> None:
@@ -192,8 +197,8 @@ def bench_out(session, node: Ros2Node, args: argparse.Namespace) -> None:
     time.sleep(0.5)
     sent = pace(args.fps, args.seconds, send)
     time.sleep(1.0)
-    report(f"out (gngdt clouds {args.fps:g} fps -> ROS 2, 307,200 points)", sent, bridged, direct,
-           args.seconds, 1)
+    report(f"out (gngdt clouds {args.fps:g} fps -> ROS 2, {len(positions):,} points)", sent,
+           bridged, direct, args.seconds, 1)
     direct_sub.undeclare()
     publisher.undeclare()
 
@@ -238,13 +243,16 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="per direction (default 10)")
     parser.add_argument("--fps", type=float, default=30.0, help="offered rate; 0: flat out")
+    parser.add_argument("--max-points", type=int, default=0,
+                        help="points per cloud both ways (default 0: all, 307,200 out)")
     args = parser.parse_args()
     bench_translation()
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     router = open_config(router_config([endpoint]), what="router")
     session = open_config(client_config([endpoint]))
     log = Path(tempfile.mkdtemp(prefix="bench-ros2-")) / "ros2.log"
-    bridge = gngdt("ros2", "--zenoh-connect", endpoint, "--log-level", "WARNING", log=log)
+    bridge = gngdt("ros2", "--zenoh-connect", endpoint, "--log-level", "WARNING",
+                   "--max-points", str(args.max_points), log=log)
     try:
         wait_until(lambda: any(True for _ in session.liveliness().get(
             "gngdt/camera/ros2/alive", timeout=1.0)), 60, "the bridge")
