@@ -42,6 +42,9 @@ from gngdt_io.ros2.wire import (
 
 log = logging.getLogger(__name__)
 
+#: subscriptions hear other sessions only: a node never takes back what it published itself
+#: (rclcpp's ignore_local_publications), e.g. gngdt's own /tf into its pose lookups
+REMOTE = zenoh.Locality.REMOTE
 #: callback(payload CDR bytes, attachment or None if absent/malformed)
 SampleCallback = Callable[[bytes, Attachment | None], None]
 
@@ -100,7 +103,8 @@ class Ros2Publisher:
 
 
 class Ros2Subscription:
-    """One ROS 2 subscription: a zenoh subscriber on the topic key plus an MS token."""
+    """One ROS 2 subscription: a zenoh subscriber on the topic key (samples from other sessions
+    only) plus an MS token."""
 
     def __init__(
         self,
@@ -128,9 +132,10 @@ class Ros2Subscription:
             history = zenoh.ext.HistoryConfig(detect_late_publishers=True,
                                               max_samples=self.qos.depth)
             self._sub = zenoh.ext.declare_advanced_subscriber(
-                session, self.key, self._on_sample, history=history)
+                session, self.key, self._on_sample, history=history, allowed_origin=REMOTE)
         else:
-            self._sub = session.declare_subscriber(self.key, self._on_sample)
+            self._sub = session.declare_subscriber(self.key, self._on_sample,
+                                                   allowed_origin=REMOTE)
         self._token = session.liveliness().declare_token(self.token_key)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:

@@ -408,3 +408,51 @@ def test_run_with_ros2_publishes_the_results_into_ros(
         translation = [t.transform.translation.x, t.transform.translation.y,
                        t.transform.translation.z]
         assert min(np.abs(pose[:3, 3] - translation).max() for pose in poses) < 1e-6
+
+
+def test_objects_gone_are_deleted(router_endpoint: str, spawn: Callable, tmp_path: Path) -> None:
+    """Two objects updates as the learner publishes them (ids 1, 2; then 2 alone): the second
+    MarkerArray deletes object 1's cube and label."""
+    from schemas.scene import objects_to_scene_update
+    from schemas.wire import ENCODING_SCENE_UPDATE
+
+    def update(ids: list[int]) -> bytes:
+        count = len(ids)
+        return objects_to_scene_update(
+            ids=np.array(ids), centers=np.ones((count, 3)),
+            quaternions_xyzw=np.tile([0.0, 0.0, 0.0, 1.0], (count, 1)),
+            sizes=np.full((count, 3), 0.1), colors=np.full((count, 3), 200, np.uint8),
+            node_counts=np.full(count, 9), centroids=np.ones((count, 3)),
+            mean_colors=np.full((count, 3), 100.0), normals=np.tile([0.0, 0.0, 1.0], (count, 1)),
+            timestamp_ns=time.time_ns(), frame_id="world").SerializeToString()
+
+    port = int(router_endpoint.rsplit(":", 1)[1])
+    spawn("ros2", "--zenoh-connect", router_endpoint, "--no-input")
+    wait_for(lambda: "gngdt/camera/ros2/alive" in gngdt_tokens(router_endpoint), 60, "bridge up")
+    session = open_config(client_config([router_endpoint]))
+    received = Received()
+    try:
+        publisher = session.declare_publisher("gngdt/camera/objects",
+                                              encoding=ENCODING_SCENE_UPDATE)
+        with sdk_session(port, tmp_path) as sdk:
+            subscriber = sdk.ROS2Subscriber("/gngdt/camera/objects",
+                                            "visualization_msgs/msg/MarkerArray",
+                                            callback=received.callback("objects"),
+                                            router_port=port)
+            try:
+                deadline = time.monotonic() + 30
+                while not received.get("objects"):  # until the bridge's publisher matches
+                    assert time.monotonic() < deadline
+                    publisher.put(update([1, 2]))
+                    time.sleep(0.2)
+                publisher.put(update([2]))
+                wait_for(lambda: any(m.action == 2 for message in received.get("objects")
+                                     for m in message.markers), 10, "a DELETE")
+            finally:
+                subscriber.close()
+    finally:
+        session.close()
+    last = received.get("objects")[-1].markers
+    assert [(m.ns, m.id, m.action) for m in last] == [
+        ("objects", 2, 0), ("object_labels", 2, 0), ("objects", 1, 2), ("object_labels", 1, 2)]
+    assert last[0].header.frame_id == "world"
