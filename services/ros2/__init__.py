@@ -42,6 +42,8 @@ from services.plumbing.session import add_zenoh_arguments
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt_io.deproject import FrameToCloud
+
 log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
@@ -187,7 +189,7 @@ def open_ros2_session(endpoints: list[str], wait_s: float) -> zenoh.Session:
 
 
 def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, domain: int,
-           to_cloud: object) -> None:
+           to_cloud: FrameToCloud) -> None:
     """Translate until a stop signal; everything declared is undeclared on the way out."""
     from gngdt_io.ros2.messages import OK, WARN, Status
     from gngdt_io.ros2.node import Ros2Node
