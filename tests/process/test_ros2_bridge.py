@@ -456,3 +456,34 @@ def test_objects_gone_are_deleted(router_endpoint: str, spawn: Callable, tmp_pat
     assert [(m.ns, m.id, m.action) for m in last] == [
         ("objects", 2, 0), ("object_labels", 2, 0), ("objects", 1, 2), ("object_labels", 1, 2)]
     assert last[0].header.frame_id == "world"
+
+
+def test_ros2_side_on_its_own_router_and_nothing_listening(
+        router_endpoint: str, spawn: Callable) -> None:
+    """``--ros2-connect``: gngdt's side on gngdt's router, the ROS 2 node on the other one; the
+    bridge is a client of both and listens nowhere (no port, no scouting socket)."""
+    from processes import bound_sockets
+
+    from services.plumbing.session import free_tcp_port, router_config
+
+    ros_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    ros_router = open_config(router_config([ros_endpoint]), what="router")
+    try:
+        bridge = spawn("ros2", "--zenoh-connect", router_endpoint, "--ros2-connect", ros_endpoint)
+        wait_for(lambda: "gngdt/camera/ros2/alive" in gngdt_tokens(router_endpoint), 60,
+                 "bridge up")
+
+        def ros_tokens(endpoint: str) -> set[str]:
+            session = open_config(client_config([endpoint]))
+            try:
+                return {str(reply.ok.key_expr) for reply in
+                        session.liveliness().get("@ros2_lv/0/**", timeout=2.0) if reply.ok}
+            finally:
+                session.close()
+
+        wait_for(lambda: any("/NN/%/%/gngdt_camera" in key for key in ros_tokens(ros_endpoint)),
+                 30, "the node in the ROS 2 router's graph")
+        assert not ros_tokens(router_endpoint)
+        assert bound_sockets(bridge.pid) == []
+    finally:
+        ros_router.close()
