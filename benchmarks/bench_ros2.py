@@ -20,6 +20,7 @@ cost (why ``/graph`` is throttled).
 from __future__ import annotations
 
 import argparse
+import os
 import struct
 import sys
 import tempfile
@@ -103,7 +104,7 @@ def pace(fps: float, seconds: float, send) -> dict[int, int]:
 
 
 def report(name: str, sent: dict[int, int], bridged: Arrivals, direct: Arrivals,
-           seconds: float, messages_per_frame: int) -> None:
+           seconds: float, messages_per_frame: int, cpu_s: float) -> None:
     through = bridged.latencies_ms(sent)
     floor = direct.latencies_ms(sent)
     lost = len(sent) - bridged.count(sent)
@@ -118,9 +119,11 @@ def report(name: str, sent: dict[int, int], bridged: Arrivals, direct: Arrivals,
     print(f"  latency through the bridge  p50 {p50:6.2f} ms  p99 {p99:6.2f} ms")
     print(f"  direct (no bridge, floor)   p50 {f50:6.2f} ms  p99 {f99:6.2f} ms")
     print(f"  added by the bridge         p50 {p50 - f50:6.2f} ms  p99 {p99 - f99:6.2f} ms")
+    print(f"  bridge CPU {cpu_s * 1e3 / max(bridged.count(sent), 1):.1f} ms per frame bridged "
+          f"({cpu_s / seconds:.0%} of one core)")
 
 
-def bench_in(session, node: Ros2Node, args: argparse.Namespace) -> None:
+def bench_in(session, node: Ros2Node, args: argparse.Namespace, bridge_pid: int) -> None:
     """ROS 2 camera -> bridge -> gngdt."""
     color, depth = camera_frame(np.random.default_rng(0))
     hashes = {kind: m.type_hash(kind) for kind in (m.IMAGE, m.CAMERA_INFO)}
@@ -149,15 +152,17 @@ def bench_in(session, node: Ros2Node, args: argparse.Namespace) -> None:
 
     pace(args.fps, 1.0, send)  # warm-up: calibration, caches
     time.sleep(0.5)
+    cpu = cpu_seconds(bridge_pid)
     sent = pace(args.fps, args.seconds, send)
     time.sleep(1.0)
     report(f"in  (camera {args.fps:g} fps -> gngdt, clouds of "
-           f"{args.max_points or 'all the'} points)", sent, bridged, direct, args.seconds, 4)
+           f"{args.max_points or 'all the'} points)", sent, bridged, direct, args.seconds, 4,
+           cpu_seconds(bridge_pid) - cpu)
     for subscriber in subscribers:
         subscriber.undeclare()
 
 
-def bench_out(session, node: Ros2Node, args: argparse.Namespace) -> None:
+def bench_out(session, node: Ros2Node, args: argparse.Namespace, bridge_pid: int) -> None:
     """gngdt clouds -> bridge -> ROS 2 PointCloud2."""
     color, depth = camera_frame(np.random.default_rng(1))
     z = depth.reshape(-1) / 1000.0
@@ -195,10 +200,11 @@ def bench_out(session, node: Ros2Node, args: argparse.Namespace) -> None:
         send(time.time_ns())
         time.sleep(0.1)
     time.sleep(0.5)
+    cpu = cpu_seconds(bridge_pid)
     sent = pace(args.fps, args.seconds, send)
     time.sleep(1.0)
     report(f"out (gngdt clouds {args.fps:g} fps -> ROS 2, {len(positions):,} points)", sent,
-           bridged, direct, args.seconds, 1)
+           bridged, direct, args.seconds, 1, cpu_seconds(bridge_pid) - cpu)
     direct_sub.undeclare()
     publisher.undeclare()
 
@@ -257,12 +263,10 @@ def main() -> None:
         wait_until(lambda: any(True for _ in session.liveliness().get(
             "gngdt/camera/ros2/alive", timeout=1.0)), 60, "the bridge")
         node = Ros2Node(session, "bench")
-        cpu_before = cpu_seconds(bridge.pid)
-        bench_in(session, node, args)
-        bench_out(session, node, args)
-        busy = cpu_seconds(bridge.pid) - cpu_before
-        print(f"bridge CPU over both runs: {busy:.1f} s ({busy / (2 * args.seconds + 5):.0%} of "
-              "one core); its log:", log)
+        print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
+        bench_in(session, node, args, bridge.pid)
+        bench_out(session, node, args, bridge.pid)
+        print(f"load average {os.getloadavg()[0]:.1f}; the bridge's log: {log}")
         node.close()
     finally:
         bridge.terminate()
