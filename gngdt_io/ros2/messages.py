@@ -115,16 +115,6 @@ def header(ns: int, frame_id: str) -> Any:
 # --- PointCloud2 ----------------------------------------------------------------------------
 
 
-def pack_rgb(colors: np.ndarray) -> np.ndarray:
-    """(N, 3) uint8 RGB -> (N,) uint32 ``0x00RRGGBB``: the bits of the float32 ``rgb`` field
-    RViz and PCL read."""
-    rgb = np.asarray(colors)
-    if rgb.ndim != 2 or rgb.shape[1] != 3 or rgb.dtype != np.uint8:
-        raise ValueError(f"colors must be (N, 3) uint8, got {rgb.shape} {rgb.dtype}")
-    wide = rgb.astype(np.uint32)
-    return (wide[:, 0] << 16) | (wide[:, 1] << 8) | wide[:, 2]
-
-
 def label_field_name(clustering: str) -> str:
     """PointCloud2 field of a clustering's labels: ``col+nor`` -> ``label_col_nor``."""
     return "label_" + "".join(c if c.isalnum() or c == "_" else "_" for c in clustering)
@@ -150,39 +140,52 @@ def encode_pointcloud2(
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"positions must be (N, 3), got {positions.shape}")
     count = positions.shape[0]
-    columns: list[tuple[str, int, np.ndarray]] = [
-        (axis, FLOAT32, positions[:, k]) for k, axis in enumerate("xyz")]
+    fields: list[tuple[str, int]] = [("x", FLOAT32), ("y", FLOAT32), ("z", FLOAT32)]
     if colors is not None:
-        if len(colors) != count:
-            raise ValueError(f"colors have {len(colors)} rows, positions {count}")
-        columns.append(("rgb", FLOAT32, pack_rgb(colors).view(np.float32)))
+        colors = np.asarray(colors)
+        if colors.shape != (count, 3) or colors.dtype != np.uint8:
+            raise ValueError(f"colors must be ({count}, 3) uint8, got {colors.shape} "
+                             f"{colors.dtype}")
+        fields.append(("rgb", FLOAT32))
     if normals is not None:
         normals = np.asarray(normals)
         if normals.shape != (count, 3):
             raise ValueError(f"normals must be ({count}, 3), got {normals.shape}")
-        columns += [(f"normal_{axis}", FLOAT32, normals[:, k]) for k, axis in enumerate("xyz")]
-    for name, values in (labels or {}).items():
-        values = np.asarray(values)
+        fields += [("normal_x", FLOAT32), ("normal_y", FLOAT32), ("normal_z", FLOAT32)]
+    label_columns = {label_field_name(name): np.asarray(values)
+                     for name, values in (labels or {}).items()}
+    if len(label_columns) != len(labels or {}):
+        raise ValueError(f"clusterings {sorted(labels or {})} give the same field name")
+    for name, values in label_columns.items():
         if values.shape != (count,):
             raise ValueError(f"labels {name!r} must be ({count},), got {values.shape}")
-        columns.append((label_field_name(name), UINT32, values.astype(np.int64) & 0xFFFFFFFF))
-    names = [name for name, _, _ in columns]
-    if len(set(names)) != len(names):
-        raise ValueError(f"duplicate PointCloud2 field names: {names}")
-    # one row of 4-byte words per point (a numpy structured array is ~5x slower to fill)
-    table = np.empty((count, len(columns)), np.dtype("<u4"))
+        fields.append((name, UINT32))
+    # one row of 4-byte words per point, filled column by column (copies that are strided but
+    # aligned on the destination: a numpy structured array was ~5x slower)
+    table = np.empty((count, len(fields)), np.dtype("<u4"))
     floats = table.view(np.dtype("<f4"))
     floats[:, :3] = positions
-    for k, (_, kind, values) in enumerate(columns[3:], start=3):
-        (floats if kind == FLOAT32 else table)[:, k] = values
-    point_step = 4 * len(columns)
+    column = 3
+    if colors is not None:  # float32 'rgb' whose bits are 0x00RRGGBB: bytes B, G, R, 0
+        as_bytes = table.view(np.uint8).reshape(count, 4 * len(fields))
+        for offset, channel in ((12, 2), (13, 1), (14, 0)):
+            as_bytes[:, offset] = colors[:, channel]
+        as_bytes[:, 15] = 0
+        column += 1
+    if normals is not None:
+        floats[:, column:column + 3] = normals
+        column += 3
+    for values in label_columns.values():
+        table[:, column] = values.astype(np.int64) & 0xFFFFFFFF  # -1 -> 0xFFFFFFFF
+        column += 1
+    point_step = 4 * len(fields)
     point_field = msg_type("sensor_msgs/msg/PointField")
     message = msg_type(POINT_CLOUD2)(
         header=header(stamp_ns, frame_id), height=1, width=count,
         fields=[point_field(name=name, offset=4 * k, datatype=kind, count=1)
-                for k, (name, kind, _) in enumerate(columns)],
+                for k, (name, kind) in enumerate(fields)],
         is_bigendian=False, point_step=point_step, row_step=point_step * count,
-        data=table.reshape(-1).view(np.uint8), is_dense=bool(np.isfinite(positions).all()))
+        data=table.reshape(-1).view(np.uint8), is_dense=bool(np.isfinite(floats[:, :3]).all()))
     return serialize(message, POINT_CLOUD2)
 
 
