@@ -152,7 +152,6 @@ def check_graph(graph: dict, topic_info) -> None:
     assert graph[INFO] == ["sensor_msgs/msg/CameraInfo"]
     # the bridge's subscription to the colour topic, as `ros2 topic info -v` shows it
     assert "gngdt_camera" in {endpoint.node_name for endpoint in topic_info.subscribers}
-    assert "camera" in {endpoint.node_name for endpoint in topic_info.publishers}
 
 
 def check_points(cloud, frames: list, sent: dict[int, int], camera: dict) -> np.ndarray:
@@ -266,15 +265,20 @@ def gngdt_clouds(endpoint: str) -> tuple[object, list]:
 
 def publish_bad_input(sdk, driver: CameraDriver, color: np.ndarray, depth: np.ndarray) -> None:
     """Seven messages the bridge must refuse: three of garbage on the colour key, a yuv422
-    image, a frame over 640x480 (colour and depth), an uncalibrated CameraInfo."""
+    image, a frame over 640x480 (colour and depth), an uncalibrated CameraInfo. A pause after
+    each (or each frame's three): the bridge holds at most 8 samples, and a burst beyond that
+    would be dropped (counted as such) before being refused."""
     noise = sdk.ZenohSession.get_instance().session
     for garbage in (b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3):
         noise.put(driver.publishers[COLOR].keyexpr, garbage)
+        time.sleep(0.2)
     driver.publishers[COLOR].publish(
         header=driver.header(stamp=driver.time(sec=1, nanosec=0), frame_id="x"),
         height=1, width=2, encoding="yuv422", is_bigendian=0, step=4, data=np.zeros(4, np.uint8))
+    time.sleep(0.2)
     big = np.zeros((481, 640, 3), np.uint8)  # one row over --max-frame-pixels
     driver.publish(big, np.zeros((481, 640), np.uint16), time.time_ns())
+    time.sleep(0.2)
     CameraDriver.publish(driver_with(driver, dict(driver.camera, fx=0.0, fy=0.0)), color, depth,
                          1)
 
@@ -334,8 +338,8 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
                     return {kv.key: kv.value for kv in ours[0].values} if ours else {}
 
                 # 3 garbage, yuv422, the big colour and depth, the uncalibrated CameraInfo
-                wait_for(lambda: int(status_values().get("camera/images/malformed", 0)) >= 7,
-                         10, "the bad messages counted in the status")
+                wait_for(lambda: int(status_values().get("camera/images/malformed", 0)) == 7,
+                         15, "the bad messages counted in the status")
             finally:
                 driver.close()
                 tf.close()
