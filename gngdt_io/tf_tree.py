@@ -83,6 +83,19 @@ class _Link:
             self._sorted = stamps[order], values[order]
         return self._sorted
 
+    def forget_before(self, stamp_ns: int) -> int:
+        """Drop the samples older than ``stamp_ns``, keeping the newest one; how many went."""
+        if self.static or len(self) < 2:
+            return 0
+        stamps, values = self.samples()
+        keep = min(int(np.searchsorted(stamps, stamp_ns)), len(stamps) - 1)
+        if keep == 0:
+            return 0
+        self._stamps = array("q", stamps[keep:].tobytes())
+        self._values = array("d", values[keep:].tobytes())
+        self._sorted = None
+        return keep
+
     def at(self, stamp_ns: int, max_extrapolation_ns: int, child: str) -> np.ndarray:
         """(4, 4) parent_from_child at ``stamp_ns``."""
         stamps, values = self.samples()
@@ -154,6 +167,12 @@ class TransformTree:
         q = -q if q[3] < 0 else q  # one sign for each rotation, as matrix_to_pose gives
         self.samples += 0 if link.static and len(link) else 1  # a static one replaces
         link.add(int(stamp_ns), t, q)
+
+    def forget_before(self, stamp_ns: int) -> None:
+        """Drop the samples of dynamic transforms older than ``stamp_ns`` (each link keeps its
+        newest one): a live ``/tf`` stream is held over a window, not for ever."""
+        for link in self._links.values():
+            self.samples -= link.forget_before(stamp_ns)
 
     def _ancestors(self, frame: str) -> list[str]:
         """``frame`` and its parents up to its tree's root, in that order."""

@@ -81,7 +81,7 @@ DEFAULT_MAX_GAP_S = 5.0
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_source_arguments(parser)
     _add_replay_arguments(parser)
-    _add_cloud_arguments(parser)
+    add_cloud_arguments(parser)
     _add_limit_arguments(parser)
     add_zenoh_arguments(parser)
 
@@ -150,7 +150,8 @@ def add_camera_arguments(parser: argparse.ArgumentParser) -> None:
                         "the source says")
 
 
-def _add_cloud_arguments(parser: argparse.ArgumentParser) -> None:
+def add_cloud_arguments(parser: argparse.ArgumentParser) -> None:
+    """How a frame becomes a cloud (depth range, voxel, veil, point cap); see `frame_to_cloud`."""
     parser.add_argument("--min-depth", type=float, default=0.1, help="metres (default 0.1)")
     parser.add_argument("--max-depth", type=float, default=10.0, help="metres (default 10)")
     parser.add_argument(
@@ -187,6 +188,13 @@ def _add_limit_arguments(parser: argparse.ArgumentParser) -> None:
         "--max-transforms", type=int, default=defaults.max_transform_samples, metavar="N",
         help="transform samples (/tf) read for camera poses, 64 bytes each, ~40 s a million "
         f"(default {defaults.max_transform_samples:,}); the rest are not read, with a warning")
+
+
+def frame_to_cloud(args: argparse.Namespace) -> FrameToCloud:
+    """The frame-to-cloud conversion `add_cloud_arguments` describes (``ValueError`` for a wrong
+    value)."""
+    return FrameToCloud(CloudOptions(args.min_depth, args.max_depth, args.voxel,
+                                     args.max_points or None, args.drop_veil), args.seed)
 
 
 def source_options(args: argparse.Namespace) -> SourceOptions:
@@ -356,11 +364,7 @@ def main(args: argparse.Namespace) -> int:
     try:
         args.recording = source_spec(args)
         source = open_source(args.recording, options=source_options(args))
-        to_cloud = FrameToCloud(
-            CloudOptions(args.min_depth, args.max_depth, args.voxel, args.max_points or None,
-                         args.drop_veil),
-            args.seed,
-        )
+        to_cloud = frame_to_cloud(args)
         clock = ReplayClock(None if args.fast or source.live else args.rate, args.max_gap)
     except (ValueError, RecordingError) as error:
         log.error("%s", error)

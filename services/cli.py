@@ -22,6 +22,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "router": ("services.router", "run a zenoh router for standalone services"),
     "record": ("services.record", "make recordings: synthetic scenes or real RGB-D frames"),
     "segment": ("services.segment", "segment RGB-D frames: a label image per frame"),
+    "ros2": ("services.ros2", "bridge to ROS 2 (rmw_zenoh): camera topics in, results out"),
     "eval": ("gngdt_eval.cli", "evaluate: the paper's tables, recordings, logged runs"),
 }
 

@@ -5,7 +5,7 @@
 #
 # DIR (default config/secure/certs): where ca.pem/ca.key, router.pem/router.key and one
 # <CLIENT_CN>.pem/.key per client name (default: one per role, gngdt-capture, gngdt-learner,
-# gngdt-logger, gngdt-viewer) are written.
+# gngdt-logger, gngdt-bridge, gngdt-viewer) are written.
 # ROUTER_HOST (default localhost): the router's DNS name, also put in the certificate's
 # subjectAltName together with 127.0.0.1; clients must connect to this name.
 # Client certificates carry their name as Common Name: the router's access_control matches it
@@ -14,7 +14,7 @@ set -eu
 dir=${1:-config/secure/certs}
 host=${2:-localhost}
 [ $# -ge 2 ] && shift 2 || shift $#
-[ $# -eq 0 ] && set -- gngdt-capture gngdt-learner gngdt-logger gngdt-viewer
+[ $# -eq 0 ] && set -- gngdt-capture gngdt-learner gngdt-logger gngdt-bridge gngdt-viewer
 mkdir -p "$dir"
 umask 077
 openssl req -x509 -newkey rsa:2048 -nodes -days 365 -subj "/CN=gngdt-ca" \

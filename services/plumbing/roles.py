@@ -6,6 +6,9 @@ the streams DESIGN's topics table gives it, enforced by the router's zenoh acces
 - learner: puts ``gngdt/<cam>/{topology,objects,scene,learner/status}`` and answers topology
   queries, tokens ``gngdt/<cam>/learner/alive`` and ``gngdt/<cam>/learner/instance/*``;
 - logger: puts nothing, token ``gngdt/logger/alive/*``;
+- bridge (``gngdt ros2``): with camera input from ROS 2 puts that camera's
+  ``gngdt/<cam>/{color,depth,calibration,points}``, tokens ``gngdt/<cam>/ros2/alive`` and
+  ``gngdt/<cam>/capture/alive`` (``gngdt run --ros2`` starts it without input: it puts nothing);
 - viewer: puts nothing, no token.
 
 Every role may subscribe to, query and hear the liveliness of ``gngdt/**``; nothing else is
@@ -37,6 +40,7 @@ ROLE_STREAMS: dict[str, tuple[str, ...]] = {
     "capture": CAPTURE_STREAMS,
     "learner": LEARNER_STREAMS,
     "logger": (),
+    "bridge": ("color", "depth", "calibration", "points"),
     "viewer": (),
 }
 #: the liveliness tokens each role may declare
@@ -44,11 +48,12 @@ ROLE_TOKENS: dict[str, tuple[str, ...]] = {
     "capture": ("gngdt/*/capture/alive",),
     "learner": ("gngdt/*/learner/alive", "gngdt/*/learner/instance/*"),
     "logger": ("gngdt/logger/alive/*",),
+    "bridge": ("gngdt/*/ros2/alive", "gngdt/*/capture/alive"),
     "viewer": (),
 }
 ROLES = tuple(ROLE_STREAMS)
 #: the role of each gngdt service (subcommand)
-SERVICE_ROLES = {"capture": "capture", "learn": "learner", "log": "logger"}
+SERVICE_ROLES = {"capture": "capture", "learn": "learner", "log": "logger", "ros2": "bridge"}
 
 _EVERYTHING = ["gngdt/**"]
 

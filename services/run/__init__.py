@@ -60,11 +60,14 @@ EXAMPLES = """examples:
   gngdt run recordings/tabletop.mcap --keep-everything            # every frame in full in the .rrd
   gngdt run --realsense                              # the RealSense plugged in, until Ctrl-C
   gngdt run session.db3 --foxglove                   # live in Foxglove at ws://127.0.0.1:8765
+  gngdt run recordings/tabletop.mcap --ros2          # + ROS 2 topics, via rmw_zenohd on 7447
 """
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: capture's point cap under `gngdt run`: a uniform random subset, as the learner's own sampling
 DEFAULT_MAX_POINTS = 50_000
+#: where `--ros2` finds ROS 2 by default: rmw_zenohd listens there
+ROS2_ROUTER = "tcp/127.0.0.1:7447"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -112,6 +115,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="after the stream ends, how long learner and logger may take to "
                         "finish before they are interrupted (default 30)")
     add_rate_arguments(parser)
+    parser.add_argument("--ros2", nargs="?", const=ROS2_ROUTER, metavar="ENDPOINT",
+                        help="also run `gngdt ros2 --no-input`: the results as ROS 2 topics on the "
+                        f"ROS 2 router at ENDPOINT (default {ROS2_ROUTER}, rmw_zenohd's)")
 
 
 @dataclass(eq=False)  # a process: equal only to itself (and hashable)
@@ -331,6 +337,12 @@ def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None)
     return arguments
 
 
+def ros2_arguments(args: argparse.Namespace) -> list[str]:
+    """The ROS 2 bridge's command line under ``run --ros2``: results out, no camera input."""
+    return ["--cam", args.cam, "--no-input", "--ros2-connect", args.ros2,
+            "--router-wait", str(args.startup_timeout)]
+
+
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
                      mcap_path: Path | None = None) -> list[str]:
     arguments = [*rate_arguments(args), "--overwrite"]
@@ -465,6 +477,9 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
     learner = pipeline.start("learn", learner_arguments(args))
     logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
     starting = {learner: f"gngdt/{args.cam}/learner/alive", logger: LIVELINESS_KEY}
+    if args.ros2:  # the results into ROS 2 as well (see `gngdt ros2`)
+        bridge = pipeline.start("ros2", ros2_arguments(args))
+        starting[bridge] = f"gngdt/{args.cam}/ros2/alive"
     silent = wait_for_startup(starting, observed, args.startup_timeout, stop, pipeline)
     ready = not silent and not stop.is_set() and pipeline.failed() is None
     early_end, stream_ended = "", False
@@ -496,5 +511,7 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
                  "interrupted" if stop.is_set() else early_end or "a service failed")
         pipeline.interrupt_all()
     for child in pipeline.children:
+        if child.name == "ros2":  # bridges until told to stop: once the others are done
+            child.interrupt()
         child.stop(args.drain_timeout)
     return early_end

@@ -70,13 +70,13 @@ def test_the_runs_credentials_are_private_files_removed_at_its_end(tmp_path: Pat
     folder.mkdir(mode=0o700)
     access = RunAccess("tcp/127.0.0.1:7447", folder)
     files = [access.users_file, *access.client_files.values()]
-    assert sorted(access.client_files) == ["capture", "learner", "logger"]
+    assert sorted(access.client_files) == ["bridge", "capture", "learner", "logger"]
     for path in files:
         assert stat.S_IMODE(path.stat().st_mode) == 0o600
     users = dict(line.split(":", 1) for line in access.users_file.read_text().splitlines())
     for role, path in access.client_files.items():  # each service gets its own role only
         auth = json.loads(path.read_text())["transport"]["auth"]["usrpwd"]
         assert auth == {"user": role, "password": users[role]}
-    assert len(set(users.values())) == 3
+    assert len(set(users.values())) == 4
     access.forget()
     assert not any(path.exists() for path in files)

@@ -1,0 +1,234 @@
+"""Bridge gngdt and ROS 2 over zenoh (rmw_zenoh's wire format): camera topics in, results out.
+
+A robot's camera topics come in; clouds, nodes, graph, objects, camera pose and status go out,
+in ROS 2's graph, without a ROS installation.
+
+A ROS 2 node ``gngdt_<cam>`` (domain ``--domain``, else ``ROS_DOMAIN_ID``, else 0) on the same
+router as the other services (or on the ROS 2 router ``--ros2-connect`` names):
+
+out (`services.ros2.outbound`): ``/gngdt/<cam>/points`` sensor_msgs/PointCloud2 (x, y, z, rgb),
+``/gngdt/<cam>/nodes`` PointCloud2 (x, y, z, rgb, normal_x/y/z, a uint32 ``label_<clustering>``
+per clustering: the persistent cluster id, 0xFFFFFFFF for none), ``/gngdt/<cam>/graph``
+visualization_msgs/MarkerArray (a LINE_LIST per topology, coloured by cluster; at most
+``--graph-rate`` a second), ``/gngdt/<cam>/objects`` MarkerArray (a CUBE and a TEXT_VIEW_FACING
+label per object, marker id = object id; DELETE for ids gone), ``/tf`` tf2_msgs/TFMessage (fixed
+frame -> camera when the clouds have poses) and ``/gngdt/<cam>/status``
+diagnostic_msgs/DiagnosticArray (the bridge's and the learner's status, once a second).
+
+in (`services.ros2.inbound`, unless ``--no-input``): a camera driver's colour and depth
+sensor_msgs/Image and CameraInfo (realsense2_camera's names by default), paired by stamp, as
+gngdt frames on ``gngdt/<cam>/{color,depth,calibration,points}`` (what `gngdt capture`
+publishes), with poses from ``/tf`` when ``--fixed-frame`` names a frame.
+
+Liveliness tokens: the node, each publisher and subscription (ROS 2's graph: ``ros2 node
+list``, ``ros2 topic list``), and gngdt's ``gngdt/<cam>/ros2/alive`` (and, with input,
+``gngdt/<cam>/capture/alive``). A bad message is counted in the status and skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import time
+from typing import TYPE_CHECKING
+
+from gngdt_io.mcap_limits import ReadLimits
+from gngdt_io.sources.base import DEFAULT_MAX_SKEW_MS
+from schemas.wire import DEFAULT_CAMERA
+from services.capture import add_cloud_arguments
+from services.plumbing.session import add_zenoh_arguments
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from gngdt_io.deproject import FrameToCloud
+
+log = logging.getLogger(__name__)
+
+EXAMPLES = """examples:
+  gngdt ros2 --zenoh-connect tcp/127.0.0.1:7447      # beside rmw_zenohd: a RealSense in, all out
+  gngdt ros2 --fixed-frame odom --voxel 0.01         # camera poses from /tf, learned in odom
+  gngdt ros2 --color-topic /kinect/rgb/image_raw --depth-topic /kinect/depth/image_raw \\
+      --camera-info-topic /kinect/rgb/camera_info --max-skew-ms 20
+  gngdt ros2 --no-input --domain 3                   # only what gngdt learns, into domain 3
+  gngdt run recordings/tabletop.mcap --ros2          # a recording's results into ROS 2
+"""
+
+#: ROS 2's largest domain id (ROS 2's documentation: 0-232 on Linux)
+MAX_DOMAIN_ID = 232
+DEFAULT_GRAPH_RATE_HZ = 2.0
+#: how often /gngdt/<cam>/status is published
+STATUS_PERIOD_S = 1.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from services.ros2.inbound import CameraTopics
+
+    parser.add_argument("--cam", default=DEFAULT_CAMERA,
+                        help="camera name in gngdt's topics; the ROS 2 node is gngdt_<cam>, its "
+                        "topics /gngdt/<cam>/... (letters, digits and _)")
+    parser.add_argument("--domain", type=int, metavar="ID",
+                        help=f"ROS 2 domain id, 0-{MAX_DOMAIN_ID} (default: ROS_DOMAIN_ID, else 0)")
+    parser.add_argument("--ros2-connect", action="append", metavar="ENDPOINT",
+                        help="the ROS 2 side is on this router (e.g. rmw_zenohd's "
+                        "tcp/127.0.0.1:7447), joined as a second client session; default: the "
+                        "router the other services use")
+    out = parser.add_argument_group("out (gngdt -> ROS 2)")
+    out.add_argument("--graph-rate", type=float, default=DEFAULT_GRAPH_RATE_HZ, metavar="HZ",
+                     help="most graphs (/gngdt/<cam>/graph) a second: a MarkerArray of "
+                     "thousands of lines takes ~100 ms to encode "
+                     f"(default {DEFAULT_GRAPH_RATE_HZ:g})")
+    out.add_argument("--camera-frame", metavar="FRAME",
+                     help="ROS frame of a posed cloud's points, the child of the fixed frame in "
+                     "/tf (default: the camera name); must not be a frame the robot's TF "
+                     "already has")
+    camera = parser.add_argument_group("in (a ROS 2 camera driver -> gngdt)")
+    camera.add_argument("--no-input", action="store_true",
+                        help="subscribe to no camera (gngdt's own capture publishes the frames)")
+    defaults = CameraTopics()
+    camera.add_argument("--color-topic", default=defaults.color,
+                        help=f"colour sensor_msgs/Image, rgb8 or bgr8 (default {defaults.color})")
+    camera.add_argument("--depth-topic", default=defaults.depth,
+                        help="depth sensor_msgs/Image aligned to colour, 16UC1 millimetres or "
+                        f"32FC1 metres (default {defaults.depth})")
+    camera.add_argument("--camera-info-topic", default=defaults.camera_info,
+                        help=f"colour sensor_msgs/CameraInfo (default {defaults.camera_info})")
+    camera.add_argument("--max-skew-ms", type=float, default=DEFAULT_MAX_SKEW_MS,
+                        help="largest stamp difference between a colour and a depth image "
+                        f"paired into a frame (default {DEFAULT_MAX_SKEW_MS:g})")
+    camera.add_argument("--fixed-frame", metavar="FRAME",
+                        help="look up each frame's camera pose in this frame (e.g. odom, map) "
+                        "in /tf and /tf_static; frames without a pose publish no cloud "
+                        "(default: no poses, camera-frame clouds)")
+    limits = ReadLimits()
+    camera.add_argument("--max-frame-pixels", type=int, default=limits.max_frame_pixels,
+                        metavar="N", help="largest image, width x height (default "
+                        f"{limits.max_frame_pixels:,}); a larger one is refused, counted")
+    camera.add_argument("--max-pending-mb", type=int, default=limits.max_held_bytes >> 20,
+                        metavar="MB", help="images held waiting for their partner (default "
+                        f"{limits.max_held_bytes >> 20})")
+    add_cloud_arguments(camera)
+    add_zenoh_arguments(parser)
+
+
+def domain_id(args: argparse.Namespace) -> int:
+    """``--domain``, else ``ROS_DOMAIN_ID``, else 0; ``ValueError`` naming the source."""
+    if args.domain is not None:
+        value, source = args.domain, "--domain"
+    else:
+        text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        if not text:
+            return 0
+        source = f"ROS_DOMAIN_ID={text!r}"
+        value = int(text) if text.isdigit() else -1
+    if not 0 <= value <= MAX_DOMAIN_ID:
+        raise ValueError(f"{source}: a ROS 2 domain id is 0-{MAX_DOMAIN_ID}")
+    return value
+
+
+def check_names(args: argparse.Namespace) -> None:
+    """The camera name and topics must make valid ROS 2 names (``ValueError`` says which)."""
+    from gngdt_io.ros2.wire import validate_node_name, validate_topic_name
+    from schemas.wire import topic
+
+    topic(args.cam, "points")
+    try:
+        validate_node_name(f"gngdt_{args.cam}")
+        validate_topic_name(f"/gngdt/{args.cam}/points")
+    except ValueError:
+        raise ValueError(f"--cam {args.cam!r}: ROS 2 names take letters, digits and _ only "
+                         "(the node is gngdt_<cam>)") from None
+    for option in ("color_topic", "depth_topic", "camera_info_topic"):
+        try:
+            validate_topic_name(getattr(args, option))
+        except ValueError as error:
+            raise ValueError(f"--{option.replace('_', '-')}: {error}") from None
+    if not args.graph_rate > 0:
+        raise ValueError(f"--graph-rate must be positive, got {args.graph_rate}")
+    if args.max_skew_ms < 0:
+        raise ValueError(f"--max-skew-ms must be >= 0, got {args.max_skew_ms}")
+    ReadLimits(max_frame_pixels=args.max_frame_pixels,
+               max_held_bytes=args.max_pending_mb << 20)  # positive, or ValueError
+
+
+def main(args: argparse.Namespace) -> int:
+    from services.capture import frame_to_cloud
+    from services.plumbing.session import ZenohSetupError, open_session
+
+    try:
+        check_names(args)
+        domain = domain_id(args)
+        to_cloud = frame_to_cloud(args)
+    except ValueError as error:
+        log.error("%s", error)
+        return 2
+    sessions: list[zenoh.Session] = []
+    try:
+        sessions.append(open_session(args))
+        if args.ros2_connect:
+            sessions.append(open_ros2_session(args.ros2_connect, args.router_wait))
+    except ZenohSetupError as error:
+        log.error("%s", error)
+        for session in sessions:
+            session.close()
+        return 1
+    try:
+        bridge(args, sessions[0], sessions[-1], domain, to_cloud)
+    finally:
+        for session in reversed(sessions):
+            session.close()
+    return 0
+
+
+def open_ros2_session(endpoints: list[str], wait_s: float) -> zenoh.Session:
+    """A client session of the ROS 2 router (loopback defaults: listening nowhere, no scouting)."""
+    from services.plumbing.session import client_config, open_config
+
+    return open_config(client_config(endpoints), what="ROS 2 session", wait_s=wait_s)
+
+
+def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, domain: int,
+           to_cloud: FrameToCloud) -> None:
+    """Translate until a stop signal; everything declared is undeclared on the way out."""
+    from gngdt_io.ros2.messages import OK, WARN, Status
+    from gngdt_io.ros2.node import Ros2Node
+    from services.plumbing import lifecycle
+    from services.ros2.inbound import CameraTopics, RosToGngdt
+    from services.ros2.outbound import GngdtToRos
+
+    node = Ros2Node(ros, f"gngdt_{args.cam}", domain_id=domain)
+    outbound = GngdtToRos(gngdt, node, args.cam, args.camera_frame or args.cam,
+                          1.0 / args.graph_rate)
+    inbound = None
+    tokens = [gngdt.liveliness().declare_token(f"gngdt/{args.cam}/ros2/alive")]
+    try:
+        if not args.no_input:
+            inbound = RosToGngdt(
+                gngdt, node, args.cam,
+                CameraTopics(args.color_topic, args.depth_topic, args.camera_info_topic),
+                to_cloud, max_skew_ns=int(args.max_skew_ms * 1e6),
+                max_pixels=args.max_frame_pixels, max_held_bytes=args.max_pending_mb << 20,
+                fixed_frame=args.fixed_frame)
+            tokens.append(gngdt.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive"))
+        log.info("ROS 2 node gngdt_%s in domain %d: %s", args.cam, domain,
+                 "camera in, results out" if inbound else "results out")
+        skipped = 0
+        with lifecycle.graceful() as stop:
+            while not stop.wait(STATUS_PERIOD_S):
+                values = outbound.counts() | (inbound.counts_for_status() if inbound else {})
+                bad = sum(value for key, value in values.items()
+                          if key.endswith(("malformed", "failed", "bad_frames")))
+                outbound.publish_status(Status(
+                    f"gngdt/{args.cam}/ros2", WARN if bad > skipped else OK,
+                    f"skipped {bad - skipped} bad messages" if bad > skipped else "bridging",
+                    args.cam, values))
+                skipped = bad
+    finally:
+        for token in tokens:
+            token.undeclare()
+        outbound.close()
+        if inbound is not None:
+            inbound.close()
+        node.close()
+        time.sleep(0.1)  # let the undeclarations reach the router

@@ -1,0 +1,215 @@
+"""ROS 2 -> gngdt: a camera driver's colour, depth and CameraInfo topics as gngdt frames, published
+on ``gngdt/<cam>/{color,depth,calibration,points}`` exactly as `gngdt capture` publishes a
+recording's (`services.capture.CapturePublisher`, `gngdt_io.deproject.FrameToCloud`), so the
+learner and the logger work unchanged.
+
+Colour and depth are paired by stamp within ``max_skew_ns`` (`gngdt_io.frame_assembly`); images
+wait at most ``max_held_bytes`` for a partner. With a fixed frame named, each frame's camera pose
+is looked up in ``/tf`` and ``/tf_static`` at its stamp (as tf2 does, interpolated; up to
+``LIVE_TF_EXTRAPOLATION_NS`` past the newest transform); a frame without a pose publishes its
+images but no cloud. Each frame's capture time is its colour image's stamp when that is
+wall-clock time (within a day of this clock), else (simulated time) the time it arrived.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from gngdt_io.frame import CameraPose
+from gngdt_io.frame_assembly import DecodedImage, FrameAssembler
+from gngdt_io.ros2.messages import (
+    CAMERA_INFO,
+    IMAGE,
+    TF_MESSAGE,
+    decode_camera_info,
+    decode_image,
+    decode_tf,
+    type_hash,
+)
+from gngdt_io.ros2.wire import QOS_SENSOR_DATA, QOS_TF, Durability, Qos
+from gngdt_io.tf_tree import TransformError, TransformTree
+from schemas.wire import MAX_CLOCK_OFFSET_NS, FrameStamp
+from services.capture import CapturePublisher
+from services.ros2.worker import Worker
+
+if TYPE_CHECKING:
+    import zenoh
+
+    from gngdt_io.deproject import FrameToCloud
+    from gngdt_io.errors import RecordingError
+    from gngdt_io.frame import Frame
+    from gngdt_io.ros2.node import Ros2Node
+
+log = logging.getLogger(__name__)
+
+#: image encodings taken as colour and as depth (16UC1/mono16 millimetres, 32FC1 metres)
+COLOR_ENCODINGS = frozenset({"rgb8", "bgr8", "rgba8", "bgra8", "mono8"})
+DEPTH_ENCODINGS = frozenset({"16UC1", "mono16", "32FC1"})
+#: a frame may be this much newer than the newest transform of its chain (a live /tf at 10 Hz)
+LIVE_TF_EXTRAPOLATION_NS = 100_000_000
+#: transforms older than this (behind the newest) are forgotten: /tf is held over a window
+TF_WINDOW_NS = 10_000_000_000
+#: tf2_ros' static listener QoS: reliable, transient local, keep last 100
+QOS_TF_STATIC = Qos(durability=Durability.TRANSIENT_LOCAL, depth=100)
+#: bad frames, frames without pose, transforms refused: warned one by one up to this many
+WARN_FIRST = 5
+
+
+@dataclass(frozen=True)
+class CameraTopics:
+    """A camera driver's topics (realsense2_camera's default names)."""
+
+    color: str = "/camera/camera/color/image_raw"
+    depth: str = "/camera/camera/aligned_depth_to_color/image_raw"
+    camera_info: str = "/camera/camera/color/camera_info"
+
+
+@dataclass
+class InboundCounts:
+    """Frames made of the camera's images, and what was skipped (each also warned about)."""
+
+    frames_published: int = 0
+    frames_without_pose: int = 0
+    images_before_calibration: int = 0
+    bad_frames: int = 0
+    transforms_refused: int = 0
+
+
+class RosToGngdt:
+    """Subscribes (with ``node``) to a camera's topics, and ``/tf`` + ``/tf_static`` when
+    ``fixed_frame`` is named; publishes its frames on ``session`` as camera ``camera``."""
+
+    def __init__(self, session: zenoh.Session, node: Ros2Node, camera: str, topics: CameraTopics,
+                 to_cloud: FrameToCloud, *, max_skew_ns: int, max_pixels: int,
+                 max_held_bytes: int, fixed_frame: str | None = None) -> None:
+        self.publisher = CapturePublisher(session, camera)
+        self.to_cloud = to_cloud
+        self.max_pixels = max_pixels
+        self.fixed_frame = fixed_frame
+        self.counts = InboundCounts()
+        self.transforms = TransformTree(max_extrapolation_ns=LIVE_TF_EXTRAPOLATION_NS)
+        self.assembler = FrameAssembler(
+            Path(topics.color), None, max_skew_ns, on_bad_frame=self._bad_frame,
+            poses=self._pose if fixed_frame else None, max_held_bytes=max_held_bytes)
+        self.worker = Worker("camera", self._on_sample, capacity=8)
+        self._sequence = 0
+        self._newest_transform_ns = 0
+        self._pruned_at = 0.0
+        self._simulated_time = False
+        subscriptions = [(topics.color, "color", IMAGE, QOS_SENSOR_DATA),
+                         (topics.depth, "depth", IMAGE, QOS_SENSOR_DATA),
+                         (topics.camera_info, "camera_info", CAMERA_INFO, QOS_SENSOR_DATA)]
+        if fixed_frame:
+            subscriptions += [("/tf", "tf", TF_MESSAGE, QOS_TF),
+                              ("/tf_static", "tf_static", TF_MESSAGE, QOS_TF_STATIC)]
+        for name, stream, kind, qos in subscriptions:
+            node.create_subscription(name, kind, type_hash(kind), self._feed(stream), qos)
+        self.worker.start()
+
+    def _feed(self, stream: str):
+        def on_message(payload: bytes, _attachment: object) -> None:
+            self.worker.put(stream, payload, None)
+        return on_message
+
+    def _on_sample(self, stream: str, payload: bytes, attachment: bytes | None) -> None:
+        if stream == "camera_info":
+            intrinsics = decode_camera_info(payload).intrinsics
+            if intrinsics != self.assembler.calibration:
+                log.info("camera calibration: %dx%d, fx %.1f fy %.1f cx %.1f cy %.1f",
+                         intrinsics.width, intrinsics.height, intrinsics.fx, intrinsics.fy,
+                         intrinsics.cx, intrinsics.cy)
+                for frame in self.assembler.add_calibration(intrinsics):
+                    self._publish(frame)
+        elif stream in ("color", "depth"):
+            self._on_image(stream, payload)
+        else:
+            self._on_transforms(payload, static=stream == "tf_static")
+
+    def _on_image(self, role: str, payload: bytes) -> None:
+        from gngdt_io.ros2.messages import Ros2MessageError
+
+        image = decode_image(payload, self.max_pixels)
+        accepted = COLOR_ENCODINGS if role == "color" else DEPTH_ENCODINGS
+        if image.encoding not in accepted:
+            raise Ros2MessageError(f"{role} image encoding {image.encoding!r} is not one of "
+                                   f"{', '.join(sorted(accepted))}")
+        if self.assembler.calibration is None:  # a driver sends CameraInfo with every frame
+            self.counts.images_before_calibration += 1
+            if self.counts.images_before_calibration == 1:
+                log.info("images arrive; waiting for the first CameraInfo")
+            return
+        for frame in self.assembler.add_image(role, DecodedImage(image.stamp_ns, image.pixels,
+                                                                 image.frame_id)):
+            self._publish(frame)
+
+    def _on_transforms(self, payload: bytes, static: bool) -> None:
+        for transform in decode_tf(payload):
+            try:
+                self.transforms.add(transform.parent, transform.child, transform.stamp_ns,
+                                    transform.translation, transform.rotation, static)
+            except TransformError as error:
+                self.counts.transforms_refused += 1
+                if self.counts.transforms_refused <= WARN_FIRST:
+                    log.warning("%s: %s; skipped", "/tf_static" if static else "/tf", error)
+                continue
+            self._newest_transform_ns = max(self._newest_transform_ns, transform.stamp_ns)
+        if time.monotonic() - self._pruned_at > 1.0:
+            self.transforms.forget_before(self._newest_transform_ns - TF_WINDOW_NS)
+            self._pruned_at = time.monotonic()
+
+    def _pose(self, camera_frame: str, stamp_ns: int,
+              index: int) -> tuple[CameraPose | None, str | None]:
+        """The camera's pose in the fixed frame at ``stamp_ns``, or why there is none."""
+        assert self.fixed_frame is not None
+        if not camera_frame:
+            return None, "the images carry no frame_id"
+        try:
+            matrix = self.transforms.lookup(self.fixed_frame, camera_frame, stamp_ns)
+        except TransformError as error:
+            return None, str(error)
+        return CameraPose(matrix, self.fixed_frame), None
+
+    def _bad_frame(self, error: RecordingError) -> None:
+        self.counts.bad_frames += 1
+        if self.counts.bad_frames <= WARN_FIRST:
+            log.warning("%s; skipped", error)
+
+    def _publish(self, frame: Frame) -> None:
+        """The frame on gngdt's topics: images, calibration when new, and its cloud unless a
+        fixed frame is named and the frame has no pose in it."""
+        now = time.time_ns()
+        capture_time = frame.timestamp_ns
+        if abs(now - capture_time) > MAX_CLOCK_OFFSET_NS:
+            if not self._simulated_time:
+                log.warning("image stamps are %.3g s from this clock (simulated time?): frames "
+                            "are stamped with their arrival time", (capture_time - now) / 1e9)
+                self._simulated_time = True
+            capture_time = now
+        positions = colors = None
+        if "pose_error" in frame.extras:
+            self.counts.frames_without_pose += 1
+            if self.counts.frames_without_pose <= WARN_FIRST:
+                log.warning("frame %d has no pose in %r: %s; its images are published, not its "
+                            "cloud", frame.index, self.fixed_frame, frame.extras["pose_error"])
+        else:
+            positions, colors = self.to_cloud(frame)
+        self.publisher.publish_frame(frame, FrameStamp(self._sequence, capture_time), positions,
+                                     colors)
+        self._sequence += 1
+        self.counts.frames_published += 1
+
+    def counts_for_status(self) -> dict[str, int]:
+        values = {f"camera/{key}": value for key, value in asdict(self.counts).items()}
+        values.update({f"camera/images/{key}": value
+                       for key, value in asdict(self.worker.counts).items()})
+        return values
+
+    def idle(self) -> bool:
+        return self.worker.idle()
+
+    def close(self) -> None:
+        self.worker.stop()
