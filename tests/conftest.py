@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, settings
+from synthetic_recordings import render_small_recording
 
 from services.plumbing.session import client_config, free_tcp_port, open_config, router_config
 
@@ -62,33 +63,22 @@ def router_endpoint(free_port: int) -> Iterator[str]:
     session.close()
 
 
-def _render_recording(directory: Path, scene: str, frames: int) -> Path:
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
-
-    path = directory / f"{scene}_small.mcap"
-    with RecordingWriter(path) as writer:
-        for frame in render_scene(scene, frames, width=320, height=240):
-            writer.write_frame(frame)
-    return path
-
-
 @pytest.fixture(scope="session")
 def data2_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An 8-frame 320x240 recording of the paper's Data2 scene (rendered once per session)."""
-    return _render_recording(tmp_path_factory.mktemp("recordings"), "data2", 8)
+    return render_small_recording(tmp_path_factory.mktemp("recordings"), "data2", 8)
 
 
 @pytest.fixture(scope="session")
 def one_frame_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A single 320x240 frame of the tabletop scene: a static input."""
-    return _render_recording(tmp_path_factory.mktemp("one_frame"), "tabletop", 1)
+    return render_small_recording(tmp_path_factory.mktemp("one_frame"), "tabletop", 1)
 
 
 @pytest.fixture(scope="session")
 def tabletop_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """An 8-frame 320x240 synthetic tabletop recording (rendered once per session)."""
-    return _render_recording(tmp_path_factory.mktemp("recordings"), "tabletop", 8)
+    return render_small_recording(tmp_path_factory.mktemp("recordings"), "tabletop", 8)
 
 
 @pytest.fixture

@@ -43,7 +43,7 @@ def test_forgeries_with_another_roles_credentials_are_not_recorded_and_do_not_st
         wait_for(lambda: "replaying" in log_path.read_text(), 120, "the services to come up")
         folder = zenoh_config_of(children(run.pid)[0]).parent
         assert sorted(path.name for path in folder.glob("*.json5")) == [
-            "capture.json5", "learner.json5", "logger.json5"]
+            "bridge.json5", "capture.json5", "learner.json5", "logger.json5"]
         endpoints = client_config(None, folder / "logger.json5").get_json("connect/endpoints")
         anonymous = client_config(json.loads(endpoints))
         anonymous.insert_json5("connect/timeout_ms", "2000")

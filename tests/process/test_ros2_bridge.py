@@ -381,11 +381,11 @@ def test_run_with_ros2_publishes_the_results_into_ros(
     """`gngdt run --ros2 ENDPOINT` on a recording whose camera moves: the bridge joins the ROS 2
     router, the robot side gets nodes, clouds in the camera frame and the camera's pose on
     /tf (one of the recording's poses), and run ends as usual."""
-    from conftest import _render_recording
+    from synthetic_recordings import render_small_recording
 
     from gngdt_io.mcap_reader import read_frames
 
-    recording = _render_recording(tmp_path, "tabletop_walk", 6)
+    recording = render_small_recording(tmp_path, "tabletop_walk", 6)
     poses = [frame.pose.matrix for frame in read_frames(recording)]
     port = int(router_endpoint.rsplit(":", 1)[1])
     received = Received()

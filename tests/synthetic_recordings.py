@@ -1,0 +1,17 @@
+"""Small synthetic recordings for tests, rendered by the virtual Kinect."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def render_small_recording(directory: Path, scene: str, frames: int) -> Path:
+    """``directory/<scene>_small.mcap``: ``frames`` 320x240 frames of a synthetic scene."""
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
+
+    path = directory / f"{scene}_small.mcap"
+    with RecordingWriter(path) as writer:
+        for frame in render_scene(scene, frames, width=320, height=240):
+            writer.write_frame(frame)
+    return path
