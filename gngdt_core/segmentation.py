@@ -17,12 +17,17 @@ position topology is here):
 3. Convexity topology. An edge is *convex* when neither end rises above the other's tangent
    plane by more than ``concavity_angle_deg`` (flat and convex folds; concave folds and steps
    are cut). These edges are the network's local-convexity topology (``convex_edges``).
-4. Objects. Two adjacent patches merge when ``convex_share`` of the position edges between them
-   are convex (the boundary's concavity at that quantile, interpolated, is below the concavity
-   angle: a 2-2 tie is settled by how concave the concave ones are) and there are at least
-   ``min_boundary_edges`` of them: a majority over the whole shared boundary, so one noisy edge
-   neither joins an object to its table nor splits a box. Merges are transitive (connected
-   components of the patch graph).
+4. Objects. Adjacent patches join, best first (most convex boundary, then the longest), when
+   at least ``min_boundary_edges`` position edges lie between them, ``convex_share`` of those
+   are convex, and at most ``crease_share`` of the node pairs between them (edges and two-edge
+   paths) are *creases*: one end rises above the other's tangent plane by more than
+   ``crease_angle_deg``, a sharp concave fold or a step, where a curved surface (a bowl's
+   inside) bends far less over two edges. After each join the union's boundary with every
+   neighbour is judged as a whole (the counts are summed), so a chain of small patches along a
+   crease — straddling nodes, the thin side of a box lying on another — cannot carry one object
+   into another or into its support: once the union holds both, the creases between them
+   count. (After LCCP's merging of convex-connected supervoxels, with CPC's idea of judging the
+   union of segments rather than single adjacencies.)
 5. Fragments. Segments of fewer than ``min_segment_nodes`` nodes (typically single nodes that
    straddle a crease) join the adjacent larger segment they share most convex edges with; they
    never bridge two larger segments. Those with no larger neighbour (chains of single nodes
@@ -72,11 +77,15 @@ class SegmentationParams:
     patch_angle_deg: float = 30.0
     #: an edge is convex unless one end rises above the other's tangent plane by more than this
     concavity_angle_deg: float = 10.0
-    #: adjacent patches merge when this share of their boundary edges is convex (the
-    #: boundary's concavity at this quantile is below the concavity angle) ...
+    #: adjacent patches merge when this share of their boundary edges is convex ...
     convex_share: float = 0.5
-    #: ... and the boundary has at least this many edges
+    #: ... and the boundary has at least this many edges ...
     min_boundary_edges: int = 3
+    #: ... and at most this share of the node pairs between them (edges and two-edge paths) are
+    #: creases: one end rises above the other's tangent plane by more than ``crease_angle_deg``
+    #: (a sharp concave fold or a step; a curved surface bends far less over two edges)
+    crease_share: float = 0.15
+    crease_angle_deg: float = 25.0
     #: segments smaller than this many nodes join a larger neighbour, or are no segment (-1)
     min_segment_nodes: int = 4
     #: metres: segments apart by a gap of missing depth at most this wide join where the two
@@ -84,9 +93,11 @@ class SegmentationParams:
     bridge_gap_m: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("smooth_angle_deg", "patch_angle_deg", "concavity_angle_deg"):
+        for name in ("smooth_angle_deg", "patch_angle_deg", "concavity_angle_deg",
+                     "crease_angle_deg"):
             check_real(name, getattr(self, name), 0.0, 90.0, low_open=True)
         check_real("convex_share", self.convex_share, 0.0, 1.0)
+        check_real("crease_share", self.crease_share, 0.0, 1.0)
         check_integer("min_boundary_edges", self.min_boundary_edges, 1)
         check_integer("min_segment_nodes", self.min_segment_nodes, 1)
         check_real("bridge_gap_m", self.bridge_gap_m, 0.0, 1.0)
@@ -161,9 +172,10 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     smooth = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i)) < _sine(params.smooth_angle_deg)
     concavity = np.maximum(rise_of_j, rise_of_i)
     convex = concavity < _sine(params.concavity_angle_deg)
-    patches = _smooth_patches(n, edges, smooth, normals, rise_of_j, rise_of_i,
+    adjacency = _adjacency(n, edges, smooth)
+    patches = _smooth_patches(n, edges, adjacency, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
-    objects = _merge_convex_patches(patches, edges, concavity, params)
+    objects = _join_patches(patches, adjacency, positions, normals, params)
     labels = rank_by_size(_absorb_fragments(objects, edges, convex, params.min_segment_nodes),
                           params.min_segment_nodes)
     if view is not None and params.bridge_gap_m > 0 and labels.max() > 0:
@@ -176,15 +188,16 @@ def _sine(degrees: float) -> float:
     return math.sin(math.radians(degrees))
 
 
-def _smooth_patches(n: int, edges: np.ndarray, smooth: np.ndarray, normals: np.ndarray,
+def _smooth_patches(n: int, edges: np.ndarray, adjacency: tuple, normals: np.ndarray,
                     rise_of_j: np.ndarray, rise_of_i: np.ndarray, cos_patch: float) -> np.ndarray:
-    """(n,) int32 patch of each node: region growing over smooth edges, flattest seeds first."""
+    """(n,) int32 patch of each node: region growing over smooth edges (``adjacency``'s flags),
+    flattest seeds first."""
     steepest = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i))
     roughness = np.zeros(n)
     np.maximum.at(roughness, edges[:, 0], steepest)
     np.maximum.at(roughness, edges[:, 1], steepest)
     seeds = np.argsort(roughness, kind="stable")
-    offsets, neighbours, usable = _adjacency(n, edges, smooth)
+    offsets, neighbours, usable = adjacency
     return SK.grow_patches(n, offsets, neighbours, usable, normals, seeds, cos_patch)
 
 
@@ -199,32 +212,24 @@ def _adjacency(n: int, edges: np.ndarray,
     return offsets, target[order], np.concatenate([flags, flags])[order]
 
 
-def _merge_convex_patches(patches: np.ndarray, edges: np.ndarray, concavity: np.ndarray,
-                          params: SegmentationParams) -> np.ndarray:
-    """(n,) segment of each node: patches joined where their shared boundary is mostly convex.
+def _join_patches(patches: np.ndarray, adjacency: tuple, positions: np.ndarray,
+                  normals: np.ndarray, params: SegmentationParams,
+                  fixed: np.ndarray | None = None) -> np.ndarray:
+    """(n,) segment of each node: patches joined, best first, while the boundary between the
+    two growing unions is mostly convex and free of creases (`_segment_kernels.join_regions`).
 
-    concavity: (E,) per edge, the sine of the larger of its two elevations. Two patches join
-    when the ``convex_share`` quantile of their boundary's concavity (linearly interpolated, so
-    a tie between convex and concave edges is settled by how concave they are) is below the
-    concavity angle.
-    """
+    fixed: (n_patches,) bool patches that join nothing (support surfaces)."""
     n_patches = int(patches.max()) + 1
-    pair = _segment_pair_keys(patches, edges, n_patches)
-    between = pair >= 0
-    pair = pair[between]
-    values = concavity[between]
-    order = np.lexsort((values, pair))
-    pair, values = pair[order], values[order]
-    pairs, start, boundary = np.unique(pair, return_index=True, return_counts=True)
-    position = params.convex_share * (boundary - 1)
-    low = np.floor(position).astype(np.int64)
-    high = np.minimum(low + 1, boundary - 1)
-    fraction = position - low
-    quantile = values[start + low] * (1.0 - fraction) + values[start + high] * fraction
-    join = (boundary >= params.min_boundary_edges) & (
-        quantile < _sine(params.concavity_angle_deg))
-    joined = np.stack([pairs[join] // n_patches, pairs[join] % n_patches], axis=1)
-    return connected_component_labels(n_patches, joined)[patches]
+    offsets, neighbours, _ = adjacency
+    low, high, flags = SK.boundary_pairs(patches, offsets, neighbours, positions, normals,
+                                         _sine(params.concavity_angle_deg),
+                                         _sine(params.crease_angle_deg))
+    pair_low, pair_high, counts = SK.pair_statistics(n_patches, low, high, flags)
+    if fixed is None:
+        fixed = np.zeros(n_patches, dtype=bool)
+    root = SK.join_regions(n_patches, pair_low, pair_high, counts, fixed,
+                           params.min_boundary_edges, params.convex_share, params.crease_share)
+    return root[patches]
 
 
 def _absorb_fragments(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
