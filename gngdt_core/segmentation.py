@@ -50,13 +50,15 @@ concavely. Labels are ordered by decreasing segment size; -1 is no segment.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+from functools import cached_property
 
 import numpy as np
 
 from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels, rank_by_size
 from gngdt_core.parameters import check_integer, check_real
+from gngdt_core.supports import OBJECT, SegmentRoles, segment_roles, split_off_planes
 from gngdt_core.view import SensorView
 
 #: points judged along a node pair that may cross a gap of missing depth (step 6)
@@ -65,6 +67,8 @@ GAP_SAMPLES = 6
 GAP_BORDER_M = 0.005
 #: a sample lies on something the sensor measured when within this share of its depth
 GAP_DEPTH_MARGIN = 0.02
+#: cells of the view (`SensorView`) from its bounds within which a node is at the view's edge
+VIEW_EDGE_CELLS = 2
 
 
 @dataclass(frozen=True)
@@ -88,6 +92,20 @@ class SegmentationParams:
     crease_angle_deg: float = 25.0
     #: segments smaller than this many nodes join a larger neighbour, or are no segment (-1)
     min_segment_nodes: int = 4
+    #: a smooth patch of at least this many nodes that is a plane keeps only the nodes within
+    #: ``plane_sigmas`` robust standard deviations of its own noise (and ``min_plane_offset_m``)
+    #: of its plane; the others become patches of their own (step 2b)
+    min_plane_nodes: int = 20
+    plane_sigmas: float = 3.0
+    min_plane_offset_m: float = 0.003
+    #: roles: a plane at least this wide both ways that something rests on is a support ...
+    support_min_extent_m: float = 0.25
+    #: ... a segment longer than this or reaching the edge of the view (or bordering mostly on
+    #: such), or narrower than ``min_object_extent_m`` or of fewer nodes than
+    #: ``min_object_nodes``, is clutter; any other is an object
+    max_object_extent_m: float = 0.5
+    min_object_extent_m: float = 0.02
+    min_object_nodes: int = 8
     #: metres: segments apart by a gap of missing depth at most this wide join where the two
     #: sides meet convexly (step 6; needs the frame's view); 0: no bridging
     bridge_gap_m: float = 0.0
@@ -100,6 +118,13 @@ class SegmentationParams:
         check_real("crease_share", self.crease_share, 0.0, 1.0)
         check_integer("min_boundary_edges", self.min_boundary_edges, 1)
         check_integer("min_segment_nodes", self.min_segment_nodes, 1)
+        check_integer("min_plane_nodes", self.min_plane_nodes, 3)
+        check_real("plane_sigmas", self.plane_sigmas, 0.0, low_open=True)
+        check_real("min_plane_offset_m", self.min_plane_offset_m, 0.0)
+        check_real("support_min_extent_m", self.support_min_extent_m, 0.0)
+        check_real("max_object_extent_m", self.max_object_extent_m, 0.0, low_open=True)
+        check_real("min_object_extent_m", self.min_object_extent_m, 0.0)
+        check_integer("min_object_nodes", self.min_object_nodes, 1)
         check_real("bridge_gap_m", self.bridge_gap_m, 0.0, 1.0)
 
     @classmethod
@@ -123,10 +148,55 @@ class Segmentation:
     patches: np.ndarray
     #: (E,) bool, per position edge: convex or flat (the local-convexity topology)
     convex: np.ndarray
+    #: what the roles are judged from (filled by `segment_network`; None: every segment is an
+    #: object)
+    context: _RoleContext | None = field(default=None, repr=False, compare=False)
 
     @property
     def n_segments(self) -> int:
         return int(self.labels.max()) + 1 if self.labels.size else 0
+
+    @cached_property
+    def role_details(self) -> SegmentRoles:
+        """Roles of the segments, who rests on whom, their planes (`gngdt_core.supports`);
+        judged on first use."""
+        context = self.context
+        if context is None:
+            return segment_roles(self.labels, np.zeros((self.labels.size, 3)),
+                                 np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=bool),
+                                 None, **_role_arguments(SegmentationParams()))
+        return segment_roles(self.labels, context.positions, context.edges, ~self.convex,
+                             context.at_view_edge, **_role_arguments(context.params))
+
+    @property
+    def roles(self) -> np.ndarray:
+        """(n_segments,) int8 role of each segment: `supports.OBJECT`, `supports.SUPPORT`
+        (a table, floor, wall or shelf something rests on) or `supports.CLUTTER`."""
+        return self.role_details.roles
+
+    def object_labels(self) -> np.ndarray:
+        """(n,) int32 ``labels`` with every segment that is not an object (supports, clutter)
+        set to -1: for consumers that want the objects only."""
+        keep = np.concatenate([self.roles == OBJECT, [False]])
+        return np.where(keep[self.labels], self.labels, -1).astype(np.int32)
+
+
+@dataclass(frozen=True)
+class _RoleContext:
+    """The network a `Segmentation` was made from, for its roles."""
+
+    positions: np.ndarray
+    edges: np.ndarray
+    at_view_edge: np.ndarray | None
+    params: SegmentationParams
+
+
+def _role_arguments(params: SegmentationParams) -> dict:
+    return {"plane_sigmas": params.plane_sigmas, "min_offset_m": params.min_plane_offset_m,
+            "support_min_extent_m": params.support_min_extent_m,
+            "max_object_extent_m": params.max_object_extent_m,
+            "min_object_extent_m": params.min_object_extent_m,
+            "min_object_nodes": params.min_object_nodes}
 
 
 def edge_elevations(positions: np.ndarray, normals: np.ndarray,
@@ -175,13 +245,33 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     adjacency = _adjacency(n, edges, smooth)
     patches = _smooth_patches(n, edges, adjacency, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
+    patches = split_off_planes(patches, positions, edges, params.min_plane_nodes,
+                               params.plane_sigmas, params.min_plane_offset_m)
     objects = _join_patches(patches, adjacency, positions, normals, params)
     labels = rank_by_size(_absorb_fragments(objects, edges, convex, params.min_segment_nodes),
                           params.min_segment_nodes)
+    camera_from_model = np.eye(4) if camera_from_model is None else camera_from_model
     if view is not None and params.bridge_gap_m > 0 and labels.max() > 0:
-        labels = _bridge_gaps(labels, positions, normals, edges, params, view,
-                              np.eye(4) if camera_from_model is None else camera_from_model)
-    return Segmentation(labels, patches, convex)
+        labels = _bridge_gaps(labels, positions, normals, edges, params, view, camera_from_model)
+    at_view_edge = None if view is None else _at_view_edge(positions, view, camera_from_model)
+    return Segmentation(labels, patches, convex,
+                        _RoleContext(positions, edges, at_view_edge, params))
+
+
+def _at_view_edge(positions: np.ndarray, view: SensorView,
+                  camera_from_model: np.ndarray) -> np.ndarray:
+    """(n,) bool: nodes that project within ``VIEW_EDGE_CELLS`` cells of the view's bounds (or
+    outside them, or behind the camera): what they belong to was seen only in part."""
+    camera = positions @ camera_from_model[:3, :3].T + camera_from_model[:3, 3]
+    z = camera[:, 2]
+    ahead = z > 0
+    safe = np.where(ahead, z, 1.0)
+    rows, columns = view.zmax.shape
+    u = (camera[:, 0] / safe - view.u_min) * view.inv_cell
+    v = (camera[:, 1] / safe - view.v_min) * view.inv_cell
+    margin = VIEW_EDGE_CELLS
+    inside = (u >= margin) & (u <= columns - margin) & (v >= margin) & (v <= rows - margin)
+    return ~(ahead & inside)
 
 
 def _sine(degrees: float) -> float:

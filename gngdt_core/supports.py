@@ -1,0 +1,237 @@
+"""Support surfaces and segment roles in a segmented GNG-DT network.
+
+Planes are fitted to groups of nodes (smooth patches, segments) all at once: per group the
+least-squares plane, then again over the nodes within ``INLIER_SIGMAS`` robust standard
+deviations of it, so an object lying on a table does not tilt the table's plane.
+
+- `split_off_planes`: a smooth patch that is a plane keeps only the nodes on it. Nodes farther
+  from the plane than ``plane_sigmas`` of its own noise (and than ``min_offset_m``) leave it as
+  patches of their own: a 1-2 cm case lying flat on a table, whose top grows into the table's
+  patch when straddling nodes smooth its low edge, is then judged against the table like any
+  object (its edge to the table is a step, a crease). With attention on (`gngdt_core.stream`),
+  such a case is no longer thinned out as part of the table.
+- `segment_roles`: each segment is a **support** (a plane at least ``support_min_extent_m``
+  across in both directions that another segment rests on or leans against: a table, a floor,
+  a wall, a shelf's floor or side, in any orientation), **clutter** (background structure: seen
+  only in part — it reaches the edge of the view — or longer than ``max_object_extent_m``, or
+  bordering mostly on such structure; and bits: narrower than ``min_object_extent_m`` or of
+  fewer than ``min_object_nodes`` nodes) or an **object**.
+  `SegmentRoles.rests_on` records who rests on (or leans against) whom: supports, and objects
+  stacked on a flat top.
+
+Pure computation on arrays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: nodes within this many robust standard deviations of a group's first plane refit it
+INLIER_SIGMAS = 3.0
+#: robust standard deviation from the median absolute deviation (normal noise)
+MAD_TO_SIGMA = 1.4826
+
+OBJECT, SUPPORT, CLUTTER = 0, 1, 2
+ROLE_NAMES = ("object", "support", "clutter")
+
+
+@dataclass(frozen=True)
+class Planes:
+    """Least-squares planes of K groups of nodes (`fit_planes`)."""
+
+    #: (K, 3) metres, the centroid of each group's inliers
+    centroid: np.ndarray
+    #: (K, 3) unit normal, facing the sensor (the origin of the nodes' frame) where it can
+    normal: np.ndarray
+    #: (K,) metres, robust standard deviation of the nodes' distances to the plane
+    sigma: np.ndarray
+    #: (K, 2) metres, extent along the plane's two in-plane axes (larger first): the side of a
+    #: uniform rectangle with the same spread (sqrt(12) standard deviations)
+    extent: np.ndarray
+    #: (K,) nodes in each group
+    count: np.ndarray
+
+    def distances(self, positions: np.ndarray, groups: np.ndarray) -> np.ndarray:
+        """(n,) signed distance (metres) of each node to its group's plane, positive on the
+        normal's side; ``groups`` (n,) int group of each node (all >= 0)."""
+        offset = positions - self.centroid[groups]
+        return np.einsum("ij,ij->i", offset, self.normal[groups])
+
+
+def fit_planes(positions: np.ndarray, groups: np.ndarray, n_groups: int) -> Planes:
+    """Planes of the nodes of each group 0..n_groups-1 (groups: (n,) int, -1 = none), fitted
+    twice: to all the group's nodes, then to those within ``INLIER_SIGMAS`` robust standard
+    deviations of the first plane. Groups of fewer than 3 nodes get a zero normal."""
+    member = groups >= 0
+    planes = _least_squares_planes(positions[member], groups[member], n_groups)
+    distance = planes.distances(positions[member], groups[member])
+    sigma = _robust_sigma(distance, groups[member], n_groups)
+    inlier = np.abs(distance) <= INLIER_SIGMAS * np.maximum(sigma[groups[member]], 1e-9)
+    refit = _least_squares_planes(positions[member][inlier], groups[member][inlier], n_groups)
+    keep = refit.count >= 3
+    planes = Planes(np.where(keep[:, None], refit.centroid, planes.centroid),
+                    np.where(keep[:, None], refit.normal, planes.normal), planes.sigma,
+                    np.where(keep[:, None], refit.extent, planes.extent), planes.count)
+    distance = planes.distances(positions[member], groups[member])
+    return Planes(planes.centroid, planes.normal,
+                  _robust_sigma(distance, groups[member], n_groups), planes.extent,
+                  planes.count)
+
+
+def _least_squares_planes(positions: np.ndarray, groups: np.ndarray, n_groups: int) -> Planes:
+    count = np.bincount(groups, minlength=n_groups).astype(np.float64)
+    safe = np.maximum(count, 1.0)
+    centroid = np.stack([np.bincount(groups, positions[:, k], n_groups) for k in range(3)],
+                        axis=1) / safe[:, None]
+    centred = positions - centroid[groups]
+    covariance = np.empty((n_groups, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            covariance[:, a, b] = covariance[:, b, a] = np.bincount(
+                groups, centred[:, a] * centred[:, b], n_groups) / safe
+    values, vectors = np.linalg.eigh(covariance)  # ascending: the normal is the first
+    normal = vectors[:, :, 0]
+    towards_sensor = np.einsum("ij,ij->i", normal, -centroid) >= 0.0
+    normal = np.where(towards_sensor[:, None], normal, -normal)
+    normal[count < 3] = 0.0
+    extent = np.sqrt(12.0 * np.maximum(values[:, [2, 1]], 0.0))
+    return Planes(centroid, normal, np.sqrt(np.maximum(values[:, 0], 0.0)), extent,
+                  count.astype(np.int64))
+
+
+def _robust_sigma(distance: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups,) MAD_TO_SIGMA x the median absolute distance of each group (0: empty)."""
+    sigma = np.zeros(n_groups)
+    if distance.size == 0:
+        return sigma
+    order = np.lexsort((np.abs(distance), groups))
+    sorted_groups = groups[order]
+    start = np.searchsorted(sorted_groups, np.arange(n_groups), side="left")
+    stop = np.searchsorted(sorted_groups, np.arange(n_groups), side="right")
+    present = stop > start
+    middle = (start + stop - 1) // 2
+    sigma[present] = MAD_TO_SIGMA * np.abs(distance[order][middle[present]])
+    return sigma
+
+
+def split_off_planes(patches: np.ndarray, positions: np.ndarray, edges: np.ndarray,
+                     min_nodes: int, plane_sigmas: float, min_offset_m: float) -> np.ndarray:
+    """(n,) int32 patches where every patch of at least ``min_nodes`` nodes that is a plane
+    keeps only the nodes on it; the others become new patches, one per connected group (over
+    ``edges`` (E, 2), the position edges).
+
+    A node is off its patch's plane when farther than ``plane_sigmas`` robust standard
+    deviations of the patch's distances and than ``min_offset_m``. A patch is a plane when
+    fewer than a quarter of its nodes are off it (a curved patch is left as it is).
+    """
+    n_patches = int(patches.max()) + 1 if patches.size else 0
+    sizes = np.bincount(patches, minlength=n_patches)
+    large = sizes >= max(min_nodes, 3)
+    if not large.any():
+        return patches
+    groups = np.where(large[patches], patches, -1)
+    planes = fit_planes(positions, groups, n_patches)
+    member = np.flatnonzero(groups >= 0)
+    distance = np.abs(planes.distances(positions[member], groups[member]))
+    limit = np.maximum(plane_sigmas * planes.sigma, min_offset_m)
+    off = distance > limit[groups[member]]
+    off_share = np.bincount(groups[member][off], minlength=n_patches) / np.maximum(sizes, 1)
+    leaving = member[off & (off_share[groups[member]] < 0.25)]
+    if leaving.size == 0:
+        return patches
+    from gngdt_core.clustering import connected_component_labels
+
+    moved = np.zeros(patches.size, dtype=bool)
+    moved[leaving] = True
+    # the leaving nodes of one patch stay together where they are connected
+    keep_edge = moved[edges[:, 0]] & moved[edges[:, 1]] & (
+        patches[edges[:, 0]] == patches[edges[:, 1]])
+    local = np.full(patches.size, -1, dtype=np.int64)
+    local[leaving] = np.arange(leaving.size)
+    pieces = connected_component_labels(leaving.size, local[edges[keep_edge]])
+    result = patches.astype(np.int32, copy=True)
+    result[leaving] = n_patches + pieces
+    return result
+
+
+@dataclass(frozen=True)
+class SegmentRoles:
+    """Roles of the segments of one segmentation (`segment_roles`)."""
+
+    #: (n_segments,) int8: OBJECT, SUPPORT or CLUTTER
+    roles: np.ndarray
+    #: (R, 2) int: segment pairs (upper, lower): the first rests on (or leans against) the second
+    rests_on: np.ndarray
+    #: planes of the segments (`fit_planes`), for the supports' normals and extents
+    planes: Planes
+
+
+def segment_roles(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
+                  concave: np.ndarray, at_view_edge: np.ndarray | None, *,
+                  plane_sigmas: float, min_offset_m: float, support_min_extent_m: float,
+                  max_object_extent_m: float, min_object_extent_m: float,
+                  min_object_nodes: int) -> SegmentRoles:
+    """Role of every segment (module docstring).
+
+    labels: (n,) segment of each node (-1 none); positions: (n, 3) metres; edges: (E, 2)
+    position edges; concave: (E,) bool, the edge is not convex (one end rises above the
+    other's tangent plane); at_view_edge: (n,) bool nodes at the edge of the sensor's view (None:
+    unknown). A segment rests on a plane segment when a concave edge joins them and its nodes lie
+    on the plane's sensor side.
+    """
+    n_segments = int(labels.max()) + 1 if labels.size else 0
+    roles = np.full(n_segments, OBJECT, dtype=np.int8)
+    if n_segments == 0:
+        return SegmentRoles(roles, np.zeros((0, 2), dtype=np.int64),
+                            fit_planes(positions, labels, 0))
+    planes = fit_planes(positions, labels, n_segments)
+    member = labels >= 0
+    distance = np.abs(planes.distances(positions[member], labels[member]))
+    limit = np.maximum(plane_sigmas * planes.sigma, min_offset_m)
+    off_share = (np.bincount(labels[member][distance > limit[labels[member]]],
+                             minlength=n_segments) / np.maximum(planes.count, 1))
+    planar = (planes.count >= 3) & (off_share < 0.1)
+    # who rests on whom: concave edges between segments, the upper one on the plane's side
+    a, b = labels[edges[:, 0]], labels[edges[:, 1]]
+    between = (a >= 0) & (b >= 0) & (a != b) & concave
+    upper = np.concatenate([a[between], b[between]])
+    lower = np.concatenate([b[between], a[between]])
+    centre_side = np.einsum("ij,ij->i", planes.centroid[upper] - planes.centroid[lower],
+                            planes.normal[lower])
+    resting = planar[lower] & (centre_side > limit[lower])
+    pairs = np.unique(np.stack([upper[resting], lower[resting]], axis=1), axis=0)
+    carries = np.zeros(n_segments, dtype=bool)
+    carries[pairs[:, 1]] = True
+    large_plane = planar & (planes.extent[:, 1] >= support_min_extent_m)
+    roles[large_plane & carries] = SUPPORT
+    too_large = planes.extent[:, 0] > max_object_extent_m
+    too_small = (planes.count < min_object_nodes) | (planes.extent[:, 1] < min_object_extent_m)
+    partial = np.zeros(n_segments, dtype=bool)
+    if at_view_edge is not None:
+        partial[np.unique(labels[member & at_view_edge])] = True
+    structure = (roles != SUPPORT) & (too_large | partial)
+    # a segment bordering mostly on such background structure is a piece of it (a key of a
+    # keyboard cut by the view's edge): judged until nothing changes; small bits do not count
+    touching = (a >= 0) & (b >= 0) & (a != b)
+    structure = _spread(structure, ~too_small & (roles != SUPPORT), a[touching], b[touching])
+    roles[(roles != SUPPORT) & (structure | too_small)] = CLUTTER
+    return SegmentRoles(roles, pairs, planes)
+
+
+def _spread(marked: np.ndarray, eligible: np.ndarray, a: np.ndarray,
+            b: np.ndarray) -> np.ndarray:
+    """(K,) bool: ``marked`` segments, and every ``eligible`` one whose edges (a[k], b[k]) to
+    other non-small segments mostly reach marked ones, repeated until none is added."""
+    marked = marked.copy()
+    source = np.concatenate([a, b])
+    target = np.concatenate([b, a])
+    counted = eligible[target] | marked[target]
+    border = np.bincount(source[counted], minlength=marked.size)
+    while True:
+        on_marked = np.bincount(source[marked[target]], minlength=marked.size)
+        turning = eligible & ~marked & (2 * on_marked > border)
+        if not turning.any():
+            return marked
+        marked[turning] = True
