@@ -58,7 +58,7 @@ import numpy as np
 from gngdt_core import _segment_kernels as SK
 from gngdt_core.clustering import connected_component_labels, rank_by_size
 from gngdt_core.parameters import check_integer, check_real
-from gngdt_core.supports import OBJECT, SegmentRoles, segment_roles, split_off_planes
+from gngdt_core.supports import OBJECT, SegmentRoles, find_supports, segment_roles
 from gngdt_core.view import SensorView
 
 #: points judged along a node pair that may cross a gap of missing depth (step 6)
@@ -92,15 +92,14 @@ class SegmentationParams:
     crease_angle_deg: float = 25.0
     #: segments smaller than this many nodes join a larger neighbour, or are no segment (-1)
     min_segment_nodes: int = 4
-    #: a smooth patch of at least this many nodes that is a plane keeps only the nodes within
-    #: ``plane_sigmas`` robust standard deviations of its own noise (and ``min_plane_offset_m``)
-    #: of its plane; the others become patches of their own (step 2b)
+    #: supports (step 2b): a smooth patch of at least ``min_plane_nodes`` nodes, 90 % of them
+    #: within ``plane_sigmas`` robust standard deviations of its own noise (and
+    #: ``min_plane_offset_m``) of its plane, at least ``support_min_extent_m`` wide both ways
     min_plane_nodes: int = 20
     plane_sigmas: float = 3.0
     min_plane_offset_m: float = 0.003
-    #: roles: a plane at least this wide both ways that something rests on is a support ...
     support_min_extent_m: float = 0.25
-    #: ... a segment longer than this or reaching the edge of the view (or bordering mostly on
+    #: roles: a segment longer than this or reaching the edge of the view (or bordering mostly on
     #: such), or narrower than ``min_object_extent_m`` or of fewer nodes than
     #: ``min_object_nodes``, is clutter; any other is an object
     max_object_extent_m: float = 0.5
@@ -164,9 +163,13 @@ class Segmentation:
         if context is None:
             return segment_roles(self.labels, np.zeros((self.labels.size, 3)),
                                  np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=bool),
-                                 None, **_role_arguments(SegmentationParams()))
+                                 np.zeros(self.n_segments, dtype=bool), None,
+                                 **_role_arguments(SegmentationParams()))
+        is_support = np.zeros(self.n_segments, dtype=bool)
+        on = self.labels >= 0
+        is_support[self.labels[on & context.support_node]] = True
         return segment_roles(self.labels, context.positions, context.edges, ~self.convex,
-                             context.at_view_edge, **_role_arguments(context.params))
+                             is_support, context.at_view_edge, **_role_arguments(context.params))
 
     @property
     def roles(self) -> np.ndarray:
@@ -187,14 +190,14 @@ class _RoleContext:
 
     positions: np.ndarray
     edges: np.ndarray
+    #: (n,) bool: the node is on a support plane (step 2b)
+    support_node: np.ndarray
     at_view_edge: np.ndarray | None
     params: SegmentationParams
 
 
 def _role_arguments(params: SegmentationParams) -> dict:
-    return {"plane_sigmas": params.plane_sigmas, "min_offset_m": params.min_plane_offset_m,
-            "support_min_extent_m": params.support_min_extent_m,
-            "max_object_extent_m": params.max_object_extent_m,
+    return {"max_object_extent_m": params.max_object_extent_m,
             "min_object_extent_m": params.min_object_extent_m,
             "min_object_nodes": params.min_object_nodes}
 
@@ -245,9 +248,15 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     adjacency = _adjacency(n, edges, smooth)
     patches = _smooth_patches(n, edges, adjacency, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
-    patches = split_off_planes(patches, positions, edges, params.min_plane_nodes,
-                               params.plane_sigmas, params.min_plane_offset_m)
-    objects = _join_patches(patches, adjacency, positions, normals, params)
+    supports = find_supports(patches, positions, normals, edges,
+                             min_nodes=params.min_plane_nodes,
+                             min_extent_m=params.support_min_extent_m,
+                             plane_sigmas=params.plane_sigmas,
+                             min_offset_m=params.min_plane_offset_m,
+                             cos_normal=math.cos(math.radians(params.patch_angle_deg)))
+    patches = supports.patches
+    support_node = supports.is_support[patches]
+    objects = _join_patches(patches, adjacency, positions, normals, params, supports.is_support)
     labels = rank_by_size(_absorb_fragments(objects, edges, convex, params.min_segment_nodes),
                           params.min_segment_nodes)
     camera_from_model = np.eye(4) if camera_from_model is None else camera_from_model
@@ -255,7 +264,7 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
         labels = _bridge_gaps(labels, positions, normals, edges, params, view, camera_from_model)
     at_view_edge = None if view is None else _at_view_edge(positions, view, camera_from_model)
     return Segmentation(labels, patches, convex,
-                        _RoleContext(positions, edges, at_view_edge, params))
+                        _RoleContext(positions, edges, support_node, at_view_edge, params))
 
 
 def _at_view_edge(positions: np.ndarray, view: SensorView,

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gngdt_core.clustering import connected_component_labels
+
 #: nodes within this many robust standard deviations of a group's first plane refit it
 INLIER_SIGMAS = 3.0
 #: robust standard deviation from the median absolute deviation (normal noise)
@@ -116,44 +118,70 @@ def _robust_sigma(distance: np.ndarray, groups: np.ndarray, n_groups: int) -> np
     return sigma
 
 
-def split_off_planes(patches: np.ndarray, positions: np.ndarray, edges: np.ndarray,
-                     min_nodes: int, plane_sigmas: float, min_offset_m: float) -> np.ndarray:
-    """(n,) int32 patches where every patch of at least ``min_nodes`` nodes that is a plane
-    keeps only the nodes on it; the others become new patches, one per connected group (over
-    ``edges`` (E, 2), the position edges).
+@dataclass(frozen=True)
+class Supports:
+    """Support planes found among the smooth patches (`find_supports`)."""
 
-    A node is off its patch's plane when farther than ``plane_sigmas`` robust standard
-    deviations of the patch's distances and than ``min_offset_m``. A patch is a plane when
-    fewer than a quarter of its nodes are off it (a curved patch is left as it is).
+    #: (n,) int32 patches after the supports took their nodes (the supports' patches first)
+    patches: np.ndarray
+    #: (n_patches,) bool: the patch is a support plane
+    is_support: np.ndarray
+
+
+def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarray,
+                  edges: np.ndarray, *, min_nodes: int, min_extent_m: float,
+                  plane_sigmas: float, min_offset_m: float, cos_normal: float) -> Supports:
+    """Support planes (tables, floors, walls, shelf floors and sides: any orientation, any
+    number) and their nodes.
+
+    A smooth patch of at least ``min_nodes`` nodes is a support plane when at least 90 % of its
+    nodes lie within ``plane_sigmas`` robust standard deviations (and ``min_offset_m``) of its
+    plane and it spans at least ``min_extent_m`` along both in-plane axes. Its nodes are then
+    exactly those on the plane (that close, normals within ``acos(cos_normal)`` of its normal)
+    connected to the patch's own such nodes by position edges (E, 2): pieces of the same table
+    cut off by noise join it, and nodes of the patch off the plane (a thin case the patch grew
+    over) leave it as patches of their own, one per connected group.
     """
-    n_patches = int(patches.max()) + 1 if patches.size else 0
+    n = patches.size
+    n_patches = int(patches.max()) + 1 if n else 0
     sizes = np.bincount(patches, minlength=n_patches)
-    large = sizes >= max(min_nodes, 3)
-    if not large.any():
-        return patches
-    groups = np.where(large[patches], patches, -1)
+    groups = np.where(sizes[patches] >= max(min_nodes, 3), patches, -1)
+    nothing = Supports(patches, np.zeros(n_patches, dtype=bool))
+    if not (groups >= 0).any():
+        return nothing
     planes = fit_planes(positions, groups, n_patches)
     member = np.flatnonzero(groups >= 0)
-    distance = np.abs(planes.distances(positions[member], groups[member]))
     limit = np.maximum(plane_sigmas * planes.sigma, min_offset_m)
-    off = distance > limit[groups[member]]
-    off_share = np.bincount(groups[member][off], minlength=n_patches) / np.maximum(sizes, 1)
-    leaving = member[off & (off_share[groups[member]] < 0.25)]
-    if leaving.size == 0:
-        return patches
-    from gngdt_core.clustering import connected_component_labels
-
-    moved = np.zeros(patches.size, dtype=bool)
-    moved[leaving] = True
-    # the leaving nodes of one patch stay together where they are connected
-    keep_edge = moved[edges[:, 0]] & moved[edges[:, 1]] & (
-        patches[edges[:, 0]] == patches[edges[:, 1]])
-    local = np.full(patches.size, -1, dtype=np.int64)
-    local[leaving] = np.arange(leaving.size)
-    pieces = connected_component_labels(leaving.size, local[edges[keep_edge]])
-    result = patches.astype(np.int32, copy=True)
-    result[leaving] = n_patches + pieces
-    return result
+    near = np.abs(planes.distances(positions[member], groups[member])) <= limit[groups[member]]
+    near_share = np.bincount(groups[member][near], minlength=n_patches) / np.maximum(sizes, 1)
+    support = np.flatnonzero((near_share >= 0.9) & (planes.extent[:, 1] >= min_extent_m))
+    if support.size == 0:
+        return nothing
+    # each node's nearest support plane it lies on (distance and normal), if any
+    distance = np.abs(positions @ planes.normal[support].T
+                      - np.einsum("kj,kj->k", planes.centroid[support], planes.normal[support]))
+    facing = np.abs(normals @ planes.normal[support].T) >= cos_normal
+    on = (distance <= limit[support][None]) & facing
+    candidate = np.where(on.any(axis=1), np.argmin(np.where(on, distance, np.inf), axis=1), -1)
+    # connected pieces of each plane's nodes; a plane keeps the pieces holding its patch's nodes
+    same = (candidate[edges[:, 0]] >= 0) & (candidate[edges[:, 0]] == candidate[edges[:, 1]])
+    piece = connected_component_labels(n, edges[same])
+    seeded = np.zeros(int(piece.max()) + 1, dtype=bool)
+    own = (candidate >= 0) & (patches == support[np.maximum(candidate, 0)])
+    seeded[piece[own]] = True
+    taken = (candidate >= 0) & seeded[piece]
+    # the supports' patches are 0..S-1; every other node keeps its patch, split by connectivity
+    rest = ~taken
+    keep = rest[edges[:, 0]] & rest[edges[:, 1]] & (patches[edges[:, 0]] == patches[edges[:, 1]])
+    local = np.full(n, -1, dtype=np.int64)
+    local[rest] = np.arange(int(rest.sum()))
+    rest_pieces = connected_component_labels(int(rest.sum()), local[edges[keep]])
+    result = np.empty(n, dtype=np.int32)
+    result[taken] = candidate[taken]
+    result[rest] = support.size + rest_pieces
+    is_support = np.zeros(int(result.max()) + 1, dtype=bool)
+    is_support[: support.size] = True
+    return Supports(result, is_support)
 
 
 @dataclass(frozen=True)
@@ -169,43 +197,40 @@ class SegmentRoles:
 
 
 def segment_roles(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
-                  concave: np.ndarray, at_view_edge: np.ndarray | None, *,
-                  plane_sigmas: float, min_offset_m: float, support_min_extent_m: float,
-                  max_object_extent_m: float, min_object_extent_m: float,
+                  concave: np.ndarray, is_support: np.ndarray, at_view_edge: np.ndarray | None,
+                  *, max_object_extent_m: float, min_object_extent_m: float,
                   min_object_nodes: int) -> SegmentRoles:
     """Role of every segment (module docstring).
 
     labels: (n,) segment of each node (-1 none); positions: (n, 3) metres; edges: (E, 2)
     position edges; concave: (E,) bool, the edge is not convex (one end rises above the
-    other's tangent plane); at_view_edge: (n,) bool nodes at the edge of the sensor's view (None:
-    unknown). A segment rests on a plane segment when a concave edge joins them and its nodes lie
-    on the plane's sensor side.
+    other's tangent plane); is_support: (n_segments,) bool, the segment is a support plane
+    (`find_supports`); at_view_edge: (n,) bool nodes at the edge of the sensor's view (None:
+    unknown). A segment rests on (or leans against) a support or a flat-topped segment when a
+    concave edge joins them and it lies on that plane's sensor side.
     """
     n_segments = int(labels.max()) + 1 if labels.size else 0
     roles = np.full(n_segments, OBJECT, dtype=np.int8)
-    if n_segments == 0:
-        return SegmentRoles(roles, np.zeros((0, 2), dtype=np.int64),
-                            fit_planes(positions, labels, 0))
     planes = fit_planes(positions, labels, n_segments)
+    if n_segments == 0:
+        return SegmentRoles(roles, np.zeros((0, 2), dtype=np.int64), planes)
+    roles[is_support[:n_segments]] = SUPPORT
     member = labels >= 0
-    distance = np.abs(planes.distances(positions[member], labels[member]))
-    limit = np.maximum(plane_sigmas * planes.sigma, min_offset_m)
-    off_share = (np.bincount(labels[member][distance > limit[labels[member]]],
-                             minlength=n_segments) / np.maximum(planes.count, 1))
-    planar = (planes.count >= 3) & (off_share < 0.1)
+    limit = np.maximum(INLIER_SIGMAS * planes.sigma, 1e-9)
+    off = np.abs(planes.distances(positions[member], labels[member])) > limit[labels[member]]
+    flat = (planes.count >= 3) & (np.bincount(labels[member][off], minlength=n_segments)
+                                  < 0.1 * planes.count)
     # who rests on whom: concave edges between segments, the upper one on the plane's side
     a, b = labels[edges[:, 0]], labels[edges[:, 1]]
-    between = (a >= 0) & (b >= 0) & (a != b) & concave
+    touching = (a >= 0) & (b >= 0) & (a != b)
+    between = touching & concave
     upper = np.concatenate([a[between], b[between]])
     lower = np.concatenate([b[between], a[between]])
-    centre_side = np.einsum("ij,ij->i", planes.centroid[upper] - planes.centroid[lower],
-                            planes.normal[lower])
-    resting = planar[lower] & (centre_side > limit[lower])
+    height = np.einsum("ij,ij->i", planes.centroid[upper] - planes.centroid[lower],
+                       planes.normal[lower])
+    resting = (flat | (roles == SUPPORT))[lower] & (height > limit[lower]) & (
+        roles[upper] != SUPPORT)
     pairs = np.unique(np.stack([upper[resting], lower[resting]], axis=1), axis=0)
-    carries = np.zeros(n_segments, dtype=bool)
-    carries[pairs[:, 1]] = True
-    large_plane = planar & (planes.extent[:, 1] >= support_min_extent_m)
-    roles[large_plane & carries] = SUPPORT
     too_large = planes.extent[:, 0] > max_object_extent_m
     too_small = (planes.count < min_object_nodes) | (planes.extent[:, 1] < min_object_extent_m)
     partial = np.zeros(n_segments, dtype=bool)
@@ -214,7 +239,6 @@ def segment_roles(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
     structure = (roles != SUPPORT) & (too_large | partial)
     # a segment bordering mostly on such background structure is a piece of it (a key of a
     # keyboard cut by the view's edge): judged until nothing changes; small bits do not count
-    touching = (a >= 0) & (b >= 0) & (a != b)
     structure = _spread(structure, ~too_small & (roles != SUPPORT), a[touching], b[touching])
     roles[(roles != SUPPORT) & (structure | too_small)] = CLUTTER
     return SegmentRoles(roles, pairs, planes)
