@@ -508,3 +508,110 @@ def _slot(key_slot, key):
 def _priority(counts, e):
     """Heap key of pair slot e: most convex boundary first, then the longest."""
     return (-counts[e, 1] / max(counts[e, 0], 1), -counts[e, 0], e)
+
+
+# ----------------------------------------------------------------- segmentation: support planes
+
+
+@njit(cache=True)
+def grow_supports(offsets, neighbours, plane, seed, patch, n_patches, n_supports):
+    """Support planes' nodes, and the patches left over.
+
+    plane: (n,) int64 the support plane each node lies on (-1: none); seed: (n,) bool nodes of
+    a support's own patch that lie on its plane. A support takes every node on its plane
+    connected to its seeds through such nodes (breadth first over the CSR adjacency
+    ``offsets``/``neighbours``). Returns (n,) int32 patches: support s is patch s; every other
+    node keeps its ``patch`` (< n_patches) shifted by n_supports, except nodes that were in a
+    support's patch but not taken, which get new patches, one per connected group.
+    """
+    n = plane.size
+    result = np.full(n, -1, dtype=np.int32)
+    queue = np.empty(n, dtype=np.int64)
+    tail = 0
+    for u in range(n):
+        if seed[u]:
+            result[u] = plane[u]
+            queue[tail] = u
+            tail += 1
+    head = 0
+    while head < tail:
+        u = queue[head]
+        head += 1
+        for slot in range(offsets[u], offsets[u + 1]):
+            v = neighbours[slot]
+            if result[v] < 0 and plane[v] == result[u]:
+                result[v] = result[u]
+                queue[tail] = v
+                tail += 1
+    # support patches lose the nodes not taken: each connected group of them is a new patch
+    was_support = np.zeros(n_patches, dtype=np.bool_)
+    for u in range(n):
+        if seed[u]:
+            was_support[patch[u]] = True
+    next_patch = n_supports + n_patches
+    for u in range(n):
+        if result[u] >= 0:
+            continue
+        if not was_support[patch[u]]:
+            result[u] = n_supports + patch[u]
+            continue
+        result[u] = next_patch
+        queue[0] = u
+        head = 0
+        tail = 1
+        while head < tail:
+            w = queue[head]
+            head += 1
+            for slot in range(offsets[w], offsets[w + 1]):
+                v = neighbours[slot]
+                if result[v] < 0 and patch[v] == patch[u]:
+                    result[v] = next_patch
+                    queue[tail] = v
+                    tail += 1
+        next_patch += 1
+    return result
+
+
+# ------------------------------------------------------------ segmentation: edges and adjacency
+
+
+@njit(cache=True)
+def edge_rises(positions, normals, edges):
+    """(E,) sines of the elevations of each edge's ends (`segmentation.edge_elevations`): how
+    far j rises above i's tangent plane, and i above j's."""
+    rise_of_j = np.zeros(edges.shape[0])
+    rise_of_i = np.zeros(edges.shape[0])
+    for k in range(edges.shape[0]):
+        i = edges[k, 0]
+        j = edges[k, 1]
+        d0 = positions[j, 0] - positions[i, 0]
+        d1 = positions[j, 1] - positions[i, 1]
+        d2 = positions[j, 2] - positions[i, 2]
+        length = max(math.sqrt(d0 * d0 + d1 * d1 + d2 * d2), 1e-300)
+        rise_of_j[k] = (normals[i, 0] * d0 + normals[i, 1] * d1 + normals[i, 2] * d2) / length
+        rise_of_i[k] = -(normals[j, 0] * d0 + normals[j, 1] * d1 + normals[j, 2] * d2) / length
+    return rise_of_j, rise_of_i
+
+
+@njit(cache=True)
+def csr_adjacency(n, edges, flags):
+    """CSR adjacency of an undirected edge list: offsets (n+1,), neighbours (2E,) and their
+    flags (2E,); each node's neighbours in edge order, first as the edge's first end, then as
+    its second (a stable sort of the concatenated ends)."""
+    n_edges = edges.shape[0]
+    offsets = np.zeros(n + 1, dtype=np.int64)
+    for k in range(n_edges):
+        offsets[edges[k, 0] + 1] += 1
+        offsets[edges[k, 1] + 1] += 1
+    for u in range(n):
+        offsets[u + 1] += offsets[u]
+    fill = offsets[:-1].copy()
+    neighbours = np.empty(2 * n_edges, dtype=np.int64)
+    usable = np.empty(2 * n_edges, dtype=np.bool_)
+    for end in range(2):
+        for k in range(n_edges):
+            u = edges[k, end]
+            neighbours[fill[u]] = edges[k, 1 - end]
+            usable[fill[u]] = flags[k]
+            fill[u] += 1
+    return offsets, neighbours, usable

@@ -210,13 +210,9 @@ def edge_elevations(positions: np.ndarray, normals: np.ndarray,
     elevation 0); edges: (E, 2) node pairs (i, j); d: unit vector from i to j. The first is how
     far j rises above i's tangent plane, the second how far i rises above j's.
     """
-    i, j = edges[:, 0], edges[:, 1]
-    direction = positions[j] - positions[i]
-    length = np.linalg.norm(direction, axis=1)
-    direction /= np.maximum(length, 1e-300)[:, None]
-    rise_of_j = np.einsum("ij,ij->i", normals[i], direction)
-    rise_of_i = -np.einsum("ij,ij->i", normals[j], direction)
-    return rise_of_j, rise_of_i
+    return SK.edge_rises(np.asarray(positions, dtype=np.float64),
+                         np.asarray(normals, dtype=np.float64),
+                         np.asarray(edges, dtype=np.int64).reshape(-1, 2))
 
 
 def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarray,
@@ -248,7 +244,7 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     adjacency = _adjacency(n, edges, smooth)
     patches = _smooth_patches(n, edges, adjacency, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
-    supports = find_supports(patches, positions, normals, edges,
+    supports = find_supports(patches, positions, normals, adjacency,
                              min_nodes=params.min_plane_nodes,
                              min_extent_m=params.support_min_extent_m,
                              plane_sigmas=params.plane_sigmas,
@@ -303,12 +299,7 @@ def _smooth_patches(n: int, edges: np.ndarray, adjacency: tuple, normals: np.nda
 def _adjacency(n: int, edges: np.ndarray,
                flags: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """CSR adjacency of an undirected edge list: offsets (n+1,), neighbours and their flags."""
-    source = np.concatenate([edges[:, 0], edges[:, 1]])
-    target = np.concatenate([edges[:, 1], edges[:, 0]])
-    order = np.argsort(source, kind="stable")
-    offsets = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(source, minlength=n), out=offsets[1:])
-    return offsets, target[order], np.concatenate([flags, flags])[order]
+    return SK.csr_adjacency(n, edges, flags)
 
 
 def _join_patches(patches: np.ndarray, adjacency: tuple, positions: np.ndarray,

@@ -28,8 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_core.clustering import connected_component_labels
-
 #: nodes within this many robust standard deviations of a group's first plane refit it
 INLIER_SIGMAS = 3.0
 #: robust standard deviation from the median absolute deviation (normal noise)
@@ -129,7 +127,7 @@ class Supports:
 
 
 def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarray,
-                  edges: np.ndarray, *, min_nodes: int, min_extent_m: float,
+                  adjacency: tuple, *, min_nodes: int, min_extent_m: float,
                   plane_sigmas: float, min_offset_m: float, cos_normal: float) -> Supports:
     """Support planes (tables, floors, walls, shelf floors and sides: any orientation, any
     number) and their nodes.
@@ -138,50 +136,89 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     nodes lie within ``plane_sigmas`` robust standard deviations (and ``min_offset_m``) of its
     plane and it spans at least ``min_extent_m`` along both in-plane axes. Its nodes are then
     exactly those on the plane (that close, normals within ``acos(cos_normal)`` of its normal)
-    connected to the patch's own such nodes by position edges (E, 2): pieces of the same table
-    cut off by noise join it, and nodes of the patch off the plane (a thin case the patch grew
-    over) leave it as patches of their own, one per connected group.
+    connected to the patch's own such nodes by position edges (``adjacency``: CSR offsets and
+    neighbours): pieces of the same table cut off by noise join it, and nodes of the patch off
+    the plane (a thin case the patch grew over) leave it as patches of their own, one per
+    connected group. Supports are patches 0..S-1 of the result.
     """
+    from gngdt_core import _segment_kernels as SK
+
     n = patches.size
     n_patches = int(patches.max()) + 1 if n else 0
-    sizes = np.bincount(patches, minlength=n_patches)
-    groups = np.where(sizes[patches] >= max(min_nodes, 3), patches, -1)
     nothing = Supports(patches, np.zeros(n_patches, dtype=bool))
-    if not (groups >= 0).any():
+    order = np.argsort(patches, kind="stable")
+    starts = np.searchsorted(patches[order], np.arange(n_patches + 1))
+    sizes = np.diff(starts)
+    # only patches at least min_extent_m long along some axis can be that wide in-plane
+    large = np.flatnonzero(sizes >= max(min_nodes, 3))
+    if large.size == 0:
         return nothing
-    planes = fit_planes(positions, groups, n_patches)
-    member = np.flatnonzero(groups >= 0)
-    limit = np.maximum(plane_sigmas * planes.sigma, min_offset_m)
-    near = np.abs(planes.distances(positions[member], groups[member])) <= limit[groups[member]]
-    near_share = np.bincount(groups[member][near], minlength=n_patches) / np.maximum(sizes, 1)
-    support = np.flatnonzero((near_share >= 0.9) & (planes.extent[:, 1] >= min_extent_m))
-    if support.size == 0:
+    ordered = positions[order]
+    fits = []
+    wide = _second_extent(ordered, starts[:-1], sizes) >= min_extent_m
+    for patch in large[wide[large]]:
+        nodes = ordered[starts[patch]:starts[patch + 1]]
+        plane = _fit_one_plane(nodes)
+        limit = max(plane_sigmas * plane.sigma[0], min_offset_m)
+        near = np.abs(plane.distances(nodes, np.zeros(len(nodes), dtype=np.int64))) <= limit
+        if near.mean() >= 0.9 and plane.extent[0, 1] >= min_extent_m:
+            fits.append((patch, plane, limit))
+    if not fits:
         return nothing
+    normal = np.concatenate([plane.normal for _, plane, _ in fits])
+    offset = np.einsum("kj,kj->k", np.concatenate([plane.centroid for _, plane, _ in fits]),
+                       normal)
+    limit = np.array([limit for _, _, limit in fits])
+    own = np.array([patch for patch, _, _ in fits])
     # each node's nearest support plane it lies on (distance and normal), if any
-    distance = np.abs(positions @ planes.normal[support].T
-                      - np.einsum("kj,kj->k", planes.centroid[support], planes.normal[support]))
-    facing = np.abs(normals @ planes.normal[support].T) >= cos_normal
-    on = (distance <= limit[support][None]) & facing
-    candidate = np.where(on.any(axis=1), np.argmin(np.where(on, distance, np.inf), axis=1), -1)
-    # connected pieces of each plane's nodes; a plane keeps the pieces holding its patch's nodes
-    same = (candidate[edges[:, 0]] >= 0) & (candidate[edges[:, 0]] == candidate[edges[:, 1]])
-    piece = connected_component_labels(n, edges[same])
-    seeded = np.zeros(int(piece.max()) + 1, dtype=bool)
-    own = (candidate >= 0) & (patches == support[np.maximum(candidate, 0)])
-    seeded[piece[own]] = True
-    taken = (candidate >= 0) & seeded[piece]
-    # the supports' patches are 0..S-1; every other node keeps its patch, split by connectivity
-    rest = ~taken
-    keep = rest[edges[:, 0]] & rest[edges[:, 1]] & (patches[edges[:, 0]] == patches[edges[:, 1]])
-    local = np.full(n, -1, dtype=np.int64)
-    local[rest] = np.arange(int(rest.sum()))
-    rest_pieces = connected_component_labels(int(rest.sum()), local[edges[keep]])
-    result = np.empty(n, dtype=np.int32)
-    result[taken] = candidate[taken]
-    result[rest] = support.size + rest_pieces
+    distance = np.abs(positions @ normal.T - offset)
+    on = (distance <= limit) & (np.abs(normals @ normal.T) >= cos_normal)
+    plane_of = np.where(on.any(axis=1), np.argmin(np.where(on, distance, np.inf), axis=1), -1)
+    seed = (plane_of >= 0) & (patches == own[np.maximum(plane_of, 0)])
+    offsets, neighbours, _ = adjacency
+    result = SK.grow_supports(offsets, neighbours, plane_of.astype(np.int64), seed, patches,
+                              n_patches, len(fits))
     is_support = np.zeros(int(result.max()) + 1, dtype=bool)
-    is_support[: support.size] = True
+    is_support[: len(fits)] = True
     return Supports(result, is_support)
+
+
+def _second_extent(ordered: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """(K,) the second largest extent (sqrt(12) standard deviations) of K consecutive groups of
+    the rows of ``ordered`` (n, 3): group k is rows ``starts[k]`` .. ``starts[k] + sizes[k] -
+    1``, every group non-empty, the last ending at n."""
+    count = sizes[:, None].astype(np.float64)
+    mean = np.add.reduceat(ordered, starts, axis=0) / count
+    products = ordered[:, [0, 0, 0, 1, 1, 2]] * ordered[:, [0, 1, 2, 1, 2, 2]]
+    second = np.add.reduceat(products, starts, axis=0) / count
+    covariance = np.empty((len(starts), 3, 3))
+    for k, (a, b) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
+        covariance[:, a, b] = covariance[:, b, a] = second[:, k] - mean[:, a] * mean[:, b]
+    values = np.linalg.eigvalsh(covariance)
+    return np.sqrt(12.0 * np.maximum(values[:, 1], 0.0))
+
+
+def _fit_one_plane(nodes: np.ndarray) -> Planes:
+    """`fit_planes` of one group of nodes (m, 3), m >= 3."""
+    def fit(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        centroid = points.mean(axis=0)
+        values, vectors = np.linalg.eigh(np.cov(points, rowvar=False, bias=True))
+        return centroid, vectors[:, 0], values
+
+    centroid, normal, _ = fit(nodes)
+    distance = (nodes - centroid) @ normal
+    sigma = MAD_TO_SIGMA * np.median(np.abs(distance))
+    inlier = np.abs(distance) <= INLIER_SIGMAS * max(sigma, 1e-9)
+    if inlier.sum() >= 3:
+        centroid, normal, values = fit(nodes[inlier])
+    else:
+        values = np.linalg.eigvalsh(np.cov(nodes, rowvar=False, bias=True))
+    if normal @ -centroid < 0:
+        normal = -normal
+    sigma = MAD_TO_SIGMA * np.median(np.abs((nodes - centroid) @ normal))
+    extent = np.sqrt(12.0 * np.maximum(values[[2, 1]], 0.0))
+    return Planes(centroid[None], normal[None], np.array([sigma]), extent[None],
+                  np.array([len(nodes)]))
 
 
 @dataclass(frozen=True)
