@@ -237,14 +237,16 @@ def edge_elevations(positions: np.ndarray, normals: np.ndarray,
 
 def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarray,
                     params: SegmentationParams | None = None, view: SensorView | None = None,
-                    camera_from_model: np.ndarray | None = None) -> Segmentation:
+                    camera_from_model: np.ndarray | None = None,
+                    colors: np.ndarray | None = None) -> Segmentation:
     """Segments of a network (see the module docstring for the procedure).
 
     positions: (n, 3) float, metres; normals: (n, 3) float unit normals facing the sensor (zero
     where undefined); edges: (E, 2) int position-topology node pairs. view: what the sensor
     measured in the frame just learned (`SensorView.of` its points in the camera frame), for
     step 6; camera_from_model: (4, 4) from the network's frame to that camera's (None: the
-    same frame).
+    same frame). colors: (n, 3) RGB of the nodes (0-255), for step 2b's colour evidence (None:
+    geometry only; `GNGDT.segmentation` does not pass them yet).
     """
     params = params or SegmentationParams()
     positions = np.asarray(positions, dtype=np.float64)
@@ -269,7 +271,8 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
                              min_extent_m=params.support_min_extent_m,
                              plane_sigmas=params.plane_sigmas,
                              min_offset_m=params.min_plane_offset_m,
-                             cos_normal=math.cos(math.radians(params.patch_angle_deg)))
+                             cos_normal=math.cos(math.radians(params.patch_angle_deg)),
+                             colors=colors)
     patches = supports.patches
     support_node = supports.is_support[patches]
     objects = _join_patches(patches, adjacency, positions, normals, params, supports.is_support)

@@ -33,6 +33,9 @@ INLIER_SIGMAS = 3.0
 #: robust standard deviation from the median absolute deviation (normal noise)
 MAD_TO_SIGMA = 1.4826
 
+#: RGB units (0-255): a support's colour varies by at least this much (wood grain, shading)
+MIN_COLOUR_DISTANCE = 40.0
+
 OBJECT, SUPPORT, CLUTTER = 0, 1, 2
 ROLE_NAMES = ("object", "support", "clutter")
 
@@ -128,7 +131,8 @@ class Supports:
 
 def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                   adjacency: tuple, *, min_nodes: int, min_extent_m: float,
-                  plane_sigmas: float, min_offset_m: float, cos_normal: float) -> Supports:
+                  plane_sigmas: float, min_offset_m: float, cos_normal: float,
+                  colors: np.ndarray | None = None) -> Supports:
     """Support planes (tables, floors, walls, shelf floors and sides: any orientation, any
     number) and their nodes.
 
@@ -140,6 +144,12 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     neighbours): pieces of the same table cut off by noise join it, and nodes of the patch off
     the plane (a thin case the patch grew over) leave it as patches of their own, one per
     connected group. Supports are patches 0..S-1 of the result.
+
+    colors: (n, 3) RGB of the nodes (None: not used). A support is then also one colour: a
+    node on its plane whose colour lies farther from the support's median colour than
+    ``plane_sigmas`` robust standard deviations of the support's own colours (and than
+    ``MIN_COLOUR_DISTANCE``) is not taken: something flat of another colour lying on it (a
+    sheet, a flat case thinner than the plane's noise).
     """
     from gngdt_core import _segment_kernels as SK
 
@@ -175,6 +185,10 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     on = (distance <= limit) & (np.abs(normals @ normal.T) >= cos_normal)
     plane_of = np.where(on.any(axis=1), np.argmin(np.where(on, distance, np.inf), axis=1), -1)
     seed = (plane_of >= 0) & (patches == own[np.maximum(plane_of, 0)])
+    if colors is not None:
+        plane_of = _same_colour(plane_of, seed, np.asarray(colors, dtype=np.float64),
+                                len(fits), plane_sigmas)
+        seed &= plane_of >= 0
     offsets, neighbours, _ = adjacency
     result = SK.grow_supports(offsets, neighbours, plane_of.astype(np.int64), seed, patches,
                               n_patches, len(fits))
@@ -196,6 +210,24 @@ def _second_extent(ordered: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -
         covariance[:, a, b] = covariance[:, b, a] = second[:, k] - mean[:, a] * mean[:, b]
     values = np.linalg.eigvalsh(covariance)
     return np.sqrt(12.0 * np.maximum(values[:, 1], 0.0))
+
+
+def _same_colour(plane_of: np.ndarray, seed: np.ndarray, colors: np.ndarray, n_planes: int,
+                 sigmas: float) -> np.ndarray:
+    """``plane_of`` with -1 for nodes whose colour is far from their plane's (`find_supports`);
+    a plane's colour: the median of its seeds', its spread: their median distance to it."""
+    result = plane_of.copy()
+    for plane in range(n_planes):
+        own = seed & (plane_of == plane)
+        if not own.any():
+            continue
+        median = np.median(colors[own], axis=0)
+        spread = MAD_TO_SIGMA * np.median(np.linalg.norm(colors[own] - median, axis=1))
+        on = np.flatnonzero(plane_of == plane)
+        far = np.linalg.norm(colors[on] - median, axis=1) > max(sigmas * spread,
+                                                                MIN_COLOUR_DISTANCE)
+        result[on[far]] = -1
+    return result
 
 
 def _fit_one_plane(nodes: np.ndarray) -> Planes:

@@ -244,3 +244,21 @@ def test_planes_are_fitted_robustly_per_group() -> None:
     assert abs(planes.normal[1] @ np.array([1, 0, -1]) / np.sqrt(2)) > 0.99
     assert planes.sigma[0] < 0.002  # the outliers do not count
     assert planes.extent[0] == pytest.approx([0.4, 0.3], rel=0.1)
+
+
+def test_colour_tells_a_sheet_lying_flat_from_the_table_when_colours_are_given() -> None:
+    # a sheet 1 mm thick: geometry cannot tell it from the table, its colour can
+    rng = np.random.default_rng(8)
+    flat = table(rng, [(-0.1, 0.1, 0.8, 0.95)], z=(0.6, 1.2))
+    sheet = rectangle((-0.1, TABLE_Y - 0.001, 0.8), (0.2, 0, 0), (0, 0, 0.15), rng)
+    positions, normals, edges, part = network([flat, sheet])
+    wood = np.array([180.0, 140.0, 100.0]) + rng.normal(0.0, 8.0, (len(flat[0]), 3))
+    red = np.array([200.0, 30.0, 30.0]) + rng.normal(0.0, 8.0, (len(sheet[0]), 3))
+    colors = np.vstack([wood, red])
+    plain = segment(positions, normals, edges)
+    assert majority(plain.labels, part, 1)[0] == majority(plain.labels, part, 0)[0]
+    result = segment_network(positions, normals, edges, SegmentationParams(), colors=colors)
+    table_segment, table_share = majority(result.labels, part, 0)
+    sheet_segment, sheet_share = majority(result.labels, part, 1)
+    assert sheet_segment != table_segment and min(table_share, sheet_share) > 0.95
+    assert result.roles[sheet_segment] == OBJECT
