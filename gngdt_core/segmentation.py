@@ -266,7 +266,9 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     adjacency = _adjacency(n, edges, smooth)
     patches = _smooth_patches(n, edges, adjacency, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
-    supports = find_supports(patches, positions, normals, adjacency,
+    camera_from_model = np.eye(4) if camera_from_model is None else camera_from_model
+    depths = positions @ camera_from_model[2, :3] + camera_from_model[2, 3]
+    supports = find_supports(patches, positions, normals, adjacency, depths=depths,
                              min_nodes=params.min_plane_nodes,
                              min_extent_m=params.support_min_extent_m,
                              plane_sigmas=params.plane_sigmas,
@@ -278,7 +280,6 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     objects = _join_patches(patches, adjacency, positions, normals, params, supports.is_support)
     labels = rank_by_size(_absorb_fragments(objects, edges, convex, params.min_segment_nodes),
                           params.min_segment_nodes)
-    camera_from_model = np.eye(4) if camera_from_model is None else camera_from_model
     if view is not None and params.bridge_gap_m > 0 and labels.max() > 0:
         labels = _bridge_gaps(labels, positions, normals, edges, params, view, camera_from_model)
     at_view_edge = None if view is None else _at_view_edge(positions, view, camera_from_model)

@@ -132,6 +132,7 @@ class Supports:
 def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                   adjacency: tuple, *, min_nodes: int, min_extent_m: float,
                   plane_sigmas: float, min_offset_m: float, cos_normal: float,
+                  depths: np.ndarray | None = None,
                   colors: np.ndarray | None = None) -> Supports:
     """Support planes (tables, floors, walls, shelf floors and sides: any orientation, any
     number) and their nodes.
@@ -144,6 +145,10 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     neighbours): pieces of the same table cut off by noise join it, and nodes of the patch off
     the plane (a thin case the patch grew over) leave it as patches of their own, one per
     connected group. Supports are patches 0..S-1 of the result.
+
+    depths: (n,) metres from the sensor along its axis (None: all alike). A depth sensor's
+    noise grows with the square of the depth, so distances to a plane are judged in units of
+    ``depth ** 2``: the far end of a floor 4 m away stays on it, a case 1 cm high at 1 m leaves.
 
     colors: (n, 3) RGB of the nodes (None: not used). A support is then also one colour: a
     node on its plane whose colour lies farther from the support's median colour than
@@ -164,21 +169,27 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     if large.size == 0:
         return nothing
     ordered = positions[order]
+    noise = np.ones(n) if depths is None else np.square(np.maximum(depths, 1e-3))
+    ordered_noise = noise[order]
     fits = []
     wide = _second_extent(ordered, starts[:-1], sizes) >= min_extent_m
     for patch in large[wide[large]]:
         nodes = ordered[starts[patch]:starts[patch + 1]]
+        scale = ordered_noise[starts[patch]:starts[patch + 1]]
         plane = _fit_one_plane(nodes)
-        limit = max(plane_sigmas * plane.sigma[0], min_offset_m)
-        near = np.abs(plane.distances(nodes, np.zeros(len(nodes), dtype=np.int64))) <= limit
+        distance = np.abs(plane.distances(nodes, np.zeros(len(nodes), dtype=np.int64)))
+        # the plane's noise per unit of depth squared, robustly
+        spread = MAD_TO_SIGMA * np.median(distance / scale)
+        near = distance <= np.maximum(plane_sigmas * spread * scale, min_offset_m)
         if near.mean() >= 0.9 and plane.extent[0, 1] >= min_extent_m:
-            fits.append((patch, plane, limit))
+            fits.append((patch, plane, plane_sigmas * spread))
     if not fits:
         return nothing
     normal = np.concatenate([plane.normal for _, plane, _ in fits])
     offset = np.einsum("kj,kj->k", np.concatenate([plane.centroid for _, plane, _ in fits]),
                        normal)
-    limit = np.array([limit for _, _, limit in fits])
+    limit = np.maximum(np.array([limit for _, _, limit in fits])[None, :] * noise[:, None],
+                       min_offset_m)
     own = np.array([patch for patch, _, _ in fits])
     # each node's nearest support plane it lies on (distance and normal), if any
     distance = np.abs(positions @ normal.T - offset)
