@@ -404,7 +404,7 @@ def _find(parent, x):
 @inlined
 def _may_join(counts, e, min_edges, convex_share, crease_share):
     edges = counts[e, 0]
-    return (edges >= min_edges and counts[e, 1] >= convex_share * edges
+    return (edges >= min_edges and (counts[e, 1] >= convex_share * edges or counts[e, 3] == 0)
             and counts[e, 3] <= crease_share * counts[e, 2])
 
 
@@ -415,9 +415,10 @@ def join_regions(n_regions, pair_low, pair_high, counts, fixed, min_edges, conve
 
     pair_low, pair_high, counts: `pair_statistics`; fixed: (n_regions,) bool regions that never
     join anything (support surfaces). Two adjacent regions may join when at least
-    ``min_edges`` position edges lie between them, ``convex_share`` of those are convex, and at
-    most ``crease_share`` of the node pairs between them are creases. Pairs are joined best
-    first (most convex boundary, then longest); after each join the statistics of the union
+    ``min_edges`` position edges lie between them, ``convex_share`` of those are convex (or no
+    node pair between them is a crease), and at most ``crease_share`` of the node pairs between
+    them are creases. Pairs are joined surest first (fewest creases, most convex boundary,
+    longest); after each join the statistics of the union
     with every neighbour are the sums of its parts', so later joins judge the whole union: a
     chain of small patches cannot carry one object into another once their union has creases
     between them. Returns (n_regions,) int64 the representative region of each.
@@ -431,7 +432,7 @@ def join_regions(n_regions, pair_low, pair_high, counts, fixed, min_edges, conve
     tail = np.full(n_regions, -1, dtype=np.int64)
     size = np.zeros(n_regions, dtype=np.int64)
     link = np.full(2 * n_pairs, -1, dtype=np.int64)  # entry 2e: in low's list, 2e+1: high's
-    heap = [(0.0, 0, 0)]
+    heap = [(0.0, 0.0, 0, 0)]
     heap.pop()
     for e in range(n_pairs):
         a = pair_low[e]
@@ -450,7 +451,7 @@ def join_regions(n_regions, pair_low, pair_high, counts, fixed, min_edges, conve
             heapq.heappush(heap, _priority(counts, e))
     while heap:
         item = heapq.heappop(heap)
-        e = item[2]
+        e = item[3]
         a = _find(parent, pair_low[e])
         b = _find(parent, pair_high[e])
         if a == b:
@@ -506,8 +507,10 @@ def _slot(key_slot, key):
 
 @inlined
 def _priority(counts, e):
-    """Heap key of pair slot e: most convex boundary first, then the longest."""
-    return (-counts[e, 1] / max(counts[e, 0], 1), -counts[e, 0], e)
+    """Heap key of pair slot e: fewest creases first, then the most convex boundary, then the
+    longest."""
+    return (counts[e, 3] / max(counts[e, 2], 1), -counts[e, 1] / max(counts[e, 0], 1),
+            -counts[e, 0], e)
 
 
 # ----------------------------------------------------------------- segmentation: support planes

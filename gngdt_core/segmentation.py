@@ -24,12 +24,14 @@ position topology is here):
 3. Convexity topology. An edge is *convex* when neither end rises above the other's tangent
    plane by more than ``concavity_angle_deg`` (flat and convex folds; concave folds and steps
    are cut). These edges are the network's local-convexity topology (``convex_edges``).
-4. Objects. Adjacent patches join, best first (most convex boundary, then the longest), when
-   at least ``min_boundary_edges`` position edges lie between them, ``convex_share`` of those
-   are convex, and at most ``crease_share`` of the node pairs between them (edges and two-edge
-   paths) are *creases*: one end rises above the other's tangent plane by more than
-   ``crease_angle_deg``, a sharp concave fold or a step, where a curved surface (a bowl's
-   inside) bends far less over two edges. After each join the union's boundary with every
+4. Objects. Adjacent patches join, surest first (fewest creases, then the most convex
+   boundary, then the longest), when at least ``min_boundary_edges`` position edges lie
+   between them, ``convex_share`` of those are convex (or none of the pairs below is a crease:
+   a smooth continuation, such as the two halves of a small mug whose noisy normals make some
+   edges look slightly concave), and at most ``crease_share`` of the node pairs between them
+   (edges and two-edge paths) are *creases*: one end rises above the other's tangent plane
+   by more than ``crease_angle_deg``, a sharp concave fold or a step, where a curved surface
+   (a bowl's inside) bends far less over two edges. After each join the union's boundary with every
    neighbour is judged as a whole (the counts are summed), so a chain of small patches along a
    crease — straddling nodes, the thin side of a box lying on another — cannot carry one object
    into another or into its support: once the union holds both, the creases between them
