@@ -121,6 +121,9 @@ class SegmentationParams:
     plane_sigmas: float = 3.0
     min_plane_offset_m: float = 0.003
     support_min_extent_m: float = 0.25
+    #: nodes off a support's plane leave it only where they rise this high above it somewhere
+    #: (lower: the plane's warp); objects lower than this are told from it by colour only
+    min_object_height_m: float = 0.008
     #: roles: a segment longer than this or reaching the edge of the view (or bordering mostly on
     #: such), or narrower than ``min_object_extent_m`` or of fewer nodes than
     #: ``min_object_nodes``, is clutter; any other is an object
@@ -143,6 +146,7 @@ class SegmentationParams:
         check_real("plane_sigmas", self.plane_sigmas, 0.0, low_open=True)
         check_real("min_plane_offset_m", self.min_plane_offset_m, 0.0)
         check_real("support_min_extent_m", self.support_min_extent_m, 0.0)
+        check_real("min_object_height_m", self.min_object_height_m, 0.0)
         check_real("max_object_extent_m", self.max_object_extent_m, 0.0, low_open=True)
         check_real("min_object_extent_m", self.min_object_extent_m, 0.0)
         check_integer("min_object_nodes", self.min_object_nodes, 1)
@@ -275,6 +279,7 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
                              min_extent_m=params.support_min_extent_m,
                              plane_sigmas=params.plane_sigmas,
                              min_offset_m=params.min_plane_offset_m,
+                             min_height_m=params.min_object_height_m,
                              cos_normal=math.cos(math.radians(params.patch_angle_deg)),
                              colors=colors)
     patches = supports.patches

@@ -1,25 +1,23 @@
 """Support surfaces and segment roles in a segmented GNG-DT network.
 
-Planes are fitted to groups of nodes (smooth patches, segments) all at once: per group the
-least-squares plane, then again over the nodes within ``INLIER_SIGMAS`` robust standard
-deviations of it, so an object lying on a table does not tilt the table's plane.
-
-- `split_off_planes`: a smooth patch that is a plane keeps only the nodes on it. Nodes farther
-  from the plane than ``plane_sigmas`` of its own noise (and than ``min_offset_m``) leave it as
-  patches of their own: a 1-2 cm case lying flat on a table, whose top grows into the table's
-  patch when straddling nodes smooth its low edge, is then judged against the table like any
-  object (its edge to the table is a step, a crease). With attention on (`gngdt_core.stream`),
-  such a case is no longer thinned out as part of the table.
-- `segment_roles`: each segment is a **support** (a plane at least ``support_min_extent_m``
-  across in both directions that another segment rests on or leans against: a table, a floor,
-  a wall, a shelf's floor or side, in any orientation), **clutter** (background structure: seen
-  only in part — it reaches the edge of the view — or longer than ``max_object_extent_m``, or
-  bordering mostly on such structure; and bits: narrower than ``min_object_extent_m`` or of
-  fewer than ``min_object_nodes`` nodes) or an **object**.
+- `find_supports` (segmentation step 2b): smooth patches that are large planes — a table, a
+  floor, a wall, a shelf's floor or side, in any orientation, any number — keep exactly the
+  nodes on their plane (distances judged against the plane's own noise, which grows with the
+  square of the depth) connected to them; a piece that rises at least ``min_height_m`` above
+  the plane leaves it (a case lying flat that the table's patch grew over), and with node
+  colours, a piece of another colour leaves however low it is (a sheet).
+- `segment_roles`: each segment is a **support** (a support plane that something rests on or
+  leans against, or that reaches the edge of the view or is longer than an object: one seen
+  whole, small, carrying nothing is a large flat object, a laptop's lid), **clutter**
+  (background structure: seen only in part — it reaches the edge of the view — or longer than
+  ``max_object_extent_m``, or bordering mostly on such structure; and bits: narrower than
+  ``min_object_extent_m`` or of fewer than ``min_object_nodes`` nodes) or an **object**.
   `SegmentRoles.rests_on` records who rests on (or leans against) whom: supports, and objects
   stacked on a flat top.
 
-Pure computation on arrays.
+Planes are fitted per group of nodes, twice: to all of them, then to those within
+``INLIER_SIGMAS`` robust standard deviations of the first plane, so an object lying on a table
+does not tilt the table's plane. Pure computation on arrays.
 """
 
 from __future__ import annotations
@@ -55,6 +53,8 @@ class Planes:
     extent: np.ndarray
     #: (K,) nodes in each group
     count: np.ndarray
+    #: (K, 2, 3) unit in-plane axes, along the larger extent first
+    axes: np.ndarray | None = None
 
     def distances(self, positions: np.ndarray, groups: np.ndarray) -> np.ndarray:
         """(n,) signed distance (metres) of each node to its group's plane, positive on the
@@ -76,11 +76,12 @@ def fit_planes(positions: np.ndarray, groups: np.ndarray, n_groups: int) -> Plan
     keep = refit.count >= 3
     planes = Planes(np.where(keep[:, None], refit.centroid, planes.centroid),
                     np.where(keep[:, None], refit.normal, planes.normal), planes.sigma,
-                    np.where(keep[:, None], refit.extent, planes.extent), planes.count)
+                    np.where(keep[:, None], refit.extent, planes.extent), planes.count,
+                    np.where(keep[:, None, None], refit.axes, planes.axes))
     distance = planes.distances(positions[member], groups[member])
     return Planes(planes.centroid, planes.normal,
                   _robust_sigma(distance, groups[member], n_groups), planes.extent,
-                  planes.count)
+                  planes.count, planes.axes)
 
 
 def _least_squares_planes(positions: np.ndarray, groups: np.ndarray, n_groups: int) -> Planes:
@@ -101,7 +102,7 @@ def _least_squares_planes(positions: np.ndarray, groups: np.ndarray, n_groups: i
     normal[count < 3] = 0.0
     extent = np.sqrt(12.0 * np.maximum(values[:, [2, 1]], 0.0))
     return Planes(centroid, normal, np.sqrt(np.maximum(values[:, 0], 0.0)), extent,
-                  count.astype(np.int64))
+                  count.astype(np.int64), np.transpose(vectors[:, :, [2, 1]], (0, 2, 1)))
 
 
 def _robust_sigma(distance: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
@@ -132,7 +133,7 @@ class Supports:
 def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                   adjacency: tuple, *, min_nodes: int, min_extent_m: float,
                   plane_sigmas: float, min_offset_m: float, cos_normal: float,
-                  depths: np.ndarray | None = None,
+                  min_height_m: float = 0.0, depths: np.ndarray | None = None,
                   colors: np.ndarray | None = None) -> Supports:
     """Support planes (tables, floors, walls, shelf floors and sides: any orientation, any
     number) and their nodes.
@@ -144,7 +145,9 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     connected to the patch's own such nodes by position edges (``adjacency``: CSR offsets and
     neighbours): pieces of the same table cut off by noise join it, and nodes of the patch off
     the plane (a thin case the patch grew over) leave it as patches of their own, one per
-    connected group. Supports are patches 0..S-1 of the result.
+    connected group, when it rises at least ``min_height_m`` above the plane somewhere (a
+    shallower group is the plane's own warp or noise: a real table or floor bends by a few
+    millimetres). Supports are patches 0..S-1 of the result.
 
     depths: (n,) metres from the sensor along its axis (None: all alike). A depth sensor's
     noise grows with the square of the depth, so distances to a plane are judged in units of
@@ -196,13 +199,33 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     on = (distance <= limit) & (np.abs(normals @ normal.T) >= cos_normal)
     plane_of = np.where(on.any(axis=1), np.argmin(np.where(on, distance, np.inf), axis=1), -1)
     seed = (plane_of >= 0) & (patches == own[np.maximum(plane_of, 0)])
+    other_colour = np.zeros(n, dtype=bool)
     if colors is not None:
-        plane_of = _same_colour(plane_of, seed, np.asarray(colors, dtype=np.float64),
+        coloured = _same_colour(plane_of, seed, np.asarray(colors, dtype=np.float64),
                                 len(fits), plane_sigmas)
+        other_colour = coloured != plane_of
+        plane_of = coloured
         seed &= plane_of >= 0
     offsets, neighbours, _ = adjacency
     result = SK.grow_supports(offsets, neighbours, plane_of.astype(np.int64), seed, patches,
                               n_patches, len(fits))
+    left = result >= len(fits) + n_patches  # nodes that left a support's patch
+    if left.any():
+        origin = np.full(n_patches, -1)
+        origin[own] = np.arange(len(fits))
+        support_of = origin[patches[left]]
+        height = np.abs(np.einsum("ij,ij->i", positions[left], normal[support_of])
+                        - offset[support_of])
+        pieces, piece_of = np.unique(result[left], return_inverse=True)
+        tallest = np.zeros(pieces.size)
+        np.maximum.at(tallest, piece_of, height)
+        # a piece of another colour leaves however low it is
+        coloured = np.zeros(pieces.size, dtype=bool)
+        coloured[piece_of[other_colour[left]]] = True
+        back = (tallest < min_height_m)[piece_of] & ~coloured[piece_of]
+        result[np.flatnonzero(left)[back]] = support_of[back]
+        _, result = np.unique(result, return_inverse=True)  # no empty patch numbers
+        result = result.astype(np.int32)
     is_support = np.zeros(int(result.max()) + 1, dtype=bool)
     is_support[: len(fits)] = True
     return Supports(result, is_support)
@@ -300,7 +323,7 @@ def segment_roles(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
     off = np.abs(planes.distances(positions[member], labels[member])) > limit[labels[member]]
     flat = (planes.count >= 3) & (np.bincount(labels[member][off], minlength=n_segments)
                                   < 0.1 * planes.count)
-    # who rests on whom: concave edges between segments, the upper one on the plane's side
+    # who rests on whom: concave edges between segments, the upper one on the plane's side ...
     a, b = labels[edges[:, 0]], labels[edges[:, 1]]
     touching = (a >= 0) & (b >= 0) & (a != b)
     between = touching & concave
@@ -308,7 +331,11 @@ def segment_roles(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
     lower = np.concatenate([b[between], a[between]])
     height = np.einsum("ij,ij->i", planes.centroid[upper] - planes.centroid[lower],
                        planes.normal[lower])
-    resting = (flat | (roles == SUPPORT))[lower] & (height > limit[lower]) & (
+    # ... and over it: the upper one's centre within the lower one's extent along its plane
+    along = np.abs(np.einsum("ikj,ij->ik", planes.axes[lower],
+                             planes.centroid[upper] - planes.centroid[lower]))
+    over = (along <= 0.5 * planes.extent[lower]).all(axis=1)
+    resting = (flat | (roles == SUPPORT))[lower] & (height > limit[lower]) & over & (
         roles[upper] != SUPPORT)
     pairs = np.unique(np.stack([upper[resting], lower[resting]], axis=1), axis=0)
     too_large = planes.extent[:, 0] > max_object_extent_m
@@ -316,6 +343,11 @@ def segment_roles(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
     partial = np.zeros(n_segments, dtype=bool)
     if at_view_edge is not None:
         partial[np.unique(labels[member & at_view_edge])] = True
+    # a support plane seen whole, no larger than an object, that nothing rests on is a large
+    # flat object (a laptop's lid, a tray): its role is judged as any other segment's
+    carries = np.zeros(n_segments, dtype=bool)
+    carries[pairs[:, 1]] = True
+    roles[(roles == SUPPORT) & ~(carries | partial | too_large)] = OBJECT
     structure = (roles != SUPPORT) & (too_large | partial)
     # a segment bordering mostly on such background structure is a piece of it (a key of a
     # keyboard cut by the view's edge): judged until nothing changes; small bits do not count
