@@ -618,3 +618,26 @@ def csr_adjacency(n, edges, flags):
             usable[fill[u]] = flags[k]
             fill[u] += 1
     return offsets, neighbours, usable
+
+
+@njit(cache=True)
+def long_edges(n, positions, edges, ratio):
+    """(E,) bool: edges longer than ``ratio`` times the shortest edge at either end (the local
+    spacing): stale edges across free space between two surfaces, not adjacency on one."""
+    n_edges = edges.shape[0]
+    length = np.empty(n_edges)
+    shortest = np.full(n, np.inf)
+    for k in range(n_edges):
+        i = edges[k, 0]
+        j = edges[k, 1]
+        d0 = positions[j, 0] - positions[i, 0]
+        d1 = positions[j, 1] - positions[i, 1]
+        d2 = positions[j, 2] - positions[i, 2]
+        length[k] = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+        shortest[i] = min(shortest[i], length[k])
+        shortest[j] = min(shortest[j], length[k])
+    result = np.empty(n_edges, dtype=np.bool_)
+    for k in range(n_edges):
+        spacing = max(shortest[edges[k, 0]], shortest[edges[k, 1]])
+        result[k] = length[k] > ratio * spacing
+    return result

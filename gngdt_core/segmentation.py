@@ -99,6 +99,10 @@ RIM_PAIRS = 5
 #: joins it; chosen on ycbv's mug (0.912 -> 0.941 learned from scratch, 0.879 -> 0.912
 #: streamed, seed-0 networks); at 0.7 the gelatin box joined the mug in one streamed frame
 ENCLOSED_SHARE = 0.8
+#: an edge longer than this many times the shortest edge at either end is left out (1-2 % of
+#: the edges of a learned network; a streamed ycbv network tied the gelatin box to the foam
+#: brick by one 7.4 cm edge between nodes 5-8 mm from their neighbours)
+LONG_EDGE_RATIO = 6.0
 #: cells of the view (`SensorView`) from its bounds within which a node is at the view's edge
 VIEW_EDGE_CELLS = 2
 
@@ -204,7 +208,7 @@ class Segmentation:
         is_support = np.zeros(self.n_segments, dtype=bool)
         on = self.labels >= 0
         is_support[self.labels[on & context.support_node]] = True
-        return segment_roles(self.labels, context.positions, context.edges, ~self.convex,
+        return segment_roles(self.labels, context.positions, context.edges, context.concave,
                              is_support, context.at_view_edge, **_role_arguments(context.params))
 
     @property
@@ -225,7 +229,9 @@ class _RoleContext:
     """The network a `Segmentation` was made from, for its roles."""
 
     positions: np.ndarray
+    #: (E', 2) the position edges segmented (long ones left out) and (E',) which are concave
     edges: np.ndarray
+    concave: np.ndarray
     #: (n,) bool: the node is on a support plane (step 2b)
     support_node: np.ndarray
     at_view_edge: np.ndarray | None
@@ -275,6 +281,10 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     if n == 0:
         empty = np.zeros(0, dtype=np.int32)
         return Segmentation(empty, empty, np.zeros(len(edges), dtype=bool))
+    # long edges span free space between two surfaces (stale in a streamed network): no
+    # adjacency, and not in the convexity topology
+    spanning = SK.long_edges(n, positions, edges, LONG_EDGE_RATIO)
+    all_edges, edges = edges, edges[~spanning]
     rise_of_j, rise_of_i = edge_elevations(positions, normals, edges)
     smooth = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i)) < _sine(params.smooth_angle_deg)
     concavity = np.maximum(rise_of_j, rise_of_i)
@@ -284,7 +294,10 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
                               math.cos(math.radians(params.patch_angle_deg)))
     camera_from_model = np.eye(4) if camera_from_model is None else camera_from_model
     depths = positions @ camera_from_model[2, :3] + camera_from_model[2, 3]
-    supports = find_supports(patches, positions, normals, adjacency, depths=depths,
+    # a support grows over every edge, long ones too: a sparse table's far nodes are on its plane
+    supports = find_supports(patches, positions, normals,
+                             _adjacency(n, all_edges, np.ones(len(all_edges), dtype=bool)),
+                             depths=depths,
                              min_nodes=params.min_plane_nodes,
                              min_extent_m=params.support_min_extent_m,
                              plane_sigmas=params.plane_sigmas,
@@ -300,8 +313,11 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     if view is not None and params.bridge_gap_m > 0 and labels.max() > 0:
         labels = _bridge_gaps(labels, positions, normals, edges, params, view, camera_from_model)
     at_view_edge = None if view is None else _at_view_edge(positions, view, camera_from_model)
-    return Segmentation(labels, patches, convex,
-                        _RoleContext(positions, edges, support_node, at_view_edge, params))
+    convex_all = np.zeros(len(all_edges), dtype=bool)
+    convex_all[~spanning] = convex
+    return Segmentation(labels, patches, convex_all,
+                        _RoleContext(positions, edges, ~convex, support_node, at_view_edge,
+                                     params))
 
 
 def _at_view_edge(positions: np.ndarray, view: SensorView,

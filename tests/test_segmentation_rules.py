@@ -262,3 +262,21 @@ def test_colour_tells_a_sheet_lying_flat_from_the_table_when_colours_are_given()
     sheet_segment, sheet_share = majority(result.labels, part, 1)
     assert sheet_segment != table_segment and min(table_share, sheet_share) > 0.95
     assert result.roles[sheet_segment] == OBJECT
+
+
+def test_a_long_stale_edge_across_free_space_does_not_join_two_objects() -> None:
+    # two boxes 8 cm apart, one edge between them (a streamed network keeps such edges for a
+    # while after the surfaces moved apart); every other edge is 1-1.5 cm long
+    rng = np.random.default_rng(9)
+    left = box(rng, (-0.14, -0.04), TABLE_Y, 0.08, (0.8, 0.9))
+    right = box(rng, (0.04, 0.14), TABLE_Y, 0.08, (0.8, 0.9))
+    parts = [table(rng, [(-0.14, -0.04, 0.8, 0.9), (0.04, 0.14, 0.8, 0.9)]), left, right]
+    positions, normals, edges, part = network(parts)
+    # the nearest pair of nodes on the two boxes' tops
+    a = np.flatnonzero(part == 1)[np.argmax(positions[part == 1, 0])]
+    b = np.flatnonzero(part == 2)[np.argmin(positions[part == 2, 0])]
+    stale = np.vstack([edges, [[a, b]]])
+    result = segment(positions, normals, stale)
+    assert majority(result.labels, part, 1)[0] != majority(result.labels, part, 2)[0]
+    assert not result.convex[-1]  # not in the convexity topology
+    assert result.convex.shape == (len(stale),)
