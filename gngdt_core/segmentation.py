@@ -311,7 +311,8 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     labels = rank_by_size(_absorb_fragments(objects, edges, convex, params.min_segment_nodes),
                           params.min_segment_nodes)
     if view is not None and params.bridge_gap_m > 0 and labels.max() > 0:
-        labels = _bridge_gaps(labels, positions, normals, edges, params, view, camera_from_model)
+        labels = _bridge_gaps(labels, positions, normals, edges, params, view, camera_from_model,
+                              support_node)
     at_view_edge = None if view is None else _at_view_edge(positions, view, camera_from_model)
     convex_all = np.zeros(len(all_edges), dtype=bool)
     convex_all[~spanning] = convex
@@ -407,13 +408,17 @@ def _absorb_fragments(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
 
 def _bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
                  edges: np.ndarray, params: SegmentationParams, view: SensorView,
-                 camera_from_model: np.ndarray) -> np.ndarray:
-    """(n,) int32 segments after step 6: segments joined across gaps of missing depth."""
+                 camera_from_model: np.ndarray, support_node: np.ndarray) -> np.ndarray:
+    """(n,) int32 segments after step 6: segments joined across gaps of missing depth; nothing
+    joins a support (``support_node``: (n,) bool nodes on a support plane)."""
     from scipy.spatial import cKDTree
 
     gap = params.bridge_gap_m
+    on_support = np.zeros(int(labels.max()) + 2, dtype=bool)
+    on_support[labels[support_node]] = True
     candidates = np.flatnonzero(
-        (labels >= 0) & view.near_unmeasured(positions, camera_from_model, GAP_BORDER_M))
+        (labels >= 0) & ~on_support[labels]
+        & view.near_unmeasured(positions, camera_from_model, GAP_BORDER_M))
     if candidates.size < 2:
         return labels
     pairs = candidates[cKDTree(positions[candidates]).query_pairs(gap, output_type="ndarray")]
