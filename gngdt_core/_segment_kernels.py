@@ -641,3 +641,16 @@ def long_edges(n, positions, edges, ratio):
         spacing = max(shortest[edges[k, 0]], shortest[edges[k, 1]])
         result[k] = length[k] > ratio * spacing
     return result
+
+
+@njit(cache=True)
+def node_roughness(n, edges, steepest):
+    """(n,) the largest ``steepest`` (per edge) of the edges at each node (0: none)."""
+    roughness = np.zeros(n)
+    for k in range(edges.shape[0]):
+        value = steepest[k]
+        if value > roughness[edges[k, 0]]:
+            roughness[edges[k, 0]] = value
+        if value > roughness[edges[k, 1]]:
+            roughness[edges[k, 1]] = value
+    return roughness

@@ -346,10 +346,7 @@ def _smooth_patches(n: int, edges: np.ndarray, adjacency: tuple, normals: np.nda
     """(n,) int32 patch of each node: region growing over smooth edges (``adjacency``'s flags),
     flattest seeds first."""
     steepest = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i))
-    roughness = np.zeros(n)
-    np.maximum.at(roughness, edges[:, 0], steepest)
-    np.maximum.at(roughness, edges[:, 1], steepest)
-    seeds = np.argsort(roughness, kind="stable")
+    seeds = np.argsort(SK.node_roughness(n, edges, steepest), kind="stable")
     offsets, neighbours, usable = adjacency
     return SK.grow_patches(n, offsets, neighbours, usable, normals, seeds, cos_patch)
 

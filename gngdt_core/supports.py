@@ -175,8 +175,8 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
     noise = np.ones(n) if depths is None else np.square(np.maximum(depths, 1e-3))
     ordered_noise = noise[order]
     fits = []
-    wide = _second_extent(ordered, starts[:-1], sizes) >= min_extent_m
-    for patch in large[wide[large]]:
+    wide = _second_extent(ordered, starts[:-1], sizes, large) >= min_extent_m
+    for patch in large[wide]:
         nodes = ordered[starts[patch]:starts[patch + 1]]
         scale = ordered_noise[starts[patch]:starts[patch + 1]]
         plane = _fit_one_plane(nodes)
@@ -224,22 +224,25 @@ def find_supports(patches: np.ndarray, positions: np.ndarray, normals: np.ndarra
         coloured[piece_of[other_colour[left]]] = True
         back = (tallest < min_height_m)[piece_of] & ~coloured[piece_of]
         result[np.flatnonzero(left)[back]] = support_of[back]
-        _, result = np.unique(result, return_inverse=True)  # no empty patch numbers
-        result = result.astype(np.int32)
+        present = np.zeros(int(result.max()) + 1, dtype=bool)
+        present[result] = True  # renumbered without the emptied patches
+        result = (np.cumsum(present) - 1).astype(np.int32)[result]
     is_support = np.zeros(int(result.max()) + 1, dtype=bool)
     is_support[: len(fits)] = True
     return Supports(result, is_support)
 
 
-def _second_extent(ordered: np.ndarray, starts: np.ndarray, sizes: np.ndarray) -> np.ndarray:
-    """(K,) the second largest extent (sqrt(12) standard deviations) of K consecutive groups of
-    the rows of ``ordered`` (n, 3): group k is rows ``starts[k]`` .. ``starts[k] + sizes[k] -
-    1``, every group non-empty, the last ending at n."""
-    count = sizes[:, None].astype(np.float64)
-    mean = np.add.reduceat(ordered, starts, axis=0) / count
+def _second_extent(ordered: np.ndarray, starts: np.ndarray, sizes: np.ndarray,
+                   which: np.ndarray) -> np.ndarray:
+    """(K,) the second largest extent (sqrt(12) standard deviations) of the groups ``which``
+    (K,) of the consecutive groups of the rows of ``ordered`` (n, 3): group k is rows
+    ``starts[k]`` .. ``starts[k] + sizes[k] - 1``, every group non-empty, the last ending at n.
+    """
+    count = sizes[which, None].astype(np.float64)
+    mean = np.add.reduceat(ordered, starts, axis=0)[which] / count
     products = ordered[:, [0, 0, 0, 1, 1, 2]] * ordered[:, [0, 1, 2, 1, 2, 2]]
-    second = np.add.reduceat(products, starts, axis=0) / count
-    covariance = np.empty((len(starts), 3, 3))
+    second = np.add.reduceat(products, starts, axis=0)[which] / count
+    covariance = np.empty((len(which), 3, 3))
     for k, (a, b) in enumerate(((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))):
         covariance[:, a, b] = covariance[:, b, a] = second[:, k] - mean[:, a] * mean[:, b]
     values = np.linalg.eigvalsh(covariance)
