@@ -52,11 +52,12 @@ position topology is here):
    ``convex_share`` of those are convex, or ``RIM_SHARE`` of them (or ``RIM_PAIRS``) are *back
    to back*: convex with normals facing away from each other, the two faces of a thin wall at
    a rim (two objects facing each other across a gap meet concavely) — or one is seen through
-   an opening of the other: ``ENCLOSED_SHARE`` of its nodes across a gap face the other's
-   nearest nodes from behind them and from inside them on the image (a mug's inside past its
-   glossy rim). Such rim joins hold whatever creases the container's mouth adds; other joins
-   go surest first and only while at most ``crease_share`` of the crossing pairs between the
-   two growing unions are creases. Segments that already share ``min_boundary_edges`` position
+   an opening of the other: ``ENCLOSED_SHARE`` of its nodes across a gap face their nearest
+   nodes there from behind them and from inside them on the image (a mug's inside past its
+   glossy rim, the rim perhaps cut into pieces), and most of them face the other. Such rim
+   joins hold whatever creases the container's mouth adds; other joins go surest first and
+   only while at most ``crease_share`` of the crossing pairs between the two growing unions
+   are creases. Segments that already share ``min_boundary_edges`` position
    edges were judged in step 4 and are left as they are.
 7. Roles (on demand: `Segmentation.roles`, `Segmentation.object_labels`;
    `gngdt_core.supports.segment_roles`): each segment is a support (step 2b), clutter
@@ -94,10 +95,11 @@ GAP_DEPTH_MARGIN = 0.02
 #: scratch, 0.820 -> 0.867 streamed; no effect on mosd, whose rims return depth)
 RIM_SHARE = 0.2
 RIM_PAIRS = 5
-#: a segment this share of whose nodes across gaps face another from behind and from inside it
-#: on the image is seen through that one's opening (a mug's inside past its glossy rim) and
-#: joins it; chosen on ycbv's mug (0.912 -> 0.941 learned from scratch, 0.879 -> 0.912
-#: streamed, seed-0 networks); at 0.7 the gelatin box joined the mug in one streamed frame
+#: a segment this share of whose nodes across gaps face others from behind and from inside them
+#: on the image is seen through an opening (a mug's inside past its glossy rim, which may be cut
+#: into pieces) and joins the segment it faces most; chosen on ycbv's mug (0.912 -> 0.941
+#: learned from scratch, 0.879 -> 0.912 streamed, seed-0 networks); at 0.7 the gelatin box
+#: joined the mug in one streamed frame
 ENCLOSED_SHARE = 0.8
 #: an edge longer than this many times the shortest edge at either end is left out (1-2 % of
 #: the edges of a learned network; a streamed ycbv network tied the gelatin box to the foam
@@ -485,11 +487,14 @@ def _enclosed(labels: np.ndarray, positions: np.ndarray, pairs: np.ndarray,
                > np.linalg.norm(image[node] - centre[inner], axis=1))
     through = (depth[node] > depth[partner]) & outside
     facing = np.bincount(inner[through] * n_labels + outer[through],
-                         minlength=n_labels * n_labels)
+                         minlength=n_labels * n_labels).reshape(n_labels, n_labels)
     borders = np.bincount(inner, minlength=n_labels)
+    # the rim may be cut into several segments: what counts is how much of the border faces
+    # some segment through the opening; the enclosed one joins the one it faces most
+    enclosed = facing.sum(axis=1) >= ENCLOSED_SHARE * np.maximum(borders, 1)
+    most = facing.argmax(axis=1)
     low, high = keys // n_labels, keys % n_labels
-    return ((facing[low * n_labels + high] >= ENCLOSED_SHARE * borders[low])
-            | (facing[high * n_labels + low] >= ENCLOSED_SHARE * borders[high]))
+    return (enclosed[low] & (most[low] == high)) | (enclosed[high] & (most[high] == low))
 
 
 def _join_across_gaps(n_labels: int, low: np.ndarray, high: np.ndarray, crossing: np.ndarray,
