@@ -113,6 +113,7 @@ def method_rows(set_name: str, data: dict, halves: dict[str, set[str]] | None = 
                                f"ms, p90 {s90:.0f} ms: {verdict} the streaming target "
                                f"({STREAMING_TARGET_MS:.0f} ms, p50)")
         elif name == "gngdt independent":
+            p50, _ = percentiles([r["milliseconds"]["total"] for r in records])  # whole set
             verdict = "meets" if p50 <= INDEPENDENT_TARGET_MS else "misses"
             phase_lines.append(f"  {'':12s} {'':30s} total p50 {p50:.0f} ms: {verdict} the "
                                f"independent target ({INDEPENDENT_TARGET_MS:.0f} ms, p50)")
