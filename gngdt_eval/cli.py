@@ -383,7 +383,9 @@ def _main_segmentation(args: argparse.Namespace) -> int:
         print(f"  {method}: mean best IoU {summary['mean_best_iou']:.3f}, "
               f"R@0.5 {summary['recall_50']:.3f}, R@0.75 {summary['recall_75']:.3f}, "
               f"{summary['segments_per_frame']:.1f} segments/frame, "
-              f"{total['p50']:.0f} ms/frame p50")
+              f"{total['p50']:.0f} ms/frame p50; of {summary['truth_segments']} objects "
+              f"{summary['fragmented']} fragmented, {summary['merged']} merged, "
+              f"{summary['missed']} missed")
     if not data["peer"]["run"]:
         print(f"  peer not run: {data['peer']['status']}")
     return 0

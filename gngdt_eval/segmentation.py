@@ -21,7 +21,7 @@ import numpy as np
 
 from gngdt_eval.open3d_peer import PeerParams
 from gngdt_eval.report import format_number, markdown_table, write_report
-from gngdt_eval.segment_scores import RECALL_THRESHOLDS, recall_key
+from gngdt_eval.segment_scores import FAILURES, RECALL_THRESHOLDS, recall_key
 
 log = logging.getLogger(__name__)
 
@@ -43,6 +43,8 @@ class SegmentationEvalSettings:
     peer_params: PeerParams = field(default_factory=PeerParams)
     #: frames drawn side by side (colour, ground truth, each method), spread over the set
     figures: int = 4
+    #: and the frames where gngdt did worst (lowest mean best IoU over its modes)
+    worst: int = 4
     #: only the first N frames (None: all)
     max_frames: int | None = None
     seed: int = 0
@@ -51,8 +53,9 @@ class SegmentationEvalSettings:
         unknown = sorted(set(self.modes) - set(MODES))
         if unknown or not self.modes:
             raise ValueError(f"modes must be among {MODES}, got {list(self.modes)}")
-        if self.figures < 0 or (self.max_frames is not None and self.max_frames < 1):
-            raise ValueError("figures must be >= 0 and max_frames >= 1")
+        if min(self.figures, self.worst) < 0 or (self.max_frames is not None
+                                                 and self.max_frames < 1):
+            raise ValueError("figures and worst must be >= 0 and max_frames >= 1")
 
 
 def method_name(mode: str) -> str:
@@ -114,11 +117,11 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     for name, frame in _limited(source.frames(), settings.max_frames):  # fail before any work
         truth = read_truth(set_dir, name, frame.depth.shape, frame.index)
         frames.append(_Frame(name, truth, (frame.depth > 0) & (truth != 0), None))
-    drawn = set(_spread(len(frames), settings.figures))
+    spread = _spread(len(frames), settings.figures)
     log.info("%s: %d frames, methods: %s", set_dir, len(frames),
              ", ".join(method_name(mode) for mode in settings.modes))
 
-    runs = _MethodRuns(frames, drawn, progress)
+    runs = _MethodRuns(frames, progress)
 
     for mode in settings.modes:
         segmenter = make_segmenter(profile, settings.seed)
@@ -135,11 +138,13 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     else:
         log.warning("the peer was not run: %s", peer_note)
 
+    methods, predictions = runs.methods, runs.predictions
+    worst = _worst_frames(methods, settings.worst)
+    drawn = sorted(set(spread) | set(worst))
     for index, (_, frame, _, _) in enumerate(_limited(organized_frames(source),
                                                       settings.max_frames)):
         if index in drawn:
             frames[index].color = frame.color
-    methods, predictions = runs.methods, runs.predictions
     data = {
         "set": str(set_dir), "frames": len(frames), "format": source.format,
         "intrinsics_from": source.camera_note,
@@ -154,22 +159,24 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
                  "description": settings.peer_params.describe()},
         "methods": methods,
     }
-    data["figures"] = _figures(out, frames, predictions, sorted(drawn), set_dir.name)
+    data["worst_frames"] = [frames[index].name for index in worst]
+    data["figures"] = _figures(out, frames, predictions, drawn, set_dir.name,
+                               set(worst) - set(spread))
     data["wall_seconds"] = time.perf_counter() - started
     write_report(out, "segmentation", _markdown(data), data)
     return data
 
 
 class _MethodRuns:
-    """Each method's labels of every frame, scored (``methods``: summary and per-frame records),
-    and the labels of the frames drawn (``predictions``)."""
+    """Each method's labels of every frame, scored (``methods``: summary and per-frame records
+    with failure counts), and kept PNG-compressed (``predictions``, a few kB a frame) until the
+    frames to draw, gngdt's worst among them, are known."""
 
-    def __init__(self, frames: list[_Frame], drawn: set[int], progress: bool) -> None:
+    def __init__(self, frames: list[_Frame], progress: bool) -> None:
         self.frames = frames
-        self.drawn = drawn
         self.progress = progress
         self.methods: dict[str, dict[str, Any]] = {}
-        self.predictions: dict[str, dict[int, np.ndarray]] = {}
+        self.predictions: dict[str, list[bytes]] = {}
 
     def run(self, method: str,
             labelled: Iterator[tuple[np.ndarray, dict[str, float], dict]]) -> None:
@@ -177,7 +184,7 @@ class _MethodRuns:
         from gngdt_eval.segment_scores import score_frame
 
         bar = ProgressBar(len(self.frames), method) if self.progress else None
-        records, scores, drawn_labels = [], [], {}
+        records, scores, encoded = [], [], []
         for index, (labels, milliseconds, extra) in enumerate(labelled):
             kept = self.frames[index]
             score = score_frame(kept.truth, labels, kept.valid)
@@ -186,15 +193,15 @@ class _MethodRuns:
                             **{recall_key(t): score.recall(t) for t in RECALL_THRESHOLDS},
                             "truth_segments": len(score.best_iou),
                             "segments": score.n_predicted, "best_iou": score.best_iou,
+                            **score.failure_counts.as_dict(),
                             "milliseconds": milliseconds, **extra})
-            if index in self.drawn:
-                drawn_labels[index] = labels
+            encoded.append(_encode_labels(labels))
             if bar:
                 bar.advance()
         if bar:
             bar.close()
         self.methods[method] = _method_summary(scores, records)
-        self.predictions[method] = drawn_labels
+        self.predictions[method] = encoded
 
 
 def _peer_labels(peer: Any, items: Iterator[tuple[str, Any, np.ndarray, float]]
@@ -204,6 +211,31 @@ def _peer_labels(peer: Any, items: Iterator[tuple[str, Any, np.ndarray, float]]
         milliseconds = {"deproject": deproject_ms, **laps}
         milliseconds["total"] = sum(milliseconds.values())
         yield labels, milliseconds, {}
+
+
+def _encode_labels(labels: np.ndarray) -> bytes:
+    import cv2
+
+    return cv2.imencode(".png", np.clip(labels, 0, 65535).astype(np.uint16))[1].tobytes()
+
+
+def _decode_labels(encoded: bytes) -> np.ndarray:
+    import cv2
+
+    return cv2.imdecode(np.frombuffer(encoded, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+
+
+def _worst_frames(methods: dict[str, dict[str, Any]], wanted: int) -> list[int]:
+    """Indices of up to ``wanted`` frames with the lowest mean best IoU of any gngdt mode
+    (frames without ground-truth segments never), worst first."""
+    worst: dict[int, float] = {}
+    for name, method in methods.items():
+        if name == PEER:
+            continue
+        for index, record in enumerate(method["per_frame"]):
+            if record["truth_segments"]:
+                worst[index] = min(worst.get(index, 1.0), record["mean_best_iou"])
+    return sorted(worst, key=lambda index: (worst[index], index))[:wanted]
 
 
 def _spread(count: int, wanted: int) -> list[int]:
@@ -222,8 +254,8 @@ def _method_summary(scores: list, records: list[dict[str, Any]]) -> dict[str, An
             "per_frame": records}
 
 
-def _figures(out: Path, frames: list[_Frame], predictions: dict[str, dict[int, np.ndarray]],
-             drawn: list[int], set_name: str) -> list[str]:
+def _figures(out: Path, frames: list[_Frame], predictions: dict[str, list[bytes]],
+             drawn: list[int], set_name: str, worst: set[int]) -> list[str]:
     from gngdt_eval.plots import label_image_colours, plot_image_rows
 
     paths = []
@@ -232,10 +264,12 @@ def _figures(out: Path, frames: list[_Frame], predictions: dict[str, dict[int, n
         row = [(f"colour {frame.name}", frame.color),
                (f"ground truth ({len(np.unique(frame.truth[frame.truth >= 2]))} segments)",
                 label_image_colours(frame.truth))]
-        for method, labels in predictions.items():
-            row.append((method, label_image_colours(np.where(frame.valid, labels[index], 0))))
+        for method, encoded in predictions.items():
+            labels = _decode_labels(encoded[index])
+            row.append((method, label_image_colours(np.where(frame.valid, labels, 0))))
+        note = " (among gngdt's worst)" if index in worst else ""
         path = plot_image_rows([row], out / f"segmentation_{frame.name}.png",
-                               title=f"{set_name} frame {frame.name}")
+                               title=f"{set_name} frame {frame.name}{note}")
         paths.append(path.name)
     return paths
 
@@ -267,6 +301,14 @@ def _markdown(data: dict[str, Any]) -> str:
         truth = next(iter(methods.values()))["summary"]["truth_segments"]
         lines += [f"{truth} ground-truth segments in all. Time: wall clock per frame, "
                   "deprojection included, on a machine possibly shared with other jobs.", ""]
+        lines += ["## Failures", "", "Ground-truth segments (objects) by how they failed, of "
+                  f"{truth} (one can fail in more than one way): fragmented = the predicted "
+                  "segment covering most of it covers < 80 % of it; merged = that segment also "
+                  "covers > 20 % of another object; missed = no predicted segment is mostly "
+                  "this object (into the background, another object, or unassigned).", "",
+                  markdown_table(["method", *FAILURES],
+                                 [[name, *(m["summary"][key] for key in FAILURES)]
+                                  for name, m in methods.items()]), ""]
     lines += ["## Time per phase (ms, p50 / p90)", ""]
     for name, m in methods.items():
         lines.append(f"- {name}: " + ", ".join(
@@ -275,13 +317,17 @@ def _markdown(data: dict[str, Any]) -> str:
     lines += ["", "## Per frame", ""]
     for name, m in methods.items():
         lines += [f"### {name}", "", markdown_table(
-            ["frame", "GT segments", "mean best IoU", "R@0.5", "R@0.75", "segments", "ms"],
+            ["frame", "GT segments", "mean best IoU", "R@0.5", "R@0.75", "segments",
+             *FAILURES, "ms"],
             [[r["name"], r["truth_segments"], format_number(r["mean_best_iou"]),
               format_number(r["recall_50"], 2), format_number(r["recall_75"], 2),
-              r["segments"], format_number(r["milliseconds"]["total"], 0)]
+              r["segments"], *(r[key] for key in FAILURES),
+              format_number(r["milliseconds"]["total"], 0)]
              for r in m["per_frame"]]), ""]
     if data["figures"]:
         lines += ["## Frames side by side", "",
+                  "Spread over the set, and gngdt's worst frames "
+                  f"({', '.join(data['worst_frames']) or 'none'}: lowest mean best IoU). ",
                   "Black: no depth / no segment; grey: label 1 (ground truth: background; "
                   "gngdt: its largest segment; peer: the plane); other colours per label "
                   "(colours are not matched across panels).", ""]

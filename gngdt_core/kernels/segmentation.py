@@ -7,8 +7,6 @@ learning loop never calls them.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from numba import njit
 
@@ -229,43 +227,3 @@ def veil_pixels(depth, ratio, out):
                 if other > 0.0 and abs(other - z) > ratio * min(z, other):
                     out[r, c] = True
                     out[r + 1, c] = True
-
-
-@njit(cache=True)
-def grow_patches(n, offsets, neighbours, usable, normals, seeds, cos_patch):
-    """Region growing over usable edges (CSR ``offsets``/``neighbours``/``usable``), seeds in the
-    given order; a node joins while its normal is within ``acos(cos_patch)`` of the patch's
-    running mean normal. Returns (n,) int32 patch labels."""
-    patch = np.full(n, -1, dtype=np.int32)
-    queue = np.empty(n, dtype=np.int64)
-    n_patches = 0
-    for seed in seeds:
-        if patch[seed] >= 0:
-            continue
-        patch[seed] = n_patches
-        queue[0] = seed
-        head = 0
-        tail = 1
-        sx = normals[seed, 0]
-        sy = normals[seed, 1]
-        sz = normals[seed, 2]
-        while head < tail:
-            u = queue[head]
-            head += 1
-            for slot in range(offsets[u], offsets[u + 1]):
-                v = neighbours[slot]
-                if not usable[slot] or patch[v] >= 0:
-                    continue
-                norm = math.sqrt(sx * sx + sy * sy + sz * sz)
-                if norm <= 0.0:
-                    continue
-                if normals[v, 0] * sx + normals[v, 1] * sy + normals[v, 2] * sz < cos_patch * norm:
-                    continue
-                patch[v] = n_patches
-                queue[tail] = v
-                tail += 1
-                sx += normals[v, 0]
-                sy += normals[v, 1]
-                sz += normals[v, 2]
-        n_patches += 1
-    return patch

@@ -259,3 +259,51 @@ def test_fresh_normals_follow_eq_16_on_the_current_positions() -> None:
         assert abs(fresh[node] @ expected) > 1 - 1e-6, node
         compared += 1
     assert compared > 50
+
+
+def _seen_through_an_opening(inner_z: float) -> tuple:
+    """A 12 x 12 cm frame of nodes at 0.6 m around an opening; through it, 2 cm inside the
+    frame's edge all round, a 6 x 6 cm surface at ``inner_z``; the sensor measured neither the
+    1 cm band between them (a glossy rim) nor anything else in it. Normals face the sensor;
+    no edge between the two. Returns positions, normals, edges, view, which node is inner."""
+    step = 0.005
+    grid = np.arange(-0.06, 0.0601, step)
+    x, y = np.meshgrid(grid, grid, indexing="ij")
+    frame = (np.maximum(np.abs(x), np.abs(y)) >= 0.045).ravel()
+    inner_grid = np.arange(-0.03, 0.0301, step)
+    ix, iy = np.meshgrid(inner_grid, inner_grid, indexing="ij")
+    positions = np.vstack([np.column_stack([x.ravel()[frame], y.ravel()[frame],
+                                            np.full(frame.sum(), 0.6)]),
+                           np.column_stack([ix.ravel(), iy.ravel(),
+                                            np.full(ix.size, inner_z)])])
+    inner = np.arange(len(positions)) >= frame.sum()
+    normals = np.tile([0.0, 0.0, -1.0], (len(positions), 1))
+    pairs = cKDTree(positions).query_pairs(1.01 * step, output_type="ndarray")
+    edges = pairs[inner[pairs[:, 0]] == inner[pairs[:, 1]]]
+    dense_grid = np.arange(-0.065, 0.065, 0.001)
+    dx, dy = np.meshgrid(dense_grid, dense_grid)
+    dx, dy = dx.ravel(), dy.ravel()
+    ring = np.maximum(np.abs(dx), np.abs(dy))
+    measured_frame = ring >= 0.045
+    measured_inner = ring <= 0.032
+    dense = np.vstack([np.column_stack([dx, dy, np.full(dx.size, 0.6)])[measured_frame],
+                       np.column_stack([dx, dy, np.full(dx.size, inner_z)])[measured_inner]])
+    # the camera sees along rays: scale the points to lie on them (x/z, y/z as at 0.6 m)
+    dense[:, :2] *= dense[:, 2:] / 0.6
+    positions[:, :2] *= positions[:, 2:] / 0.6
+    return positions, normals, edges, SensorView.of(dense), inner
+
+
+@pytest.mark.parametrize("inner_z, joined", [
+    (0.64, True),   # behind the opening: the inside seen through a glossy rim
+    (0.56, False),  # in front of it: something else, nearer than the frame
+])
+def test_what_is_seen_through_an_opening_across_a_gap_joins_the_opening(
+        inner_z: float, joined: bool) -> None:
+    positions, normals, edges, view, inner = _seen_through_an_opening(inner_z)
+    params = SegmentationParams(bridge_gap_m=0.045)
+    alone = segment_network(positions, normals, edges, params)
+    assert alone.n_segments == 2  # no edge across, no view
+    result = segment_network(positions, normals, edges, params, view)
+    assert len(np.unique(result.labels[inner])) == 1
+    assert (result.labels[inner][0] == result.labels[~inner][0]) == joined

@@ -86,6 +86,25 @@ def test_a_set_is_scored_over_all_its_segments_not_per_frame() -> None:
     assert summary["truth_segments"] == 3
 
 
+def test_failure_modes_are_counted_per_object() -> None:
+    # one row of pixels: 1 = background; objects 2 (10 px), 3 (10), 4 (5), 5 (4), 6 (4)
+    truth = np.array([[2] * 10 + [3] * 10 + [4] * 5 + [5] * 4 + [1] * 20 + [6] * 4])
+    predicted = np.array([[1] * 6 + [2] * 4      # object 2: split 6 / 4 -> fragmented
+                          + [3] * 15             # objects 3 and 4 in one segment -> merged,
+                          + [4] * 24             # and 4 is not its majority -> missed too
+                          + [5] * 4])            # object 5 inside the table's segment: missed
+    score = score_frame(truth, predicted)
+    assert score.failures == {2: {"fragmented"}, 3: {"merged"}, 4: {"merged", "missed"},
+                              5: {"missed"}, 6: set()}
+    assert score.failure_counts.as_dict() == {"objects": 5, "fragmented": 1, "merged": 2,
+                                              "missed": 2}
+    # unassigned pixels: the object is fragmented and missed
+    alone = score_frame(truth, np.where(truth == 6, 0, predicted))
+    assert alone.failures[6] == {"fragmented", "missed"}
+    summary = summarize_scores([score, alone])
+    assert (summary["fragmented"], summary["merged"], summary["missed"]) == (3, 4, 5)
+
+
 def test_scores_refuse_mismatched_images() -> None:
     with pytest.raises(ValueError, match="differ"):
         score_frame(TRUTH, PREDICTED[:, :4])
@@ -156,7 +175,18 @@ def test_report_on_a_labelled_recording_with_both_modes(
     names = ["000000", "000001", "000002"]
     methods = ["gngdt independent", "gngdt online"] + (["open3d peer"] if HAS_OPEN3D else [])
     check_report(data, out, names, methods)
-    assert data["figures"] == ["segmentation_000000.png", "segmentation_000002.png"]
+    # two frames spread over the set, and gngdt's worst (here all three), worst first
+    lowest = {name: min(r["mean_best_iou"] for m in methods[:2]
+                        for r in data["methods"][m]["per_frame"] if r["name"] == name)
+              for name in names}
+    assert data["worst_frames"] == sorted(names, key=lambda name: (lowest[name], name))
+    assert data["figures"] == [f"segmentation_{name}.png" for name in names]
+    for method in methods:
+        for record in data["methods"][method]["per_frame"]:
+            assert record["objects"] == record["truth_segments"]
+            assert all(0 <= record[key] <= record["objects"]
+                       for key in ("fragmented", "merged", "missed"))
+    assert "## Failures" in (out / "segmentation.md").read_text()
     assert data["gngdt"]["parameters"]["frames"]["steps_first_frame"] == 20000
     steps = [r["steps"] for r in data["methods"]["gngdt online"]["per_frame"]]
     assert steps == [20000, 4000, 4000]
