@@ -1,4 +1,4 @@
-"""Depth images: which pixels to trust."""
+"""Depth images: which pixels to trust, and a deprojected cloud put back on its pixels."""
 
 from __future__ import annotations
 
@@ -19,3 +19,29 @@ def veil_pixels(depth: np.ndarray, ratio: float) -> np.ndarray:
         depth = depth.astype(np.float32)
     SK.veil_pixels(depth, float(ratio), veil)
     return veil
+
+
+def organize(points: np.ndarray, colors: np.ndarray | None, width: int, height: int,
+             fx: float, fy: float, cx: float, cy: float
+             ) -> tuple[np.ndarray, np.ndarray | None]:
+    """An organized cloud back from a deprojected one (e.g. for `gngdt_core.odometry`).
+
+    points: (N, 3) camera frame (x right, y down, z forward), metres, as a depth image's valid
+    pixels deprojected with the pinhole ``fx, fy, cx, cy`` (the learner's ``points`` topic with
+    its calibration); colors: (N, 3) uint8 or None. Each point goes back to the pixel it came
+    from. Returns (height, width, 3) float32 points, NaN where no point lands, and the colours
+    there (zero elsewhere) or None. Points behind the camera or off the image are dropped.
+    """
+    points = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    organized = np.full((height, width, 3), np.nan, dtype=np.float32)
+    image = None if colors is None else np.zeros((height, width, 3), dtype=np.uint8)
+    z = points[:, 2]
+    ahead = np.flatnonzero(np.isfinite(points).all(axis=1) & (z > 0))
+    u = np.rint(fx * points[ahead, 0] / z[ahead] + cx).astype(np.int64)
+    v = np.rint(fy * points[ahead, 1] / z[ahead] + cy).astype(np.int64)
+    inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
+    rows, u, v = ahead[inside], u[inside], v[inside]
+    organized[v, u] = points[rows]
+    if image is not None:
+        image[v, u] = np.asarray(colors).reshape(-1, 3)[rows]
+    return organized, image

@@ -97,7 +97,30 @@ class OneOf:
         return value
 
 
-Constraint = Interval | Point3 | OneOf
+@dataclass(frozen=True)
+class Numbers:
+    """A non-empty sequence of numbers, each within ``each`` (an `Interval`), as a tuple."""
+
+    each: Interval
+
+    def check(self, name: str, value: Any) -> tuple:
+        if isinstance(value, str) or not hasattr(value, "__len__") or len(value) == 0:
+            raise ValueError(f"{name} must be a non-empty list of numbers, got {value!r}")
+        return tuple(self.each.check(f"{name}[{index}]", item)
+                     for index, item in enumerate(value))
+
+
+@dataclass(frozen=True)
+class Flag:
+    """True or False."""
+
+    def check(self, name: str, value: Any) -> bool:
+        if not isinstance(value, bool | np.bool_):
+            raise ValueError(f"{name} must be true or false, got {value!r}")
+        return bool(value)
+
+
+Constraint = Interval | Point3 | OneOf | Numbers | Flag
 
 #: the estimators' hyper-parameters (`GNGDT`, `GNG`, `GNGW`; defaults in their signatures)
 MODEL_CONSTRAINTS: dict[str, Constraint] = {
