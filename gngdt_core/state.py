@@ -14,8 +14,9 @@ from gngdt_core.sampling import checked_pose
 
 Model = TypeVar("Model")
 
-STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
-# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
+STATE_VERSION = 5  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
+# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``); 5: the surface
+# seen (``coverage_cells``, with ``resolution_m``)
 
 _FLOAT_ARRAYS = ("pos", "col", "nor", "err")
 _INT_ARRAYS = ("nbr", "age", "emask", "rev", "deg")
@@ -43,6 +44,8 @@ def snapshot(model: Any) -> dict[str, np.ndarray]:
         state["memory_positions"] = model._memory.positions.copy()
         state["memory_colors"] = model._memory.colors.copy()
         state["memory_offered"] = np.array(model._memory.offered, dtype=np.int64)
+    if model._coverage is not None:
+        state["coverage_cells"] = model._coverage.cells()
     for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
                  "util"):
         if a:
@@ -138,6 +141,8 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         model._camera_pose = checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
     if model._memory is not None:  # states saved before rehearsal: an empty memory
         _restore_memory(model._memory, state)
+    if model._coverage is not None and "coverage_cells" in state:  # else: none seen yet
+        model._coverage.restore(state["coverage_cells"])
     if counters[K.I_GRID]:
         a = model._arrays
         grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],

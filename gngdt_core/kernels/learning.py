@@ -44,6 +44,7 @@ from gngdt_core.kernels.layout import (
     P_BETA,
     P_ETA1,
     P_ETA2,
+    P_GROW_DISTANCE,
     P_MU,
     P_TAU_COL,
     P_TAU_NOR,
@@ -177,6 +178,7 @@ def _learn_steps(samples, sample_colors, order,
     frame_rows = iparams[Q_FRAME_ROWS]
     utility_k = fparams[P_UTILITY_K]
     utility_decay = fparams[P_UTILITY_DECAY]
+    grow_sq = fparams[P_GROW_DISTANCE] * fparams[P_GROW_DISTANCE]
     # in GNG / GNG-W colour is part of the input vector and follows the single topology
     col_follows_pos = mode != MODE_GNGDT
 
@@ -222,6 +224,17 @@ def _learn_steps(samples, sample_colors, order,
             second = err_add
         if s2 < 0:  # every distance overflowed (|x| ~ 1e154): no winner, learn nothing
             continue
+        # new surface (``resolution_m``): a sample farther than the resolution from every node
+        # gets a node at its place, joined to its winner (as Marsland et al.'s GWR grows)
+        if (grow_sq > 0.0 and err_add > grow_sq and n < max_nodes and mode == MODE_GNGDT
+                and deg[s1] < nbr.shape[1]):
+            n = _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, age,
+                                  emask, rev, deg, has_col, has_nor, tau_col, tau_nor, forget,
+                                  util, judged, util_scale)
+            ids[n - 1] = next_id
+            next_id += 1
+            if grid_on:
+                _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, inv_cell)
         # Step 3
         err[s1] += err_add / error_scale
         # GNG-U: what the network would lose without s1, by what the sensor sees now
@@ -341,6 +354,31 @@ def _learn_steps(samples, sample_colors, order,
     fstate[F_UTIL_SCALE] = util_scale
     fstate[F_CELL] = cell_size
     fstate[F_SPACING] = spacing
+
+
+@njit(cache=True)
+def _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, age, emask, rev,
+                      deg, has_col, has_nor, tau_col, tau_nor, forget, util, judged, util_scale):
+    """A new node at the sample (x0, x1[, x2]) with its colour, joined to the winner ``s1``
+    by an edge; it takes the winner's normal, error and (judged) utility. Returns n + 1."""
+    r = n
+    pos[r, 0] = x0
+    pos[r, 1] = x1
+    if pos.shape[1] > 2:
+        pos[r, 2] = x2
+    col[r, 0] = c0 if has_col else col[s1, 0]
+    col[r, 1] = c1 if has_col else col[s1, 1]
+    col[r, 2] = c2 if has_col else col[s1, 2]
+    for a in range(3):
+        nor[r, a] = nor[s1, a]
+    deg[r] = 0
+    add_edge(nbr, age, emask, rev, deg, s1, r,
+             property_bits(col, nor, s1, r, has_col, has_nor, tau_col, tau_nor))
+    err[r] = err[s1]
+    if forget:
+        util[r] = util[s1] if judged[s1] != 0 else util[s1] / util_scale
+        judged[r] = 1
+    return n + 1
 
 
 @njit(cache=True)
