@@ -62,8 +62,24 @@ def warm_up_learner(config: LearnerConfig, progress: Progress | None = None) -> 
         ("normals and segmentation", learner.learned_frame),
         ("sensor view", lambda: learner.measure_ghosts(positions, pose)),
     ]
+    if config.options.track:
+        groups.append(("camera tracking", lambda: warm_up_tracking(config.tracker)))
     run_groups(groups, progress)
     return learner
+
+
+def warm_up_tracking(params: object = None) -> None:
+    """Align a small organized frame to a map of it once (`gngdt_core.odometry`'s kernels)."""
+    from gngdt_core.map_surface import MapSurface
+    from gngdt_core.model import GNGDT
+    from gngdt_core.odometry import MapOdometry
+
+    points, colors = sample_organized_frame()
+    valid = np.isfinite(points[..., 2])
+    model = GNGDT(max_nodes=200, lambda_=50, random_state=0)
+    model.partial_fit(points[valid], colors[valid], n_steps=5_000, camera_pose=np.eye(4))
+    odometry = MapOdometry(params, strides=(2,), iterations=(2,), gates_m=(0.1,), min_points=6)
+    odometry.reset(np.eye(4)).track(points, colors, MapSurface.from_model(model))
 
 
 def run_groups(groups: list[tuple[str, Callable[[], object]]],

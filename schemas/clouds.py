@@ -27,6 +27,7 @@ __all__ = [
     "cloud_to_msg",
     "msg_to_cloud",
     "pose_to_transform",
+    "transform_to_pose",
 ]
 
 #: Bytes per point of the clouds gngdt publishes: x, y, z float32 at 0, 4, 8 and red, green, blue
@@ -153,6 +154,20 @@ def pose_to_transform(
     )
     _set_rigid(message.translation, message.rotation, matrix)
     return message
+
+
+def transform_to_pose(message: FrameTransform | bytes) -> tuple[str, str, np.ndarray]:
+    """``(parent, child, matrix)`` of a foxglove FrameTransform: ``matrix`` (4, 4) float64 maps
+    points of the child frame into the parent frame (`pose_to_transform` inverted). Raises
+    :class:`MessageError` naming the frames for non-finite numbers or a non-unit rotation."""
+    message = parse_message(FrameTransform, message)
+    t, q = message.translation, message.rotation
+    what = f"transform {message.parent_frame_id!r} -> {message.child_frame_id!r}"
+    try:
+        matrix = pose_to_matrix([t.x, t.y, t.z], [q.x, q.y, q.z, q.w], what)
+    except TransformError as error:
+        raise MessageError(str(error)) from error
+    return message.parent_frame_id, message.child_frame_id, matrix
 
 
 def _field_column(data: bytes, count: int, stride: int, element: PackedElementField) -> np.ndarray:

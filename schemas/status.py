@@ -47,6 +47,10 @@ class LearnerStatusInfo:
     ghost_distance_m: float = 0.0
     nodes_forgotten: int = 0
     frames_other_frame: int = 0
+    frame_budget_ms: float = 0.0
+    frame_steps: int = 0
+    frames_lost_tracking: int = 0
+    tracking: str = ""
 
 
 @dataclass

@@ -21,6 +21,7 @@ ENCODING_TOPOLOGY = "application/protobuf;gngdt.Topology"
 ENCODING_STATUS = "application/protobuf;gngdt.LearnerStatus"
 ENCODING_STREAM_END = "application/protobuf;gngdt.StreamEnd"
 ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
+ENCODING_FRAME_TRANSFORM = "application/protobuf;foxglove.FrameTransform"
 
 _ATTACHMENT = struct.Struct("<Qq")
 

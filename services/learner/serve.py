@@ -3,8 +3,11 @@ publish what it learned, answer late joiners, checkpoint, stop at the stream's e
 
 Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
-memory stays bounded. Objects and scene are published latest-wins (congestion control DROP): a
-consumer that cannot keep up misses updates, and never slows the learner down.
+memory stays bounded. To keep up, each frame gets the learning steps that fit in its share of
+the time between frames (`gngdt_core.frame_budget`; the status reports the budget). Objects and
+scene are published latest-wins (congestion control DROP): a consumer that cannot keep up misses
+updates, and never slows the learner down. With ``--track`` the learner also reads the camera's
+calibration, and publishes each tracked cloud's camera pose on ``gngdt/<cam>/tf``.
 """
 
 from __future__ import annotations
@@ -19,8 +22,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gngdt_core.frame_budget import StepBudget
 from gngdt_core.frame_learner import FrameLearner, LearnerConfig, OtherFrameError
 from schemas.wire import (
+    ENCODING_FRAME_TRANSFORM,
     ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
     ENCODING_TOPOLOGY,
@@ -47,6 +52,8 @@ log = logging.getLogger(__name__)
 MAX_EOS_BYTES = 64 * 1024
 #: bytes per point a foreign cloud layout may use (gngdt's own uses 15)
 MAX_POINT_STRIDE_BYTES = 64
+#: bytes a calibration message may take (a real one is under 500)
+MAX_CALIBRATION_BYTES = 64 * 1024
 
 
 class LatencyWindow:
@@ -163,6 +170,33 @@ def attachment_bytes(sample: zenoh.Sample) -> bytes | None:
     return attachment.to_bytes()
 
 
+class LatestCalibration:
+    """The camera's latest intrinsics (set from zenoh's thread), for tracking."""
+
+    def __init__(self, learner: FrameLearner) -> None:
+        self.learner = learner
+        self.intrinsics = None
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        from schemas.images import calibration_to_intrinsics
+        from schemas.messages import MessageError
+
+        try:
+            self.intrinsics = calibration_to_intrinsics(
+                payload_bytes(sample, MAX_CALIBRATION_BYTES))
+        except (MessageError, ValueError) as error:
+            self.learner.counters.malformed_messages += 1
+            log.warning("malformed calibration skipped: %s", error)
+
+
+def warn_lost(learner: FrameLearner) -> None:
+    """Warn about a cloud whose camera was not tracked: the first, then every 30th."""
+    count = learner.counters.frames_lost_tracking
+    if count == 1 or count % 30 == 0:
+        log.warning("camera not tracked, frame not learned (%d so far): %s", count,
+                    learner.tracking.problem)
+
+
 def warn_other_frame(error: OtherFrameError, count: int) -> None:
     """Warn about clouds in another frame: the first, then every 100th (counted in status)."""
     if count == 1 or count % 100 == 0:
@@ -198,6 +232,19 @@ class LearnerService:
                                         ENCODING_SCENE_UPDATE, latest_wins=True)
         self._queryable = session.declare_queryable(topic(camera, "topology"), self.latest.reply)
         self._token = session.liveliness().declare_token(f"gngdt/{camera}/learner/alive")
+        options = self.options
+        self.budget = StepBudget(options.frame_time_share,
+                                 min(options.min_samples_per_frame, options.samples_per_frame),
+                                 options.samples_per_frame)
+        self.calibration = LatestCalibration(learner)
+        self._tracking: list = []  # the calibration subscriber and tf publisher (--track)
+        if learner.tracking is not None:
+            self._tracking = [
+                session.declare_subscriber(topic(camera, "calibration"),
+                                           self.calibration.on_sample),
+                declare_publisher(session, topic(camera, "tf"), ENCODING_FRAME_TRANSFORM,
+                                  latest_wins=False)]
+        self._last_topology = None
         self._max_cloud_bytes = self.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
         #: the last learned frame (stamp, positions, colours), kept to settle on at the end
         self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
@@ -232,7 +279,9 @@ class LearnerService:
         self._topology.put(payload, attachment=attachment)
         self.latest.set(payload, attachment)
         percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
-        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled)
+        self._last_topology = topology
+        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled,
+                                self.budget.last)
         self._status.put(status.SerializeToString(), attachment=attachment)
         objects = objects_message(learner, stamp, learner.objects(learned, final=bool(settled)))
         self._objects.put(objects.SerializeToString(), attachment=attachment)
@@ -244,7 +293,9 @@ class LearnerService:
 
     def handle(self, sample: zenoh.Sample) -> None:
         """Decode, learn and publish one points sample; a bad one is counted and skipped."""
-        counters = self.learner.counters
+        started = time.perf_counter()
+        learner = self.learner
+        counters = learner.counters
         counters.frames_received += 1
         try:
             stamp, positions, colors, frame_id, pose = decode_points(
@@ -252,7 +303,11 @@ class LearnerService:
                 self.options.max_points)
             counters.note_sequence(stamp.sequence)
             received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-            self.learner.learn(positions, colors, frame_id, pose)
+            self.budget.arrived(stamp.sequence, stamp.capture_time_ns)
+            learning_before = counters.learning_seconds
+            learned = learner.learn(positions, colors, frame_id, pose,
+                                    steps=self.budget.next().steps,
+                                    camera=self.calibration.intrinsics)
         except OtherFrameError as error:  # counted by the learner, warned sparingly
             warn_other_frame(error, counters.frames_other_frame)
             return
@@ -260,13 +315,37 @@ class LearnerService:
             counters.malformed_messages += 1
             log.warning("points message skipped: %s", error)
             return
+        if not learned:  # the camera was not tracked: nothing learned, the status says why
+            warn_lost(learner)
+            self._publish_status(stamp)
+            return
+        if learner.tracking is not None and pose is None:
+            self._publish_pose(stamp, frame_id)
         latency_ms = self.publish(stamp, positions, colors)
+        self.budget.learned(learner.last_steps, counters.learning_seconds - learning_before,
+                            time.perf_counter() - started)
         self.latencies.add(latency_ms)
         self.last_frame = (stamp, positions, colors)
         self.learned_sequence = stamp.sequence
         log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                   stamp.sequence, len(positions), received_ms, latency_ms)
         self._checkpoint_if_due()
+
+    def _publish_pose(self, stamp: FrameStamp, camera_frame: str) -> None:
+        """The tracked camera's pose: ``odom`` -> the cloud's (camera) frame."""
+        from schemas.clouds import pose_to_transform
+
+        transform = pose_to_transform(self.learner.last_pose, self.learner.frame_id,
+                                      camera_frame, timestamp_ns=stamp.capture_time_ns)
+        self._tracking[1].put(transform.SerializeToString(), attachment=stamp.to_attachment())
+
+    def _publish_status(self, stamp: FrameStamp) -> None:
+        """A status without a new topology (a frame that was not learned)."""
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
+        status = status_message(self.learner, stamp, latency_ms, percentiles,
+                                self._last_topology, "", self.budget.last)
+        self._status.put(status.SerializeToString(), attachment=stamp.to_attachment())
 
     def _checkpoint_if_due(self) -> None:
         self._frames_since_checkpoint += 1
@@ -313,7 +392,8 @@ class LearnerService:
             checkpoints.save(self.learner, self.checkpoint)
         self._token.undeclare()
         self.instances.close()
-        for entity in (self._queryable, self._eos, self.points, self._objects, self._scene):
+        for entity in (self._queryable, self._eos, self.points, self._objects, self._scene,
+                       *self._tracking):
             entity.undeclare()
 
 

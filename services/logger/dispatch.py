@@ -12,7 +12,7 @@ from services.logger.cameras import Cameras
 log = logging.getLogger(__name__)
 
 #: the streams of a camera the logger takes (others on ``gngdt/**`` are not its business)
-LOGGED_STREAMS = ("calibration", "color", "depth", "points", "topology", "objects",
+LOGGED_STREAMS = ("calibration", "color", "depth", "points", "tf", "topology", "objects",
                   "learner/status", "eos")
 
 
