@@ -1,10 +1,11 @@
 """Camera tracking without given poses (issue 27): our frame-to-map tracker against Open3D's
 RGB-D odometry, in the same run.
 
-**Ours** is the learner's loop with ``--track``: the first frame is learned at the start pose
-(``--first-steps`` steps), then every frame is aligned to the map (`gngdt_core.odometry`,
-`MapOdometry` against `MapSurface.from_model`) and, when tracked, learned at the pose found
-(``--steps`` steps; lost frames are not learned). **The peer** is Open3D's
+**Ours** is the learner's own per-frame policy with ``track`` (`FrameLearner`, as ``gngdt
+learn --track`` runs it, with the learner's map: resolution 0.1 m): the first frame starts the
+map (``first_frame_steps`` of the tracker), then every frame is put back on its pixels from the
+calibration (`organize`), aligned to the map (`gngdt_core.odometry`) and, when tracked, learned
+at the pose found (``--steps`` steps; lost frames are not learned). **The peer** is Open3D's
 ``compute_rgbd_odometry`` (hybrid photometric + geometric term, default options but the same
 depth range as ours), frame to frame, each frame started from the last motion; its poses are
 chained. Both start at the first frame's true pose.
@@ -45,13 +46,19 @@ from pathlib import Path
 
 import numpy as np
 
-from gngdt_core import GNGDT
-from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
+from gngdt_core.frame_learner import (
+    LEARNER_MODEL_DEFAULTS,
+    LEARNER_WORLD_DEFAULTS,
+    FrameLearner,
+    LearnerConfig,
+    LearnerOptions,
+)
 from gngdt_core.geometry import rigid_inverse
 from gngdt_core.kernels import odometry as OK
 from gngdt_core.map_surface import MapSurface
 from gngdt_core.metrics import ghost_nodes
-from gngdt_core.odometry import MapOdometry
+from gngdt_core.model import GNGDT
+from gngdt_core.odometry import MapOdometry, TrackerParams
 from gngdt_eval.open3d_peer import load_open3d
 from gngdt_io.deproject import Deprojector
 from gngdt_io.frame import Frame
@@ -62,20 +69,22 @@ from gngdt_io.synth.render import render_scene
 #: scene -> frames rendered at 30 fps (the walk: out and back; the arc: half its period)
 SCENES = {"tabletop_walk": 240, "tabletop": 180}
 TUM = Path(__file__).resolve().parents[2] / "shared/data/rgbd/tum_fr1_xyz_dvo_examples"
-#: the map the tracker reads: the Kinect profile's node budget and insertion rate
-#: (config/kinect.toml) with the learner's forgetting and rehearsal
-MAP_PARAMS = dict(LEARNER_MODEL_DEFAULTS, max_nodes=4000, lambda_=50)
-#: --ablations: name -> (tracker parameters, map parameters, first-frame steps or None)
-ABLATIONS: dict[str, tuple[dict, dict, int | None]] = {
-    "no plane memory": ({"plane_memory": 0}, {}, None),
-    "no node-level robust weight": ({"node_robust": 0.0}, {}, None),
-    "no maturity weight": ({"maturity_points": 0.0}, {}, None),
-    "no spread weight": ({"spread_weighting": False}, {}, None),
-    "no colour": ({"color_weight": 0.0}, {}, None),
-    "inverse-variance weights": ({"inverse_variance": True}, {}, None),
-    "first frame 200,000 steps": ({}, {}, 200_000),
-    "map eta1 0.1": ({}, {"eta1": 0.1}, None),
-    "learner's map (1000 nodes, lambda 500)": ({}, {"max_nodes": 1000, "lambda_": 500}, None),
+#: the map the tracker reads: the learner's, in a fixed frame (forgetting, rehearsal, and
+#: one node per 0.1 m cell of surface seen)
+MAP_PARAMS = {**LEARNER_WORLD_DEFAULTS, **LEARNER_MODEL_DEFAULTS}
+#: --ablations: name -> (tracker parameters, map parameters)
+ABLATIONS: dict[str, tuple[dict, dict]] = {
+    "no plane memory": ({"plane_memory": 0}, {}),
+    "no node-level robust weight": ({"node_robust": 0.0}, {}),
+    "no maturity weight": ({"maturity_points": 0.0}, {}),
+    "no spread weight": ({"spread_weighting": False}, {}),
+    "no colour": ({"color_weight": 0.0}, {}),
+    "inverse-variance weights": ({"inverse_variance": True}, {}),
+    "first frame 200,000 steps": ({"first_frame_steps": 200_000}, {}),
+    "map resolution 0.05 m": ({}, {"resolution_m": 0.05}),
+    "fixed budget 1000 nodes (no resolution)": ({}, {"resolution_m": 0, "max_nodes": 1000}),
+    "fixed budget 4000 nodes, lambda 50 (track-research)": (
+        {}, {"resolution_m": 0, "max_nodes": 4000, "lambda_": 50}),
 }
 #: depth range used by both methods, metres
 DEPTH_RANGE = (0.3, 6.0)
@@ -178,8 +187,10 @@ class Run:
     track_seconds: float = 0.0
     ghost: list[float] = field(default_factory=list)
     reasons: dict[str, int] = field(default_factory=dict)
-    #: stage -> seconds per frame (ours: deproject, surface, track, learn)
+    #: stage -> seconds per frame (ours: deproject, track and learn, track alone)
     stages: dict[str, list[float]] = field(default_factory=dict)
+    #: nodes of the map at the end (ours)
+    nodes: int = 0
 
     def lap(self, stage: str, since: float) -> float:
         now = time.perf_counter()
@@ -191,6 +202,15 @@ def new_map(seed: int, **overrides) -> GNGDT:
     return GNGDT(**dict(MAP_PARAMS, **overrides), random_state=seed)
 
 
+def new_learner(seed: int, steps: int, track: bool, tracker: dict | None = None,
+                map_overrides: dict | None = None) -> FrameLearner:
+    """The learner's per-frame policy, with ``track`` as `gngdt learn --track`."""
+    options = LearnerOptions(samples_per_frame=steps, seed=seed, track=track)
+    model = {**LEARNER_MODEL_DEFAULTS, **(map_overrides or {})}
+    return FrameLearner("camera", LearnerConfig(model=model, options=options,
+                                                tracker=TrackerParams(**(tracker or {}))))
+
+
 def ghost_share(model: GNGDT, camera_points: np.ndarray, pose: np.ndarray | None,
                 rng: np.random.Generator) -> float:
     if len(camera_points) > GHOST_SAMPLE:
@@ -200,55 +220,47 @@ def ghost_share(model: GNGDT, camera_points: np.ndarray, pose: np.ndarray | None
     return float(ghost.sum() / seen.sum()) if seen.any() else 0.0
 
 
-def run_ours(frames: list[Frame], odometry: MapOdometry, first_steps: int, steps: int,
-             seed: int, map_overrides: dict | None = None) -> Run:
-    """The learner's loop with tracking (see the module docstring)."""
+def run_ours(frames: list[Frame], steps: int, seed: int, tracker: dict | None = None,
+             map_overrides: dict | None = None) -> Run:
+    """The learner with tracking (see the module docstring)."""
     deproject = Deprojector(*DEPTH_RANGE)
-    model = new_map(seed, **(map_overrides or {}))
+    learner = new_learner(seed, steps, True, tracker, map_overrides)
+    start = frames[0].pose.matrix  # ours is anchored at the true first pose, as the peer
     rng = np.random.default_rng(seed)
     run = Run()
     for index, frame in enumerate(frames):
         started = time.perf_counter()
-        organized = deproject.organized(frame.depth, frame.intrinsics)
         points, colors = deproject(frame.depth, frame.color, frame.intrinsics)
         lap = run.lap("deproject", started) if index else started
-        if index == 0:
-            odometry.reset(frame.pose.matrix)
-            pose, lost = frame.pose.matrix, False
-        else:
-            surface = MapSurface.from_model(model)
-            lap = run.lap("surface", lap)
-            result = odometry.track(organized, frame.color, surface)
-            lap = run.lap("track", lap)
-            run.track_seconds += sum(run.stages[stage][-1] for stage in ("surface", "track"))
-            pose, lost = result.pose, result.lost
-            if lost:
-                run.reasons[result.reason] = run.reasons.get(result.reason, 0) + 1
-        if not lost:
-            model.partial_fit(points, colors, n_steps=first_steps if index == 0 else steps,
-                              camera_pose=pose)
+        learned = learner.learn(points, colors, "camera", None, camera=frame.intrinsics)
+        result = learner.tracking.last
         if index > 0:
-            run.lap("learn", lap)
+            run.lap("track and learn", lap)
+            run.stages.setdefault("track", []).append(result.seconds)
             run.seconds += time.perf_counter() - started
+            run.track_seconds += result.seconds
+        if not learned:
+            run.reasons[result.reason] = run.reasons.get(result.reason, 0) + 1
+        pose = start @ learner.tracking.odometry.pose_
         run.poses.append(pose)
-        run.lost.append(lost)
-        run.ghost.append(ghost_share(model, points, pose, rng))
+        run.lost.append(not learned)
+        run.ghost.append(ghost_share(learner.model, points, rigid_inverse(start) @ pose, rng))
+    run.nodes = learner.model.n_nodes_
     return run
 
 
-def run_mapping(frames: list[Frame], posed: bool, first_steps: int, steps: int,
-                seed: int) -> Run:
+def run_mapping(frames: list[Frame], posed: bool, steps: int, seed: int) -> Run:
     """A map learned with the true poses (``posed``) or none (camera frame): its ghost share."""
     deproject = Deprojector(*DEPTH_RANGE)
-    model = new_map(seed)
+    learner = new_learner(seed, steps, False)
     rng = np.random.default_rng(seed)
     run = Run()
-    for index, frame in enumerate(frames):
+    for frame in frames:
         points, colors = deproject(frame.depth, frame.color, frame.intrinsics)
         pose = frame.pose.matrix if posed else None
-        model.partial_fit(points, colors, n_steps=first_steps if index == 0 else steps,
-                          camera_pose=pose)
-        run.ghost.append(ghost_share(model, points, pose, rng))
+        learner.learn(points, colors, "world" if posed else "camera", pose)
+        run.ghost.append(ghost_share(learner.model, points, pose, rng))
+    run.nodes = learner.model.n_nodes_
     return run
 
 
@@ -330,17 +342,16 @@ def walk(scene: str, frames: int, args: argparse.Namespace, o3d) -> None:
           f"{steps[:, 1].max():.2f} deg; path {steps[:, 0].sum():.2f} m")
     print(f"  {'method':<40} {'ATE mm':>7} {'anchored':>8} {'RPE mm':>7} {'max':>7} "
           f"{'RPE deg':>7} {'max':>6} {'lost':>5} {'fps':>6} (track)")
-    ours = run_ours(sequence, MapOdometry(min_depth_m=DEPTH_RANGE[0],
-                                          max_depth_m=DEPTH_RANGE[1]),
-                    args.first_steps, args.steps, args.seed)
-    print(trajectory_line("ours (map tracker)", ours, truth), flush=True)
+    first = {"first_frame_steps": args.first_steps}
+    ours = run_ours(sequence, args.steps, args.seed, first)
+    print(trajectory_line("ours (the learner, --track)", ours, truth), flush=True)
     print("  ours per frame, median ms: " + ", ".join(
-        f"{stage} {np.median(times) * 1000:.1f}" for stage, times in ours.stages.items()))
+        f"{stage} {np.median(times) * 1000:.1f}" for stage, times in ours.stages.items())
+        + f"; map at the end: {ours.nodes} nodes")
     if args.ablations:
-        for name, (tracker, overrides, first) in ABLATIONS.items():
-            variant = run_ours(sequence, MapOdometry(min_depth_m=DEPTH_RANGE[0],
-                                                     max_depth_m=DEPTH_RANGE[1], **tracker),
-                               first or args.first_steps, args.steps, args.seed, overrides)
+        for name, (tracker, overrides) in ABLATIONS.items():
+            variant = run_ours(sequence, args.steps, args.seed, {**first, **tracker},
+                               overrides)
             print(trajectory_line(f"- {name}", variant, truth), flush=True)
         return
     if o3d is not None:
@@ -349,10 +360,9 @@ def walk(scene: str, frames: int, args: argparse.Namespace, o3d) -> None:
     print(f"  {'ghost share of the map (steady state)':<34} {'mean':>7} {'worst':>7}")
     print(ghost_line("learned with tracked poses", ours))
     print(ghost_line("learned with true poses",
-                     run_mapping(sequence, True, args.first_steps, args.steps, args.seed)))
+                     run_mapping(sequence, True, args.steps, args.seed)))
     print(ghost_line("learned with no poses (camera frame)",
-                     run_mapping(sequence, False, args.first_steps, args.steps, args.seed)),
-          flush=True)
+                     run_mapping(sequence, False, args.steps, args.seed)), flush=True)
 
 
 def tum(args: argparse.Namespace, o3d) -> None:
@@ -417,9 +427,9 @@ def main() -> None:
     parser.add_argument("--no-tum", action="store_true", help="skip the TUM frames")
     parser.add_argument("--clean", action="store_true",
                         help="the virtual Kinect's frames without the extra degradation")
-    parser.add_argument("--first-steps", type=int, default=400_000,
-                        help="steps on the first frame: the node budget is reached at 200,000, "
-                        "the rest lets the last nodes settle before frames are tracked on them")
+    parser.add_argument("--first-steps", type=int, default=TrackerParams().first_frame_steps,
+                        help="steps on the first frame (default: the tracker's "
+                        "first_frame_steps): the next frame is aligned to it")
     parser.add_argument("--steps", type=int, default=10_000)
     parser.add_argument("--seed", type=int, default=0,
                         help="sensor noise, degradation and learning seed")
@@ -427,8 +437,9 @@ def main() -> None:
                         help="ours with one part changed at a time (ABLATIONS), walks only")
     args = parser.parse_args()
     o3d, version = (None, "skipped") if args.no_peer else load_open3d()
-    print(f"map: GNG-DT {MAP_PARAMS}; {args.first_steps:,} steps on the first frame, "
-          f"{args.steps:,} per tracked frame; tracker: MapOdometry defaults; peer: {version}")
+    print(f"map: the learner's in a fixed frame, GNG-DT {MAP_PARAMS}; {args.first_steps:,} "
+          f"steps on the first frame, {args.steps:,} per tracked frame; tracker: TrackerParams "
+          f"defaults; peer: {version}")
     scenes = ["tabletop_walk"] if args.quick else args.scenes
     for scene in scenes:
         frames = args.frames or (120 if args.quick else SCENES[scene])
