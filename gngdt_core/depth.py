@@ -32,16 +32,13 @@ def organize(points: np.ndarray, colors: np.ndarray | None, width: int, height: 
     from. Returns (height, width, 3) float32 points, NaN where no point lands, and the colours
     there (zero elsewhere) or None. Points behind the camera or off the image are dropped.
     """
-    points = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+    from gngdt_core.kernels import odometry as OK  # numba: loaded when first used
+
+    points = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
     organized = np.full((height, width, 3), np.nan, dtype=np.float32)
-    image = None if colors is None else np.zeros((height, width, 3), dtype=np.uint8)
-    z = points[:, 2]
-    ahead = np.flatnonzero(np.isfinite(points).all(axis=1) & (z > 0))
-    u = np.rint(fx * points[ahead, 0] / z[ahead] + cx).astype(np.int64)
-    v = np.rint(fy * points[ahead, 1] / z[ahead] + cy).astype(np.int64)
-    inside = (u >= 0) & (u < width) & (v >= 0) & (v < height)
-    rows, u, v = ahead[inside], u[inside], v[inside]
-    organized[v, u] = points[rows]
-    if image is not None:
-        image[v, u] = np.asarray(colors).reshape(-1, 3)[rows]
-    return organized, image
+    image = np.zeros((height, width, 3), dtype=np.uint8)
+    pixels = (np.zeros((0, 3), dtype=np.uint8) if colors is None
+              else np.ascontiguousarray(np.asarray(colors, dtype=np.uint8).reshape(-1, 3)))
+    OK.organize_points(points, pixels, float(fx), float(fy), float(cx), float(cy), organized,
+                       image)
+    return organized, None if colors is None else image

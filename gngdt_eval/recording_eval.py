@@ -55,6 +55,8 @@ class RecordingSettings:
     #: node budget (None: the learner's: GNG-DT's max_nodes for a camera-frame map; a map in a
     #: fixed frame grows with the surface seen; the baselines take GNG-DT's max_nodes)
     max_nodes: int | None = None
+    #: GNG-DT's resolution_m (None: the learner's: 0.1 m for a map in a fixed frame; 0: off)
+    resolution_m: float | None = None
     #: clusters with fewer nodes are not counted (label -1)
     min_cluster_size: int = field(default_factory=lambda: _learner_default("min_cluster_size"))
     #: a cluster is an object once seen in this many frames in a row (object identity scores)
@@ -231,8 +233,9 @@ def learner_config(settings: RecordingSettings, trial: int) -> LearnerConfig:
                              min_cluster_size=settings.min_cluster_size,
                              object_confirm_frames=settings.object_confirm_frames, seed=trial)
     model = {"utility_k": settings.utility_k, "replay_share": settings.replay_share}
-    if settings.max_nodes is not None:
-        model["max_nodes"] = settings.max_nodes
+    for name in ("max_nodes", "resolution_m"):
+        if getattr(settings, name) is not None:
+            model[name] = getattr(settings, name)
     return LearnerConfig(model=model, options=options)
 
 

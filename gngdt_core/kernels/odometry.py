@@ -294,3 +294,33 @@ def point_to_plane(points, normals, sigma, rotation, translation, node, gated, a
         for b in range(a):
             hessian[a, b] = hessian[b, a]
     return centre, math.sqrt(spread / used), total, used
+
+
+@njit(cache=True)
+def organize_points(points, colors, fx, fy, cx, cy, organized, image):
+    """Put deprojected ``points`` (N, 3) camera frame back on their pixels: ``organized``
+    (H, W, 3) float32 (NaN-filled by the caller) gets each point at the pixel nearest its
+    projection, ``image`` (H, W, 3) uint8 its colour (``colors`` (N, 3) uint8; an empty array
+    when there are none). Points not in front of the camera, non-finite or off the image are
+    dropped. Returns how many were placed."""
+    height, width = organized.shape[0], organized.shape[1]
+    with_color = colors.shape[0] == points.shape[0]
+    placed = 0
+    for k in range(points.shape[0]):
+        x, y, z = points[k, 0], points[k, 1], points[k, 2]
+        if not (z > 0.0 and np.isfinite(x) and np.isfinite(y) and np.isfinite(z)):
+            continue
+        u = np.rint(fx * x / z + cx)
+        v = np.rint(fy * y / z + cy)
+        if not (0.0 <= u < width and 0.0 <= v < height):
+            continue
+        i, j = int(v), int(u)
+        organized[i, j, 0] = x
+        organized[i, j, 1] = y
+        organized[i, j, 2] = z
+        if with_color:
+            image[i, j, 0] = colors[k, 0]
+            image[i, j, 1] = colors[k, 1]
+            image[i, j, 2] = colors[k, 2]
+        placed += 1
+    return placed
