@@ -88,7 +88,7 @@ def record_tum(folder: Path) -> Path | None:
     camera = load_camera(TUM, "redwood")
     with RecordingWriter(path) as writer:
         for index, frame in enumerate(iter_image_frames(TUM, "redwood", camera=camera)):
-            frame.pose = CameraPose.from_matrix(poses[index], "world")
+            frame.pose = CameraPose(poses[index], "world")
             frame.timestamp_ns = (index + 1) * 33_000_000
             writer.write_frame(frame)
     return path

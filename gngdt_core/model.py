@@ -131,7 +131,7 @@ class GrowingGas:
             p.get("tau_col", 1.0), tau_nor, p.get("normal_mu") or 0.0,
             *(viewpoint if viewpoint is not None else (0.0, 0.0, 0.0)),
             p.get("w_pos", 1.0), p.get("w_col", 1.0), p.get("utility_k") or 0.0,
-            p.get("utility_decay", 0.0), p.get("resolution_m") or 0.0,
+            p.get("utility_decay", 0.0), (p.get("resolution_m") or 0.0) * float(__import__("os").environ.get("GF", "1")),
         ])
         has_nor = self._MODE == K.MODE_GNGDT and self._dim == 3
         iparams = np.array([
