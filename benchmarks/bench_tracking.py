@@ -3,7 +3,7 @@ RGB-D odometry, in the same run.
 
 **Ours** is the learner's own per-frame policy with ``track`` (`FrameLearner`, as ``gngdt
 learn --track`` runs it, with the learner's map: resolution 0.1 m): the first frame starts the
-map (``first_frame_steps`` of the tracker), then every frame is put back on its pixels from the
+map (the learner's ``first_frame_steps``), then every frame is put back on its pixels from the
 calibration (`organize`), aligned to the map (`gngdt_core.odometry`) and, when tracked, learned
 at the pose found (``--steps`` steps; lost frames are not learned). **The peer** is Open3D's
 ``compute_rgbd_odometry`` (hybrid photometric + geometric term, default options but the same
@@ -72,7 +72,7 @@ TUM = Path(__file__).resolve().parents[2] / "shared/data/rgbd/tum_fr1_xyz_dvo_ex
 #: the map the tracker reads: the learner's, in a fixed frame (forgetting, rehearsal, and
 #: one node per 0.1 m cell of surface seen)
 MAP_PARAMS = {**LEARNER_WORLD_DEFAULTS, **LEARNER_MODEL_DEFAULTS}
-#: --ablations: name -> (tracker parameters, map parameters)
+#: --ablations: name -> (tracker parameters, map parameters; "first_frame_steps": the learner's)
 ABLATIONS: dict[str, tuple[dict, dict]] = {
     "no plane memory": ({"plane_memory": 0}, {}),
     "no node-level robust weight": ({"node_robust": 0.0}, {}),
@@ -80,7 +80,7 @@ ABLATIONS: dict[str, tuple[dict, dict]] = {
     "no spread weight": ({"spread_weighting": False}, {}),
     "no colour": ({"color_weight": 0.0}, {}),
     "inverse-variance weights": ({"inverse_variance": True}, {}),
-    "first frame 200,000 steps": ({"first_frame_steps": 200_000}, {}),
+    "first frame 400,000 steps (track-research)": ({}, {"first_frame_steps": 400_000}),
     "map resolution 0.05 m": ({}, {"resolution_m": 0.05}),
     "fixed budget 1000 nodes (no resolution)": ({}, {"resolution_m": 0, "max_nodes": 1000}),
     "fixed budget 4000 nodes, lambda 50 (track-research)": (
@@ -203,10 +203,14 @@ def new_map(seed: int, **overrides) -> GNGDT:
 
 
 def new_learner(seed: int, steps: int, track: bool, tracker: dict | None = None,
-                map_overrides: dict | None = None) -> FrameLearner:
+                map_overrides: dict | None = None, first_steps: int | None = None
+                ) -> FrameLearner:
     """The learner's per-frame policy, with ``track`` as `gngdt learn --track`."""
-    options = LearnerOptions(samples_per_frame=steps, seed=seed, track=track)
-    model = {**LEARNER_MODEL_DEFAULTS, **(map_overrides or {})}
+    overrides = dict(map_overrides or {})
+    first = overrides.pop("first_frame_steps", first_steps)
+    options = LearnerOptions(samples_per_frame=steps, seed=seed, track=track,
+                             **({} if first is None else {"first_frame_steps": first}))
+    model = {**LEARNER_MODEL_DEFAULTS, **overrides}
     return FrameLearner("camera", LearnerConfig(model=model, options=options,
                                                 tracker=TrackerParams(**(tracker or {}))))
 
@@ -220,11 +224,11 @@ def ghost_share(model: GNGDT, camera_points: np.ndarray, pose: np.ndarray | None
     return float(ghost.sum() / seen.sum()) if seen.any() else 0.0
 
 
-def run_ours(frames: list[Frame], steps: int, seed: int, tracker: dict | None = None,
-             map_overrides: dict | None = None) -> Run:
+def run_ours(frames: list[Frame], steps: int, seed: int, first_steps: int,
+             tracker: dict | None = None, map_overrides: dict | None = None) -> Run:
     """The learner with tracking (see the module docstring)."""
     deproject = Deprojector(*DEPTH_RANGE)
-    learner = new_learner(seed, steps, True, tracker, map_overrides)
+    learner = new_learner(seed, steps, True, tracker, map_overrides, first_steps)
     start = frames[0].pose.matrix  # ours is anchored at the true first pose, as the peer
     rng = np.random.default_rng(seed)
     run = Run()
@@ -249,10 +253,11 @@ def run_ours(frames: list[Frame], steps: int, seed: int, tracker: dict | None = 
     return run
 
 
-def run_mapping(frames: list[Frame], posed: bool, steps: int, seed: int) -> Run:
+def run_mapping(frames: list[Frame], posed: bool, steps: int, seed: int,
+                first_steps: int) -> Run:
     """A map learned with the true poses (``posed``) or none (camera frame): its ghost share."""
     deproject = Deprojector(*DEPTH_RANGE)
-    learner = new_learner(seed, steps, False)
+    learner = new_learner(seed, steps, False, first_steps=first_steps)
     rng = np.random.default_rng(seed)
     run = Run()
     for frame in frames:
@@ -342,15 +347,14 @@ def walk(scene: str, frames: int, args: argparse.Namespace, o3d) -> None:
           f"{steps[:, 1].max():.2f} deg; path {steps[:, 0].sum():.2f} m")
     print(f"  {'method':<40} {'ATE mm':>7} {'anchored':>8} {'RPE mm':>7} {'max':>7} "
           f"{'RPE deg':>7} {'max':>6} {'lost':>5} {'fps':>6} (track)")
-    first = {"first_frame_steps": args.first_steps}
-    ours = run_ours(sequence, args.steps, args.seed, first)
+    ours = run_ours(sequence, args.steps, args.seed, args.first_steps)
     print(trajectory_line("ours (the learner, --track)", ours, truth), flush=True)
     print("  ours per frame, median ms: " + ", ".join(
         f"{stage} {np.median(times) * 1000:.1f}" for stage, times in ours.stages.items())
         + f"; map at the end: {ours.nodes} nodes")
     if args.ablations:
         for name, (tracker, overrides) in ABLATIONS.items():
-            variant = run_ours(sequence, args.steps, args.seed, {**first, **tracker},
+            variant = run_ours(sequence, args.steps, args.seed, args.first_steps, tracker,
                                overrides)
             print(trajectory_line(f"- {name}", variant, truth), flush=True)
         return
@@ -360,9 +364,10 @@ def walk(scene: str, frames: int, args: argparse.Namespace, o3d) -> None:
     print(f"  {'ghost share of the map (steady state)':<34} {'mean':>7} {'worst':>7}")
     print(ghost_line("learned with tracked poses", ours))
     print(ghost_line("learned with true poses",
-                     run_mapping(sequence, True, args.steps, args.seed)))
+                     run_mapping(sequence, True, args.steps, args.seed, args.first_steps)))
     print(ghost_line("learned with no poses (camera frame)",
-                     run_mapping(sequence, False, args.steps, args.seed)), flush=True)
+                     run_mapping(sequence, False, args.steps, args.seed, args.first_steps)),
+          flush=True)
 
 
 def tum(args: argparse.Namespace, o3d) -> None:
@@ -427,8 +432,8 @@ def main() -> None:
     parser.add_argument("--no-tum", action="store_true", help="skip the TUM frames")
     parser.add_argument("--clean", action="store_true",
                         help="the virtual Kinect's frames without the extra degradation")
-    parser.add_argument("--first-steps", type=int, default=TrackerParams().first_frame_steps,
-                        help="steps on the first frame (default: the tracker's "
+    parser.add_argument("--first-steps", type=int, default=LearnerOptions().first_frame_steps,
+                        help="steps on the first frame (default: the learner's "
                         "first_frame_steps): the next frame is aligned to it")
     parser.add_argument("--steps", type=int, default=10_000)
     parser.add_argument("--seed", type=int, default=0,

@@ -2,7 +2,7 @@
 without one, found by aligning it to the map learned so far (`gngdt_core.odometry`).
 
 The first tracked cloud starts the map: its camera frame becomes the fixed frame
-``TRACKED_FRAME`` (the camera's pose there is the identity) and it is learned longer
+``TRACKED_FRAME`` (the camera's pose there is the identity); the learner learns it longer
 (``first_frame_steps``), so that the next frame is aligned to a settled map. Every later cloud
 is put back on its pixels (`gngdt_core.depth.organize`, from the camera's intrinsics) and
 aligned to the map's surface (`MapSurface.from_model`); when the alignment fails the cloud is

@@ -108,6 +108,11 @@ class LearnerOptions:
     min_samples_per_frame: int = param(1_000, Interval(int, 1),
                                        "fewest learning steps of a frame under the time budget "
                                        "(at most samples_per_frame)")
+    first_frame_steps: int = param(200_000, Interval(int, 1),
+                                   "steps of the first frame of a map in a fixed frame (posed or "
+                                   "tracked clouds): the map starts settled, and the next frame "
+                                   "is tracked against it; a camera-frame map's first frame "
+                                   "takes samples_per_frame")
     track: bool = param(False, Flag(),
                         "estimate the camera pose of clouds that come without one by aligning "
                         "each to the map (a [tracker] table tunes it); lost frames are not "
@@ -260,10 +265,9 @@ class FrameLearner:
                     self.counters.frames_lost_tracking + 1, MAX_COUNTER)
                 return False
             pose, frame_id = located.pose, TRACKED_FRAME
-            if located.first:
-                steps = self.config.tracker.first_frame_steps
         self._check_frame(frame_id or self.camera, pose)
-        self._choose_model(pose is not None)
+        if self._choose_model(pose is not None):
+            steps = self.options.first_frame_steps
         self.last_pose = pose
         started = time.perf_counter()
         steps = self.options.samples_per_frame if steps is None else int(steps)
@@ -278,19 +282,21 @@ class FrameLearner:
         self.ghosts = self.measure_ghosts(positions, pose)
         return True
 
-    def _choose_model(self, fixed_frame: bool) -> None:
+    def _choose_model(self, fixed_frame: bool) -> bool:
         """Before the first frame: a map in a fixed frame grows with the world
-        (`LEARNER_WORLD_DEFAULTS` under the profile's own values)."""
+        (`LEARNER_WORLD_DEFAULTS` under the profile's own values). True when this frame starts
+        such a map (it is learned for ``first_frame_steps``)."""
         if self._model_chosen:
-            return
+            return False
         self._model_chosen = True
         if not fixed_frame:
-            return
+            return False
         params = {**LEARNER_WORLD_DEFAULTS, **self.config.model}
-        if self.stream is not None:
+        if self.stream is not None:  # a frame schedule learns a first frame its own way
             self.stream.model_params = params
-        else:
-            self._model = GNGDT(**{"random_state": self.options.seed, **params})
+            return False
+        self._model = GNGDT(**{"random_state": self.options.seed, **params})
+        return True
 
     def _check_frame(self, frame_id: str, pose: np.ndarray | None) -> None:
         if self.frame_id is None:

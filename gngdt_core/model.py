@@ -100,6 +100,7 @@ class GrowingGas:
             "ids": np.zeros(cap, dtype=np.int64),
             "util": np.zeros(cap),
             "judged": np.zeros(cap, dtype=np.uint8),
+            "wins": np.zeros(cap),
             "ghead": np.full(table, -1, dtype=np.int32),
             "gnext": np.full(cap, -1, dtype=np.int32),
             "gprev": np.full(cap, -1, dtype=np.int32),
@@ -131,7 +132,7 @@ class GrowingGas:
             p.get("tau_col", 1.0), tau_nor, p.get("normal_mu") or 0.0,
             *(viewpoint if viewpoint is not None else (0.0, 0.0, 0.0)),
             p.get("w_pos", 1.0), p.get("w_col", 1.0), p.get("utility_k") or 0.0,
-            p.get("utility_decay", 0.0), (p.get("resolution_m") or 0.0) * float(__import__("os").environ.get("GF", "1")),
+            p.get("utility_decay", 0.0), p.get("resolution_m") or 0.0,
         ])
         has_nor = self._MODE == K.MODE_GNGDT and self._dim == 3
         iparams = np.array([
@@ -229,7 +230,7 @@ class GrowingGas:
             learn(samples, kernel_colors, part,
                   a["pos"], a["col"], a["nor"], a["err"],
                   a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                  a["util"], a["judged"],
+                  a["util"], a["judged"], a["wins"],
                   a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
                   self._istate, self._fstate, fparams, iparams)
             if self._params.get("normal_refresh_steps"):
@@ -305,6 +306,7 @@ class GrowingGas:
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
         add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
         a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
+        a["wins"][:2] = 1.0
         self._istate[K.I_NEXT_ID] += 2
         self._istate[K.I_NODES] = 2
 

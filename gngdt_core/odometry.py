@@ -126,9 +126,6 @@ class TrackerParams:
                                "robust weight in each frame (0: off)")
     requery_m: float = param(0.002, _NON_NEGATIVE,
                              "nearest nodes are searched again once the points moved this far")
-    first_frame_steps: int = param(400_000, Interval(int, 1),
-                                   "the learner's steps on the first tracked cloud, which starts "
-                                   "the map (the next is aligned to it)")
 
     def __post_init__(self) -> None:
         for name in ("strides", "iterations", "gates_m"):  # TOML gives lists

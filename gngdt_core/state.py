@@ -16,7 +16,7 @@ Model = TypeVar("Model")
 
 STATE_VERSION = 5  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
 # a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``); 5: the surface
-# seen (``coverage_cells``, with ``resolution_m``)
+# seen (``coverage_cells``, with ``resolution_m``) and each node's wins (``wins``)
 
 _FLOAT_ARRAYS = ("pos", "col", "nor", "err")
 _INT_ARRAYS = ("nbr", "age", "emask", "rev", "deg")
@@ -47,7 +47,7 @@ def snapshot(model: Any) -> dict[str, np.ndarray]:
     if model._coverage is not None:
         state["coverage_cells"] = model._coverage.cells()
     for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
-                 "util"):
+                 "util", "wins"):
         if a:
             state[name] = a[name][:n].copy()
     return state
@@ -166,6 +166,12 @@ def _node_arrays(state: dict[str, np.ndarray], n: int, dim: int,
             raise ValueError(f"state[{key!r}] contains NaN or inf")
     _check_adjacency(n, arrays)
     arrays["ids"], counters[K.I_NEXT_ID] = _node_ids(state, n, int(counters[K.I_NEXT_ID]))
+    # states saved before win counts: every node mature (a young node's rate is 1 / wins)
+    arrays["wins"] = np.full(n, 1e9)
+    if "wins" in state:
+        arrays["wins"] = _array(state, "wins", (n,), "f").astype(np.float64)
+        if not np.isfinite(arrays["wins"]).all() or (arrays["wins"] < 0).any():
+            raise ValueError("state['wins'] must be finite and non-negative")
     arrays["util"] = np.zeros(n)  # states saved before forgetting existed: no utility yet
     if "util" in state:
         arrays["util"] = _array(state, "util", (n,), "f").astype(np.float64)

@@ -11,7 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
+from gngdt_core import GNGDT
+from gngdt_core.frame_learner import (
+    LEARNER_MODEL_DEFAULTS,
+    FrameLearner,
+    LearnerConfig,
+    LearnerOptions,
+)
 from gngdt_core.geometry import rigid_inverse
 from gngdt_core.kernels.odometry import motion_size
 from gngdt_core.schedule import FrameSchedule
@@ -52,6 +58,30 @@ def test_a_map_in_a_fixed_frame_grows_with_the_world_a_camera_frame_map_does_not
         learner = FrameLearner("camera", LearnerConfig(model=model))
         learner.learn(points, colors, "world", frame.pose.matrix)
         assert (learner.model.resolution_m, learner.model.max_nodes) == expected
+
+
+def test_a_static_camera_is_learned_as_before(walk) -> None:
+    """Camera-frame clouds: the paper's node budget and the learner's profile, samples_per_frame
+    steps of every frame, the first one too: the very network plain `GNGDT.partial_fit` calls
+    with the learner's profile give, node for node."""
+    learner = FrameLearner("camera", LearnerConfig(options=LearnerOptions(
+        samples_per_frame=3_000)))
+    plain = GNGDT(**LEARNER_MODEL_DEFAULTS, random_state=0)
+    for points, colors, _ in walk[:4]:
+        learner.learn(points, colors)
+        plain.partial_fit(points, colors, n_steps=3_000)
+    assert learner.model.max_nodes == 1_000 and learner.model.resolution_m is None
+    np.testing.assert_array_equal(learner.model.positions_, plain.positions_)
+    np.testing.assert_array_equal(learner.model.edges("pos"), plain.edges("pos"))
+
+
+def test_the_first_frame_of_a_fixed_frame_map_is_learned_longer(walk) -> None:
+    points, colors, frame = walk[0]
+    learner = FrameLearner("camera", LearnerConfig(options=LearnerOptions(
+        samples_per_frame=3_000, first_frame_steps=50_000)))
+    learner.learn(points, colors, "world", frame.pose.matrix)
+    learner.learn(points, colors, "world", frame.pose.matrix)
+    assert learner.model.n_steps_ == 53_000 and learner.last_steps == 3_000
 
 
 def test_a_walk_without_poses_is_tracked_and_learned_in_odom(walk) -> None:
