@@ -53,6 +53,7 @@ from gngdt_eval.recording_eval import RecordingSettings, frame_points, replay, s
 from gngdt_io.mcap_writer import RecordingWriter
 from gngdt_io.synth.render import SCENE_METADATA, render_scene, scene_metadata
 from gngdt_io.synth.scenes import build_scene
+from services.run import DEFAULT_MAX_POINTS as RUN_MAX_POINTS
 
 #: scene -> frames rendered (the walk goes out and back: 240 frames at 30 fps)
 SCENES = {"tabletop_walk": 240, "tabletop_vanish": 150, "tabletop_move": 150}
@@ -152,11 +153,11 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
     from schemas.topology import decode_topology
     from schemas.wire import topic
     from services.logger import LIVELINESS_KEY
-    from services.plumbing.session import free_tcp_port, open_config, router_config
-    from services.run import Observed, Pipeline, wait_until
+    from services.plumbing.session import free_tcp_port, open_config
+    from services.run import Observed, Pipeline, RunAccess, wait_until
 
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    router = open_config(router_config([endpoint]), what="router")
+    access = RunAccess(f"tcp/127.0.0.1:{free_tcp_port()}", workdir)
+    router = open_config(access.router(), what="router")
     observed, topologies, lock = Observed(), {}, threading.Lock()
 
     def on_topology(sample) -> None:
@@ -169,7 +170,7 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
         router.declare_subscriber(topic("camera", "learner/status"), observed.on_status),
         router.declare_subscriber(topic("camera", "eos"), observed.on_eos),
         router.declare_subscriber(topic("camera", "topology"), on_topology)]
-    pipeline, stop, spinners = Pipeline(endpoint, workdir, "WARNING"), threading.Event(), []
+    pipeline, stop, spinners = Pipeline(access, workdir, "WARNING"), threading.Event(), []
     try:
         extra = ["--params", str(params)] if params else []
         learner = pipeline.start("learn", ["--exit-on-eos", *extra])
@@ -177,7 +178,8 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
         wait_until(lambda: observed.has_alive("gngdt/camera/learner/alive")
                    and observed.has_alive(LIVELINESS_KEY), 300, stop, pipeline)
         spinners = [spin() for _ in range(busy)]
-        pipeline.start("capture", [str(recording)])
+        # as `gngdt run` starts it: a random 50,000 points of each cloud
+        pipeline.start("capture", [str(recording), "--max-points", str(RUN_MAX_POINTS)])
         started = time.monotonic()
         while learner.process.poll() is None and time.monotonic() - started < 600:
             time.sleep(0.2)

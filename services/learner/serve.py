@@ -4,7 +4,8 @@ publish what it learned, answer late joiners, checkpoint, stop at the stream's e
 Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
 memory stays bounded. To keep up, each frame gets the learning steps that fit in its share of
-the time between frames (`gngdt_core.frame_budget`; the status reports the budget). Objects and
+the time between frames, and what was learned is published less often when publishing would
+not fit (`gngdt_core.frame_budget`; the status reports the budget). Objects and
 scene are published latest-wins (congestion control DROP): a consumer that cannot keep up misses
 updates, and never slows the learner down. With ``--track`` the learner also reads the camera's
 calibration, and publishes each tracked cloud's camera pose on ``gngdt/<cam>/tf``.
@@ -291,8 +292,9 @@ class LearnerService:
             self._scene.put(scene.SerializeToString(), attachment=attachment)
         return latency_ms
 
-    def handle(self, sample: zenoh.Sample) -> None:
-        """Decode, learn and publish one points sample; a bad one is counted and skipped."""
+    def handle(self, sample: zenoh.Sample, waited: bool = False) -> None:
+        """Decode, learn and (when due) publish one points sample; a bad one is counted and
+        skipped. ``waited``: the learner was idle until it came (it keeps up)."""
         started = time.perf_counter()
         learner = self.learner
         counters = learner.counters
@@ -303,7 +305,7 @@ class LearnerService:
                 self.options.max_points)
             counters.note_sequence(stamp.sequence)
             received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-            self.budget.arrived(stamp.sequence, stamp.capture_time_ns)
+            self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)
             learning_before = counters.learning_seconds
             learned = learner.learn(positions, colors, frame_id, pose,
                                     steps=self.budget.next().steps,
@@ -321,14 +323,17 @@ class LearnerService:
             return
         if learner.tracking is not None and pose is None:
             self._publish_pose(stamp, frame_id)
-        latency_ms = self.publish(stamp, positions, colors)
+        learned_at = time.perf_counter()
         self.budget.learned(learner.last_steps, counters.learning_seconds - learning_before,
-                            time.perf_counter() - started)
-        self.latencies.add(latency_ms)
+                            learned_at - started)
         self.last_frame = (stamp, positions, colors)
         self.learned_sequence = stamp.sequence
-        log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
-                  stamp.sequence, len(positions), received_ms, latency_ms)
+        if self.budget.publish_due(learned_at):
+            latency_ms = self.publish(stamp, positions, colors)
+            self.budget.published(time.perf_counter() - learned_at, learned_at)
+            self.latencies.add(latency_ms)
+            log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
+                      stamp.sequence, len(positions), received_ms, latency_ms)
         self._checkpoint_if_due()
 
     def _publish_pose(self, stamp: FrameStamp, camera_frame: str) -> None:
@@ -372,6 +377,7 @@ class LearnerService:
         """Learn until a stop signal, the stream's end (``exit_on_eos``) or a second learner on
         the camera; the exit code."""
         with lifecycle.graceful() as stop:
+            waited = False  # idle since the last frame: the learner keeps up
             while not stop.is_set():
                 if self.instances.conflict.is_set():
                     log.error("stopping: learner %s came first on camera %r",
@@ -379,8 +385,10 @@ class LearnerService:
                     return 2
                 sample = self.points.try_recv()
                 if sample is not None:
-                    self.handle(sample)
+                    self.handle(sample, waited)
+                    waited = False
                     continue
+                waited = True
                 if self.stream_over() and exit_on_eos:
                     break
                 time.sleep(0.002)
