@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -55,7 +56,9 @@ def warm_up_learner(config: LearnerConfig, progress: Progress | None = None) -> 
     from gngdt_core.frame_learner import FrameLearner
 
     positions, colors, pose = sample_frame()
-    learner = FrameLearner("warm-up", config)
+    # a map in a fixed frame, as posed or tracked clouds build it, without its long first frame
+    quick = replace(config.options, first_frame_steps=config.options.samples_per_frame)
+    learner = FrameLearner("warm-up", replace(config, options=quick))
     groups: list[tuple[str, Callable[[], object]]] = [
         ("learning loop", lambda: learner.learn(positions, colors, "world", pose)),
         ("nearest nodes", lambda: learner.quantization_error(positions, colors)),
