@@ -1,4 +1,5 @@
-"""Depth images: which pixels to trust, and whether a stream's depth is plausible at all."""
+"""Depth images: which pixels to trust, whether a stream's depth is plausible at all, and a
+deprojected cloud put back on its pixels."""
 
 from __future__ import annotations
 
@@ -75,3 +76,26 @@ class DepthRange:
                     "an RGB-D camera measures: the depth is probably in another unit than "
                     "depth_scale says")
         return ""
+
+
+def organize(points: np.ndarray, colors: np.ndarray | None, width: int, height: int,
+             fx: float, fy: float, cx: float, cy: float
+             ) -> tuple[np.ndarray, np.ndarray | None]:
+    """An organized cloud back from a deprojected one (e.g. for `gngdt_core.odometry`).
+
+    points: (N, 3) camera frame (x right, y down, z forward), metres, as a depth image's valid
+    pixels deprojected with the pinhole ``fx, fy, cx, cy`` (the learner's ``points`` topic with
+    its calibration); colors: (N, 3) uint8 or None. Each point goes back to the pixel it came
+    from. Returns (height, width, 3) float32 points, NaN where no point lands, and the colours
+    there (zero elsewhere) or None. Points behind the camera or off the image are dropped.
+    """
+    from gngdt_core.kernels import odometry as OK  # numba: loaded when first used
+
+    points = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+    organized = np.full((height, width, 3), np.nan, dtype=np.float32)
+    image = np.zeros((height, width, 3), dtype=np.uint8)
+    pixels = (np.zeros((0, 3), dtype=np.uint8) if colors is None
+              else np.ascontiguousarray(np.asarray(colors, dtype=np.uint8).reshape(-1, 3)))
+    OK.organize_points(points, pixels, float(fx), float(fy), float(cx), float(cy), organized,
+                       image)
+    return organized, None if colors is None else image

@@ -7,13 +7,18 @@ what is evaluated is what is deployed. Pure computation: clouds in, network and 
 
 The network lives in the frame of the first cloud it learns (its ``frame_id``): a cloud whose
 pose places it in a fixed frame (``world``, ``map``) is learned there, pose applied, so a moving
-camera builds one map; a cloud without a pose is learned in the camera frame as it is. A later
-cloud in another frame raises `OtherFrameError` (counted). A posed cloud is learned only when
-its pose passes `gngdt_core.pose_checks` (within the workspace, moving as a camera can, agreeing
-with the depth of an earlier frame); else `PoseRejectedError` (counted). With a frame
-schedule (a sensor profile's ``[frames]`` table) frames go through `StreamLearner` (attention,
-scene cuts, a first frame learned longer); without one, ``samples_per_frame`` steps of
-`GNGDT.partial_fit` each.
+camera builds one map; a cloud without a pose is learned in the camera frame as it is, or, with
+``track``, placed by aligning it to the map (`gngdt_core.camera_tracking`, frame ``odom``; a
+cloud whose alignment fails is not learned). A later cloud in another frame raises
+`OtherFrameError` (counted). A posed cloud is learned only when its pose passes
+`gngdt_core.pose_checks` (within the workspace, moving as a camera can, agreeing with the depth
+of an earlier frame); else `PoseRejectedError` (counted). A map in a fixed frame grows with the
+world: unless the profile says otherwise it has one node per ``resolution_m`` cell of surface
+seen (`LEARNER_WORLD_DEFAULTS`); a camera-frame map keeps the node budget ``max_nodes``. With a
+frame schedule (a sensor profile's ``[frames]`` table) frames go through `StreamLearner`
+(attention, scene cuts, a first frame learned longer); without one, ``samples_per_frame`` steps
+of `GNGDT.partial_fit` each (or the steps the caller's time budget gives,
+`gngdt_core.frame_budget`).
 """
 
 from __future__ import annotations
@@ -25,12 +30,14 @@ from typing import Any
 
 import numpy as np
 
+from gngdt_core.camera_tracking import TRACKED_FRAME, CameraTracking
 from gngdt_core.clustering import CLUSTERINGS, CONVEXITY, EDGE_PROPERTIES
-from gngdt_core.geometry import apply_pose
+from gngdt_core.geometry import CameraIntrinsics, apply_pose
 from gngdt_core.metrics import ghost_nodes
 from gngdt_core.model import GNGDT
 from gngdt_core.objects import ObjectSet, ObjectTracker
-from gngdt_core.parameters import Interval, OneOf, check_fields, param
+from gngdt_core.odometry import TrackerParams
+from gngdt_core.parameters import Flag, Interval, OneOf, check_fields, param
 from gngdt_core.pose_checks import PoseChecker, PoseLimits
 from gngdt_core.schedule import FrameSchedule, StreamLearner
 from gngdt_core.segmentation import SegmentationParams
@@ -41,6 +48,10 @@ log = logging.getLogger(__name__)
 #: camera that moves and a scene that changes (measured in issue 11's note). A params file's
 #: ``utility_k = 0`` turns forgetting off, ``replay_share = 0`` rehearsal.
 LEARNER_MODEL_DEFAULTS: dict[str, Any] = {"utility_k": 1000.0, "replay_share": 0.3}
+#: ... and for a map in a fixed frame (posed or tracked clouds), where a profile does not set
+#: them: the map grows with the surface seen, one node per cell of ``resolution_m``, up to
+#: ``max_nodes`` (the memory cap). A camera-frame map keeps GNG-DT's ``max_nodes`` budget.
+LEARNER_WORLD_DEFAULTS: dict[str, Any] = {"resolution_m": 0.1, "max_nodes": 20_000}
 #: settling after the stream ends: steps between checks, and the relative change of the
 #: position error below which the network counts as settled
 SETTLE_CHUNK = 20_000
@@ -104,6 +115,23 @@ class LearnerOptions:
     pose_max_speed_m_s: float = _pose_limit("max_speed_m_s")
     pose_max_turn_deg_s: float = _pose_limit("max_turn_deg_s")
     pose_max_residual: float = _pose_limit("max_residual")
+    frame_time_share: float = param(0.8, Interval(float, 0.0, 1.0),
+                                    "live learner: share of the time between two frames it may "
+                                    "spend on a frame; a frame gets the learning steps that fit "
+                                    "(within min_samples_per_frame..samples_per_frame), so it "
+                                    "keeps up on a busy machine; 0: samples_per_frame always")
+    min_samples_per_frame: int = param(1_000, Interval(int, 1),
+                                       "fewest learning steps of a frame under the time budget "
+                                       "(at most samples_per_frame)")
+    first_frame_steps: int = param(200_000, Interval(int, 1),
+                                   "steps of the first frame of a map in a fixed frame (posed or "
+                                   "tracked clouds): the map starts settled, and the next frame "
+                                   "is tracked against it; a camera-frame map's first frame "
+                                   "takes samples_per_frame")
+    track: bool = param(False, Flag(),
+                        "estimate the camera pose of clouds that come without one by aligning "
+                        "each to the map (a [tracker] table tunes it); lost frames are not "
+                        "learned")
 
     def __post_init__(self) -> None:
         check_fields(self, "learner option")
@@ -124,8 +152,13 @@ class LearnerConfig:
     options: LearnerOptions = field(default_factory=LearnerOptions)
     segmentation: SegmentationParams = field(default_factory=SegmentationParams)
     schedule: FrameSchedule | None = None
+    tracker: TrackerParams = field(default_factory=TrackerParams)
 
     def __post_init__(self) -> None:
+        if self.options.track and self.schedule is not None:
+            raise ValueError("track: a frame schedule ([frames] table) starts a new network at "
+                             "every scene cut, which a tracked map cannot follow; use a profile "
+                             "without [frames] to track")
         # one setting for the steps of a later frame: the learner's samples_per_frame
         steps = self.options.samples_per_frame
         if self.schedule is not None and self.schedule.steps_per_frame != steps:
@@ -144,6 +177,8 @@ class Counters:
     frames_other_frame: int = 0
     #: posed clouds skipped because their pose was out of bounds or contradicted their depth
     frames_pose_rejected: int = 0
+    #: clouds not learned because their camera could not be tracked (``track``)
+    frames_lost_tracking: int = 0
     learning_seconds: float = 0.0
     #: learning steps run in ``learning_seconds`` (frames differ: a new scene learns longer)
     learning_steps: int = 0
@@ -215,6 +250,8 @@ class FrameLearner:
         elif model is None:
             model = GNGDT(**{"random_state": seed, **config.model})
         self._model = model
+        #: the network's parameters are settled (a resumed network keeps its own)
+        self._model_chosen = model is not None and model.n_steps_ > 0
         #: the segmentation of the last learned frame (None: compute when asked)
         self.last_segmentation: Any = None
         self.counters = counters or Counters()
@@ -228,6 +265,10 @@ class FrameLearner:
         self._trackers = {name: ObjectTracker(name, config.options.min_cluster_size,
                                               config.options.object_confirm_frames)
                           for name in CLUSTERINGS}
+        #: the camera tracking of unposed clouds (``track``; None: off)
+        self.tracking = CameraTracking(config.tracker) if config.options.track else None
+        #: the steps the last learned frame got
+        self.last_steps = 0
 
     @property
     def model(self) -> GNGDT | None:
@@ -236,30 +277,62 @@ class FrameLearner:
         return self._model
 
     def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
-              pose: np.ndarray | None = None, stamp_ns: int | None = None) -> None:
+              pose: np.ndarray | None = None, stamp_ns: int | None = None,
+              steps: int | None = None, camera: CameraIntrinsics | None = None) -> bool:
         """Learn one cloud: (N, 3) f32 m, (N, 3) u8, in its own (camera) frame; ``pose``
-        (4, 4) maps it into ``frame_id``; ``stamp_ns`` its capture time. Raises
-        `OtherFrameError` for a cloud in another frame than the network's and
-        `PoseRejectedError` for a pose the checks refuse (both counted)."""
+        (4, 4) maps it into ``frame_id``; ``stamp_ns`` its capture time. ``steps``: learning
+        steps of this frame (default ``samples_per_frame``; a frame learned from scratch takes
+        its own). ``camera``: the intrinsics the cloud was deprojected with (tracking needs
+        them). Returns whether the cloud was learned: False when its camera could not be
+        tracked (counted; see ``tracking.problem``). Raises `OtherFrameError` for a cloud in
+        another frame than the network's and `PoseRejectedError` for a pose the checks refuse
+        (both counted); a tracked pose is the tracker's to judge."""
+        tracked = self.tracking is not None and pose is None
+        if tracked:
+            located = self.tracking.locate(self.model, positions, colors, camera)
+            if located.pose is None:
+                self.counters.frames_lost_tracking = min(
+                    self.counters.frames_lost_tracking + 1, MAX_COUNTER)
+                return False
+            pose, frame_id = located.pose, TRACKED_FRAME
         self._check_frame(frame_id or self.camera, pose)
-        if pose is not None:
+        if pose is not None and not tracked:
             verdict = self.poses.check(positions, pose, stamp_ns)
             if not verdict.accepted:
                 self.counters.frames_pose_rejected = min(
                     self.counters.frames_pose_rejected + 1, MAX_COUNTER)
                 raise PoseRejectedError(verdict.problem)
+        if self._choose_model(pose is not None):
+            steps = self.options.first_frame_steps
         self.last_pose = pose
         started = time.perf_counter()
+        steps = self.options.samples_per_frame if steps is None else int(steps)
         if self.stream is None:
-            self.model.partial_fit(positions, colors, n_steps=self.options.samples_per_frame,
-                                   camera_pose=pose)
+            self.model.partial_fit(positions, colors, n_steps=steps, camera_pose=pose)
             self.last_segmentation = None
-            steps = self.options.samples_per_frame
         else:
-            steps = self._learn_scheduled(positions, colors, pose)
+            steps = self._learn_scheduled(positions, colors, pose, steps)
         self.counters.add_learning(time.perf_counter() - started, steps)
         self.counters.frames_used += 1
+        self.last_steps = steps
         self.ghosts = self.measure_ghosts(positions, pose)
+        return True
+
+    def _choose_model(self, fixed_frame: bool) -> bool:
+        """Before the first frame: a map in a fixed frame grows with the world
+        (`LEARNER_WORLD_DEFAULTS` under the profile's own values). True when this frame starts
+        such a map (it is learned for ``first_frame_steps``)."""
+        if self._model_chosen:
+            return False
+        self._model_chosen = True
+        if not fixed_frame:
+            return False
+        params = {**LEARNER_WORLD_DEFAULTS, **self.config.model}
+        if self.stream is not None:  # a frame schedule learns a first frame its own way
+            self.stream.model_params = params
+            return False
+        self._model = GNGDT(**{"random_state": self.options.seed, **params})
+        return True
 
     def _check_frame(self, frame_id: str, pose: np.ndarray | None) -> None:
         if self.frame_id is None:
@@ -274,13 +347,13 @@ class FrameLearner:
                 f"start the learner afresh to learn in {frame_id!r})")
 
     def _learn_scheduled(self, positions: np.ndarray, colors: np.ndarray | None,
-                         pose: np.ndarray | None) -> int:
-        """One frame through the schedule; the steps it took."""
+                         pose: np.ndarray | None, steps: int) -> int:
+        """One frame through the schedule (``steps`` for a later frame); the steps it took."""
         in_range = self.stream.in_depth_range(positions)
         had_nodes = self.model is not None and self.model.n_nodes_ > 0
         outcome = self.stream.learn_frame(positions[in_range],
                                           None if colors is None else colors[in_range],
-                                          camera_pose=pose)
+                                          camera_pose=pose, steps=steps)
         if outcome.from_scratch and had_nodes:
             log.info("frame %d shows a new scene: learning a new network",
                      self.counters.frames_used)

@@ -10,7 +10,7 @@ positions). Normals (eq. 16) are oriented toward ``viewpoint`` (the sensor origi
 orientation. The baselines keep one topology and pick the winner by position and colour.
 
 Step 0 places the two initial nodes on two random input samples. Growth stops at ``max_nodes``
-(Step 8 is then skipped entirely); adaptation goes on.
+(Step 8 is then skipped entirely; with ``resolution_m``, at the surface seen); adaptation goes on.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ import numpy as np
 
 from gngdt_core import queries
 from gngdt_core.clustering import connected_component_labels
+from gngdt_core.coverage import SurfaceCoverage
 from gngdt_core.kernels import layout as K
 from gngdt_core.kernels import segmentation as SK
 from gngdt_core.kernels.graph import add_edge
@@ -42,7 +43,7 @@ from gngdt_core.sampling import (
 )
 from gngdt_core.segmentation import Segmentation, SegmentationParams, segment_network
 from gngdt_core.state import restore, snapshot
-from gngdt_core.view import SensorView, rigid_inverse
+from gngdt_core.view import SensorView, rigid_inverse, see_batch
 
 _PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
 
@@ -77,6 +78,9 @@ class GrowingGas:
         self._normals_fresh = False
         #: earlier batches' samples for rehearsal (``replay_share``; None: off)
         self._memory = SampleMemory(self._params["replay_points"]) if self._replays else None
+        #: the surface seen, at ``resolution_m`` (None: a fixed node budget)
+        resolution = self._params.get("resolution_m")
+        self._coverage = SurfaceCoverage(resolution) if resolution else None
 
     def _allocate(self, dim: int, has_col: bool) -> None:
         cap = self._params["max_nodes"]
@@ -96,6 +100,7 @@ class GrowingGas:
             "ids": np.zeros(cap, dtype=np.int64),
             "util": np.zeros(cap),
             "judged": np.zeros(cap, dtype=np.uint8),
+            "wins": np.zeros(cap),
             "ghead": np.full(table, -1, dtype=np.int32),
             "gnext": np.full(cap, -1, dtype=np.int32),
             "gprev": np.full(cap, -1, dtype=np.int32),
@@ -127,11 +132,11 @@ class GrowingGas:
             p.get("tau_col", 1.0), tau_nor, p.get("normal_mu") or 0.0,
             *(viewpoint if viewpoint is not None else (0.0, 0.0, 0.0)),
             p.get("w_pos", 1.0), p.get("w_col", 1.0), p.get("utility_k") or 0.0,
-            p.get("utility_decay", 0.0),
+            p.get("utility_decay", 0.0), p.get("resolution_m") or 0.0,
         ])
         has_nor = self._MODE == K.MODE_GNGDT and self._dim == 3
         iparams = np.array([
-            p["lambda_"], p["age_max"], p["max_nodes"], self._MODE,
+            p["lambda_"], p["age_max"], self.growth_limit_, self._MODE,
             int(self._has_col), int(has_nor), int(viewpoint is not None), int(self._forgets),
             np.iinfo(np.int64).max,  # Q_FRAME_ROWS: every sample is the batch's (no rehearsal)
         ], dtype=np.int64)
@@ -174,6 +179,8 @@ class GrowingGas:
         n_samples = batch.shape[0] if finite_rows is None else finite_rows.size
         if n_samples == 0:
             return self
+        if self._coverage is not None:  # before Step 0: the first batch's budget counts
+            self._coverage.add(batch, camera_pose)
         steps = n_samples if n_steps is None else int(n_steps)
         replay_steps = self._replay_steps(steps, memory)
         steps -= replay_steps  # the batch's own
@@ -223,7 +230,7 @@ class GrowingGas:
             learn(samples, kernel_colors, part,
                   a["pos"], a["col"], a["nor"], a["err"],
                   a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                  a["util"], a["judged"],
+                  a["util"], a["judged"], a["wins"],
                   a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
                   self._istate, self._fstate, fparams, iparams)
             if self._params.get("normal_refresh_steps"):
@@ -274,32 +281,16 @@ class GrowingGas:
 
     def _see(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None,
              memory: SampleMemory | None) -> None:
-        """What this batch's sensor saw: mark the nodes it judges (forgetting): in 3-D, those
-        it could have seen given these camera-frame samples; in 2-D, all of them (plain GNG-U);
-        and drop the samples of ``memory`` it saw through (rehearsal)."""
-        if not (self._forgets or memory is not None):
-            return
-        n, judged = self.n_nodes_, self._arrays["judged"]
-        if self._dim != 3:
-            judged[:n] = 1
-            return
-        judged[:n] = 0
-        view = SensorView.of(camera_samples)
-        if view is None:
-            return
-        camera_from_model = np.eye(4) if camera_pose is None else rigid_inverse(camera_pose)
-        margin = self._params["view_depth_margin"]
-        if self._forgets:
-            view.judge(self._arrays["pos"], n, camera_from_model, margin,
-                       self._fstate[K.F_SPACING], judged)
-        if memory is not None:
-            memory.carve(view, camera_from_model, margin)
+        """What this batch's sensor saw (`gngdt_core.view.see_batch`): the nodes forgetting
+        judges, the samples of ``memory`` (rehearsal) it saw through."""
+        if self._forgets or memory is not None:
+            see_batch(camera_samples, camera_pose, self._arrays["pos"], self.n_nodes_,
+                      self._arrays["judged"] if self._forgets else None, self._dim,
+                      self._fstate[K.F_SPACING], self._params["view_depth_margin"], memory)
 
     def _check_consistent(self, dim: int, has_col: bool) -> None:
         if dim != self._dim:
-            raise ValueError(
-                f"positions have {dim} columns but the model learned {self._dim}-D data"
-            )
+            raise ValueError(f"positions have {dim} columns, the model learned {self._dim}-D data")
         if has_col != self._has_col:
             expected = "given" if self._has_col else "None"
             raise ValueError(f"colors must be {expected}, as in the first batch this model learned")
@@ -315,6 +306,7 @@ class GrowingGas:
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
         add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
         a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
+        a["wins"][:2] = 1.0
         self._istate[K.I_NEXT_ID] += 2
         self._istate[K.I_NODES] = 2
 
@@ -327,6 +319,12 @@ class GrowingGas:
     @property
     def n_steps_(self) -> int:
         return int(self._istate[K.I_STEPS])
+
+    @property
+    def growth_limit_(self) -> int:
+        """Nodes it may grow to now: ``max_nodes``, or one per cell seen (``resolution_m``)."""
+        cap = self._params["max_nodes"]
+        return cap if self._coverage is None else min(cap, max(2, self._coverage.count))
 
     @property
     def properties_(self) -> tuple[str, ...]:
@@ -493,6 +491,10 @@ class GNGDT(GrowingGas):
     camera's points (camera frame, z forward; or mapped by ``camera_pose``); in 2-D every node is
     judged.
 
+    Resolution (off by default: the paper's budget): with ``resolution_m`` the network grows with
+    the world, one node per cubic cell of that size the batches' points fell in (in the model's
+    frame; `gngdt_core.coverage`) within ``max_nodes``, the memory cap.
+
     Rehearsal (off by default; 3-D batches with a ``camera_pose``, i.e. a map in a fixed frame:
     without a pose what was seen before is elsewhere now): with ``replay_share`` > 0, that share
     of each such `partial_fit`'s steps learns samples of earlier batches, not the batch's, drawn
@@ -511,7 +513,7 @@ class GNGDT(GrowingGas):
     _PARAM_NAMES = (
         *GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
         "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
-        "view_depth_margin", "replay_share", "replay_points",
+        "view_depth_margin", "replay_share", "replay_points", "resolution_m",
     )
 
     def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
@@ -522,7 +524,8 @@ class GNGDT(GrowingGas):
                  normal_angle_deg: float | None = None, normal_refresh_steps: int | None = None,
                  utility_k: float | None = None, utility_decay: float = 1e-4,
                  view_depth_margin: float = 0.05, replay_share: float = 0.0,
-                 replay_points: int = 40_000, random_state: int | None = None) -> None:
+                 replay_points: int = 40_000, resolution_m: float | None = None,
+                 random_state: int | None = None) -> None:
         super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
                          age_max=age_max, alpha=alpha, beta=beta, tau_col=tau_col,
                          tau_nor=tau_nor, normal_mu=normal_mu, viewpoint=viewpoint,
@@ -530,7 +533,7 @@ class GNGDT(GrowingGas):
                          normal_refresh_steps=normal_refresh_steps, utility_k=utility_k,
                          utility_decay=utility_decay, view_depth_margin=view_depth_margin,
                          replay_share=replay_share, replay_points=replay_points,
-                         random_state=random_state)
+                         resolution_m=resolution_m, random_state=random_state)
 
     @property
     def n_forgotten_(self) -> int:

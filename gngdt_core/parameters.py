@@ -97,7 +97,30 @@ class OneOf:
         return value
 
 
-Constraint = Interval | Point3 | OneOf
+@dataclass(frozen=True)
+class Numbers:
+    """A non-empty sequence of numbers, each within ``each`` (an `Interval`), as a tuple."""
+
+    each: Interval
+
+    def check(self, name: str, value: Any) -> tuple:
+        if isinstance(value, str) or not hasattr(value, "__len__") or len(value) == 0:
+            raise ValueError(f"{name} must be a non-empty list of numbers, got {value!r}")
+        return tuple(self.each.check(f"{name}[{index}]", item)
+                     for index, item in enumerate(value))
+
+
+@dataclass(frozen=True)
+class Flag:
+    """True or False."""
+
+    def check(self, name: str, value: Any) -> bool:
+        if not isinstance(value, bool | np.bool_):
+            raise ValueError(f"{name} must be true or false, got {value!r}")
+        return bool(value)
+
+
+Constraint = Interval | Point3 | OneOf | Numbers | Flag
 
 #: the estimators' hyper-parameters (`GNGDT`, `GNG`, `GNGW`; defaults in their signatures)
 MODEL_CONSTRAINTS: dict[str, Constraint] = {
@@ -120,6 +143,8 @@ MODEL_CONSTRAINTS: dict[str, Constraint] = {
     "view_depth_margin": Interval(float, 0.0, 10.0),
     "replay_share": Interval(float, 0.0, 1.0, closed="left"),
     "replay_points": Interval(int, 1, MAX_NODES_LIMIT),
+    # metres: one node per cell of this size of the surface seen (None or 0: the fixed budget)
+    "resolution_m": Interval(float, 0.0, optional=True),
     "w_pos": Interval(float, 0.0, closed="neither"),
     "w_col": Interval(float, 0.0),
     "random_state": Interval(int, 0, optional=True),
@@ -136,8 +161,9 @@ def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
         if name not in MODEL_CONSTRAINTS:
             raise ValueError(f"unknown parameter {name!r}")
         checked[name] = MODEL_CONSTRAINTS[name].check(name, value)
-    if checked.get("utility_k") == 0.0:
-        checked["utility_k"] = None
+    for name in ("utility_k", "resolution_m"):  # 0 turns it off (TOML has no None)
+        if checked.get(name) == 0.0:
+            checked[name] = None
     if "eta1" in checked and checked.get("eta2", 0.0) > checked["eta1"]:
         raise ValueError(f"eta2 ({checked['eta2']}) must not exceed eta1 ({checked['eta1']})")
     return checked

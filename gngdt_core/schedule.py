@@ -129,7 +129,8 @@ class StreamLearner:
 
     def learn_frame(self, positions: np.ndarray, colors: np.ndarray | None,
                     independent: bool = False, camera_pose: np.ndarray | None = None,
-                    on_large_surface: np.ndarray | None = None) -> FrameOutcome:
+                    on_large_surface: np.ndarray | None = None,
+                    steps: int | None = None) -> FrameOutcome:
         """Learn from one frame and segment the network.
 
         positions: (N, 3) float metres, N >= 2, finite; colors: (N, 3) uint8 RGB or None.
@@ -140,6 +141,8 @@ class StreamLearner:
         frame showed it (e.g. the previous frame's labels of the same pixels, from
         ``FrameOutcome.on_large_surface``); attention then trusts it instead of searching each
         drawn point's nearest node. Ignored when the frame is learned from scratch.
+        steps: the steps of a later frame (default ``steps_per_frame``; a frame learned from
+        scratch always takes ``steps_first_frame``).
         """
         if len(positions) < 2:
             raise ValueError(f"a frame needs at least 2 points, got {len(positions)}")
@@ -155,7 +158,7 @@ class StreamLearner:
             self._on_large_surface = None
             steps = self.schedule.steps_first_frame
         else:
-            steps = self.schedule.steps_per_frame
+            steps = self.schedule.steps_per_frame if steps is None else steps
         self._learn(positions, colors, steps, placed,
                     None if from_scratch else on_large_surface)
         if self.schedule.scene_change_share < 1.0:

@@ -14,8 +14,9 @@ from gngdt_core.sampling import checked_pose
 
 Model = TypeVar("Model")
 
-STATE_VERSION = 4  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
-# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``)
+STATE_VERSION = 5  # 2: persistent node ids (``ids``, a fourth counter); 3: utility (``util``,
+# a fifth counter: nodes forgotten); 4: the rehearsal memory (``memory_*``); 5: the surface
+# seen (``coverage_cells``, with ``resolution_m``) and each node's wins (``wins``)
 
 #: largest counter (steps, node ids, samples offered, ...) a state may hold: far below 2**63,
 #: so that the counters can go on counting for ever without overflowing an int64
@@ -49,8 +50,10 @@ def snapshot(model: Any) -> dict[str, np.ndarray]:
         state["memory_positions"] = model._memory.positions.copy()
         state["memory_colors"] = model._memory.colors.copy()
         state["memory_offered"] = np.array(model._memory.offered, dtype=np.int64)
+    if model._coverage is not None:
+        state["coverage_cells"] = model._coverage.cells()
     for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
-                 "util"):
+                 "util", "wins"):
         if a:
             state[name] = a[name][:n].copy()
     return state
@@ -151,6 +154,8 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         model._camera_pose = checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
     if model._memory is not None:  # states saved before rehearsal: an empty memory
         _restore_memory(model._memory, state)
+    if model._coverage is not None and "coverage_cells" in state:  # else: none seen yet
+        model._coverage.restore(state["coverage_cells"])
     if counters[K.I_GRID]:
         a = model._arrays
         grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
@@ -174,6 +179,12 @@ def _node_arrays(state: dict[str, np.ndarray], n: int, dim: int,
             raise ValueError(f"state[{key!r}] contains NaN or inf")
     _check_adjacency(n, arrays)
     arrays["ids"], counters[K.I_NEXT_ID] = _node_ids(state, n, int(counters[K.I_NEXT_ID]))
+    # states saved before win counts: every node mature (a young node's rate is 1 / wins)
+    arrays["wins"] = np.full(n, 1e9)
+    if "wins" in state:
+        arrays["wins"] = _array(state, "wins", (n,), "f").astype(np.float64)
+        if not np.isfinite(arrays["wins"]).all() or (arrays["wins"] < 0).any():
+            raise ValueError("state['wins'] must be finite and non-negative")
     arrays["util"] = np.zeros(n)  # states saved before forgetting existed: no utility yet
     if "util" in state:
         arrays["util"] = _array(state, "util", (n,), "f").astype(np.float64)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -119,6 +120,29 @@ def seen_nodes(node_positions: np.ndarray, camera_points: np.ndarray,
         spacing = node_spacing(positions) if reach is None else reach
         view.judge(positions, len(positions), camera_from_model, margin, spacing, seen)
     return seen.astype(bool)
+
+
+def see_batch(camera_samples: np.ndarray, camera_pose: np.ndarray | None,
+              positions: np.ndarray, n: int, judged: np.ndarray | None, dim: int,
+              spacing: float, margin: float, memory: Any = None) -> None:
+    """What a batch's sensor saw: mark in ``judged`` (N,) uint8 (None: not forgetting) the
+    nodes it judges (forgetting): in 3-D, those of ``positions`` (first ``n`` rows, model
+    frame) it could have seen given these camera-frame samples (M, 3) and ``camera_pose``
+    (4, 4) camera-to-model (None: the model is in the camera frame); in 2-D, all of them
+    (plain GNG-U); and drop the samples of ``memory`` (a `SampleMemory`, rehearsal) it saw
+    through. ``spacing``: the running node spacing; ``margin``: ``view_depth_margin``."""
+    if judged is not None:
+        judged[:n] = 1 if dim != 3 else 0
+    if dim != 3:
+        return
+    view = SensorView.of(camera_samples)
+    if view is None:
+        return
+    camera_from_model = np.eye(4) if camera_pose is None else rigid_inverse(camera_pose)
+    if judged is not None:
+        view.judge(positions, n, camera_from_model, margin, spacing, judged)
+    if memory is not None:
+        memory.carve(view, camera_from_model, margin)
 
 
 def rigid_inverse(matrix: np.ndarray) -> np.ndarray:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -55,7 +56,9 @@ def warm_up_learner(config: LearnerConfig, progress: Progress | None = None) -> 
     from gngdt_core.frame_learner import FrameLearner
 
     positions, colors, pose = sample_frame()
-    learner = FrameLearner("warm-up", config)
+    # a map in a fixed frame, as posed or tracked clouds build it, without its long first frame
+    quick = replace(config.options, first_frame_steps=config.options.samples_per_frame)
+    learner = FrameLearner("warm-up", replace(config, options=quick))
     groups: list[tuple[str, Callable[[], object]]] = [
         ("learning loop", lambda: learner.learn(positions, colors, "world", pose)),
         ("nearest nodes", lambda: learner.quantization_error(positions, colors)),
@@ -64,8 +67,24 @@ def warm_up_learner(config: LearnerConfig, progress: Progress | None = None) -> 
         # a reference and a comparison: loads scipy's k-d tree now
         ("pose checks", lambda: [learner.poses.check(positions, pose) for _ in range(2)]),
     ]
+    if config.options.track:
+        groups.append(("camera tracking", lambda: warm_up_tracking(config.tracker)))
     run_groups(groups, progress)
     return learner
+
+
+def warm_up_tracking(params: object = None) -> None:
+    """Align a small organized frame to a map of it once (`gngdt_core.odometry`'s kernels)."""
+    from gngdt_core.map_surface import MapSurface
+    from gngdt_core.model import GNGDT
+    from gngdt_core.odometry import MapOdometry
+
+    points, colors = sample_organized_frame()
+    valid = np.isfinite(points[..., 2])
+    model = GNGDT(max_nodes=200, lambda_=50, random_state=0)
+    model.partial_fit(points[valid], colors[valid], n_steps=5_000, camera_pose=np.eye(4))
+    odometry = MapOdometry(params, strides=(2,), iterations=(2,), gates_m=(0.1,), min_points=6)
+    odometry.reset(np.eye(4)).track(points, colors, MapSurface.from_model(model))
 
 
 def run_groups(groups: list[tuple[str, Callable[[], object]]],

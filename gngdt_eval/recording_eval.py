@@ -52,7 +52,11 @@ class RecordingSettings:
     trials: int = 1
     #: the live learner's defaults, so a replay learns what ``gngdt run`` would
     samples_per_frame: int = field(default_factory=lambda: _learner_default("samples_per_frame"))
-    max_nodes: int = field(default_factory=lambda: _gngdt_default("max_nodes"))
+    #: node budget (None: the learner's: GNG-DT's max_nodes for a camera-frame map; a map in a
+    #: fixed frame grows with the surface seen; the baselines take GNG-DT's max_nodes)
+    max_nodes: int | None = None
+    #: GNG-DT's resolution_m (None: the learner's: 0.1 m for a map in a fixed frame; 0: off)
+    resolution_m: float | None = None
     #: clusters with fewer nodes are not counted (label -1)
     min_cluster_size: int = field(default_factory=lambda: _learner_default("min_cluster_size"))
     #: a cluster is an object once seen in this many frames in a row (object identity scores)
@@ -83,7 +87,6 @@ class RecordingSettings:
         for name in (
             "trials",
             "samples_per_frame",
-            "max_nodes",
             "min_cluster_size",
             "object_confirm_frames",
             "reference_points",
@@ -91,6 +94,8 @@ class RecordingSettings:
         ):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.max_nodes is not None and self.max_nodes < 2:
+            raise ValueError(f"max_nodes must be >= 2, got {self.max_nodes}")
         if self.max_frames is not None and self.max_frames < 1:
             raise ValueError(f"max_frames must be >= 1, got {self.max_frames}")
         for method in self.methods:
@@ -197,7 +202,8 @@ class MethodReplay:
             self.learner = FrameLearner("eval", learner_config(settings, trial))
             self.model = self.learner.model
         else:
-            self.model = make_model(method, settings.max_nodes, random_state=trial)
+            self.model = make_model(method, settings.max_nodes or _gngdt_default("max_nodes"),
+                                    random_state=trial)
 
     def learn(self, points: FramePoints) -> dict[str, np.ndarray]:
         """Learn one frame; each clustering's node labels after it."""
@@ -229,8 +235,10 @@ def learner_config(settings: RecordingSettings, trial: int) -> LearnerConfig:
     options = LearnerOptions(samples_per_frame=settings.samples_per_frame,
                              min_cluster_size=settings.min_cluster_size,
                              object_confirm_frames=settings.object_confirm_frames, seed=trial)
-    model = {"max_nodes": settings.max_nodes, "utility_k": settings.utility_k,
-             "replay_share": settings.replay_share}
+    model = {"utility_k": settings.utility_k, "replay_share": settings.replay_share}
+    for name in ("max_nodes", "resolution_m"):
+        if getattr(settings, name) is not None:
+            model[name] = getattr(settings, name)
     return LearnerConfig(model=model, options=options)
 
 

@@ -183,7 +183,8 @@ def render_markdown(data: dict[str, Any], plots: list[Path]) -> str:
         "Replayed offline frame by frame: GNG-DT through the learner's own per-frame policy "
         "(`gngdt_core.frame_learner.FrameLearner`, as `gngdt learn` runs it), GNG and GNG-W "
         f"with `partial_fit(points, colors, n_steps={settings['samples_per_frame']:,})` per "
-        f"frame; node budget {settings['max_nodes']}, {settings['trials']} trial(s) per method, "
+        f"frame; node budget {settings['max_nodes'] or 'the learner’s'}, "
+        f"{settings['trials']} trial(s) per method, "
         "paper parameters (Table 1). Errors (eq. 17) are measured on each frame's own points "
         "after learning it. Clusters count topologies' connected components of at least "
         f"{settings['min_cluster_size']} nodes. Wall time {data['wall_seconds']:.1f} s.",

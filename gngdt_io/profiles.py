@@ -3,8 +3,9 @@
 
 A profile only overrides what `gngdt_core.parameters` declares. Tables: ``[gngdt]`` (`GNGDT`
 constructor arguments; ``lambda`` means ``lambda_``), ``[learner]`` (`LearnerOptions`),
-``[segmentation]`` (`SegmentationParams`) and ``[frames]`` (`FrameSchedule`: a sensor profile's
-frame schedule; with it, the learner learns through `StreamLearner`). Keys at the top level count
+``[segmentation]`` (`SegmentationParams`), ``[tracker]`` (`TrackerParams`: the camera tracking
+of ``track``) and ``[frames]`` (`FrameSchedule`: a sensor profile's frame schedule; with it, the
+learner learns through `StreamLearner`). Keys at the top level count
 as ``[gngdt]`` or ``[learner]`` keys by their name. The steps per later frame of a stream are
 ``[learner] samples_per_frame``; ``[frames] steps_per_frame`` is accepted as its other name.
 Anything else is an error naming the file and the key. `Profile.sources` says where every
@@ -19,8 +20,14 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS, LearnerConfig, LearnerOptions
+from gngdt_core.frame_learner import (
+    LEARNER_MODEL_DEFAULTS,
+    LEARNER_WORLD_DEFAULTS,
+    LearnerConfig,
+    LearnerOptions,
+)
 from gngdt_core.model import GNGDT
+from gngdt_core.odometry import TrackerParams
 from gngdt_core.parameters import from_mapping
 from gngdt_core.schedule import FrameSchedule
 from gngdt_core.segmentation import SegmentationParams
@@ -31,7 +38,7 @@ DEFAULT_SENSOR_PROFILE = "kinect.toml"
 #: where a value comes from when no file or option sets it
 LEARNER_DEFAULT = "the learner's default"
 DEFAULT = "default"
-TABLES = ("gngdt", "learner", "segmentation", "frames")
+TABLES = ("gngdt", "learner", "segmentation", "tracker", "frames")
 #: the constraint of samples_per_frame, for its other name in [frames]
 _STEPS = next(item.metadata["constraint"] for item in fields(LearnerOptions)
               if item.name == "samples_per_frame")
@@ -56,6 +63,7 @@ class Profile:
             return self
         config = replace(self.config, model={**self.config.model, **model},
                          options=replace(self.config.options, **options))
+        config = replace(config)  # checks the options together (a track with a schedule)
         if config.schedule is not None and "samples_per_frame" in options:
             config = replace(config, schedule=replace(
                 config.schedule, steps_per_frame=config.options.samples_per_frame))
@@ -81,6 +89,7 @@ class Profile:
         return {"profile": str(self.path), "gngdt": dict(config.model),
                 "learner": asdict(config.options),
                 "segmentation": asdict(config.segmentation),
+                "tracker": asdict(config.tracker),
                 "frames": asdict(self.segmenter_schedule())}
 
 
@@ -130,17 +139,19 @@ def load_profile(path: Path | None, base_model: dict[str, Any] | None = None) ->
         model = {**base, **tables["gngdt"]}
         options = from_mapping(LearnerOptions, tables["learner"], "learner option")
         segmentation = SegmentationParams.from_dict(tables["segmentation"])
+        tracker = TrackerParams.from_dict(tables["tracker"])
         schedule = None
         if path is not None and tables["frames"] is not None:
             schedule = FrameSchedule.from_dict(
                 {**tables["frames"], "steps_per_frame": options.samples_per_frame})
+        config = LearnerConfig(model, options, segmentation, schedule, tracker)
     except (TypeError, ValueError) as error:
         raise ValueError(f"{path}: {error}") from error
     _check_model(model, str(path))
     sources = {f"gngdt.{name}": base_source for name in base}
     for table, values in tables.items():
         sources.update({f"{table}.{key}": str(path) for key in values or {}})
-    return Profile(LearnerConfig(model, options, segmentation, schedule), sources, path)
+    return Profile(config, sources, path)
 
 
 def load_sensor_profile(path: Path | None = None) -> Profile:
@@ -207,6 +218,7 @@ def format_parameters(profile: Profile) -> str:
         "gngdt": {**_signature_defaults(), **config.model},
         "learner": asdict(config.options),
         "segmentation": asdict(config.segmentation),
+        "tracker": asdict(config.tracker),
     }
     if config.schedule is not None:
         tables["frames"] = asdict(config.schedule)
@@ -219,6 +231,9 @@ def format_parameters(profile: Profile) -> str:
             source = profile.sources.get(f"{table}.{key}", DEFAULT)
             if table == "frames" and key == "steps_per_frame":
                 source = "[learner] samples_per_frame"
+            if table == "gngdt" and key in LEARNER_WORLD_DEFAULTS and key not in config.model:
+                source += (f"; a map in a fixed frame (posed or tracked clouds): "
+                           f"{_toml(LEARNER_WORLD_DEFAULTS[key])}, the learner's default")
             lines.append(f"{setting:<{width}}  # {source}")
         lines.append("")
     return "\n".join(lines)

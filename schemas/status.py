@@ -50,6 +50,10 @@ class LearnerStatusInfo:
     frames_pose_rejected: int = 0
     #: why the last rejected pose was rejected ("" while none was)
     pose_problem: str = ""
+    frame_budget_ms: float = 0.0
+    frame_steps: int = 0
+    frames_lost_tracking: int = 0
+    tracking: str = ""
 
 
 @dataclass

@@ -25,7 +25,9 @@ ENCODING_FRAME_TRANSFORM = "application/protobuf;foxglove.FrameTransform"
 
 #: every stream of a camera (``gngdt/<cam>/<stream>``), by who publishes it (DESIGN.md "Topics")
 CAPTURE_STREAMS = ("color", "depth", "calibration", "points", "tf", "eos")
-LEARNER_STREAMS = ("topology", "objects", "scene", "learner/status")
+#: "tf" is the camera's pose: capture's from a recording's poses, the learner's when it tracks
+#: the camera (learn --track)
+LEARNER_STREAMS = ("topology", "objects", "scene", "learner/status", "tf")
 
 _ATTACHMENT = struct.Struct("<Qq")
 

@@ -64,7 +64,7 @@ def remove_edge(nbr, age, emask, rev, deg, i, k):
 
 
 @njit(cache=True)
-def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
+def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
                 ghead, gnext, gprev, gbucket, gcell):
     """Delete isolated node ``i`` by moving the last node ``n-1`` into its slot. Returns n - 1."""
     grid_remove(ghead, gnext, gprev, gbucket, i)
@@ -79,6 +79,7 @@ def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, 
         ids[i] = ids[last]
         util[i] = util[last]
         judged[i] = judged[last]
+        wins[i] = wins[last]
         d = deg[last]
         for k in range(d):
             j = nbr[last, k]

@@ -58,6 +58,9 @@ I_NODES, I_STEPS, I_GRID, I_NEXT_ID, I_FORGOTTEN = 0, 1, 2, 3, 4
 F_ERROR_SCALE, F_CELL, F_SPACING, F_UTIL_SCALE = 0, 1, 2, 3
 P_ETA1, P_ETA2, P_ALPHA, P_BETA, P_TAU_COL, P_TAU_NOR, P_MU = 0, 1, 2, 3, 4, 5, 6
 P_VX, P_VY, P_VZ, P_W_POS, P_W_COL, P_UTILITY_K, P_UTILITY_DECAY = 7, 8, 9, 10, 11, 12, 13
+#: a sample farther than this from every node gets a node of its own (0: never; GNG-DT's
+#: ``resolution_m``)
+P_GROW_DISTANCE = 14
 Q_LAMBDA, Q_AGE_MAX, Q_MAX_NODES, Q_MODE, Q_HAS_COL, Q_HAS_NOR, Q_ORIENT, Q_FORGET = range(8)
 #: rows of ``samples`` from this index on are rehearsed (earlier batches'): no utility
 Q_FRAME_ROWS = 8

@@ -44,6 +44,7 @@ from gngdt_core.kernels.layout import (
     P_BETA,
     P_ETA1,
     P_ETA2,
+    P_GROW_DISTANCE,
     P_MU,
     P_TAU_COL,
     P_TAU_NOR,
@@ -73,7 +74,7 @@ ERROR_SCALE_FLOOR = 1e-60
 
 @njit(cache=True)
 def learn(samples, sample_colors, order,
-          pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
+          pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
           ghead, gnext, gprev, gbucket, gcell,
           istate, fstate, fparams, iparams):
     """Run one learning step (Steps 1-9) per index in ``order`` (rows of ``samples``).
@@ -89,7 +90,7 @@ def learn(samples, sample_colors, order,
     if forget:  # utilities of the nodes not judged now: frozen, in true units, for this call
         _rescale_unjudged(util, judged, istate[I_NODES], fstate[F_UTIL_SCALE])
     _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
                  ghead, gnext, gprev, gbucket, gcell,
                  istate, fstate, fparams, iparams, candidates)
     if forget:
@@ -104,8 +105,8 @@ def _rescale_unjudged(util, judged, n, factor):
 
 
 @njit(cache=True)
-def forget_least_useful(n, err, util, judged, error_scale, util_scale, utility_k, candidates,
-                        pos, col, nor, nbr, age, emask, rev, deg, ids,
+def forget_least_useful(n, err, util, judged, wins, error_scale, util_scale, utility_k,
+                        candidates, pos, col, nor, nbr, age, emask, rev, deg, ids,
                         ghead, gnext, gprev, gbucket, gcell):
     """GNG-U's removal among the judged nodes: the judged node ``l`` of least utility goes, with
     its edges and any neighbour left without one, when ``max error > utility_k * U_l`` (true,
@@ -135,7 +136,7 @@ def forget_least_useful(n, err, util, judged, error_scale, util_scale, utility_k
         j = candidates[q]
         if deg[j] == 0 and n > 2:
             last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util,
-                               judged, ghead, gnext, gprev, gbucket, gcell)
+                               judged, wins, ghead, gnext, gprev, gbucket, gcell)
             n -= 1
             removed += 1
             for q2 in range(q + 1, n_candidates):
@@ -150,7 +151,7 @@ def forget_least_useful(n, err, util, judged, error_scale, util_scale, utility_k
 # Without the runtime the function cannot allocate; numba refuses to compile it if it tries.
 @njit(cache=True, _nrt=False)
 def _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged,
+                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
                  ghead, gnext, gprev, gbucket, gcell,
                  istate, fstate, fparams, iparams, candidates):
     """The body of `learn`; ``candidates`` (MAX_DEGREE + 1,) int64 scratch."""
@@ -177,6 +178,7 @@ def _learn_steps(samples, sample_colors, order,
     frame_rows = iparams[Q_FRAME_ROWS]
     utility_k = fparams[P_UTILITY_K]
     utility_decay = fparams[P_UTILITY_DECAY]
+    grow_sq = fparams[P_GROW_DISTANCE] * fparams[P_GROW_DISTANCE]
     # in GNG / GNG-W colour is part of the input vector and follows the single topology
     col_follows_pos = mode != MODE_GNGDT
 
@@ -222,6 +224,17 @@ def _learn_steps(samples, sample_colors, order,
             second = err_add
         if s2 < 0:  # every distance overflowed (|x| ~ 1e154): no winner, learn nothing
             continue
+        # new surface (``resolution_m``): a sample farther than the resolution from every node
+        # gets a node at its place, joined to its winner (as Marsland et al.'s GWR grows)
+        if (grow_sq > 0.0 and err_add > grow_sq and n < max_nodes and mode == MODE_GNGDT
+                and deg[s1] < nbr.shape[1]):
+            n = _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, age,
+                                  emask, rev, deg, has_col, has_nor, tau_col, tau_nor, forget,
+                                  util, judged, wins, util_scale)
+            ids[n - 1] = next_id
+            next_id += 1
+            if grid_on:
+                _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, inv_cell)
         # Step 3
         err[s1] += err_add / error_scale
         # GNG-U: what the network would lose without s1, by what the sensor sees now
@@ -245,13 +258,18 @@ def _learn_steps(samples, sample_colors, order,
             k21 = rev[s1, k12]
             age[s2, k21] = 0
             emask[s2, k21] = mask
-        # Step 5: the winner moves in every input property ...
-        _move_toward(pos, s1, x0, x1, x2, dim, eta1, grid_on, ghead, gnext, gprev, gbucket,
+        # Step 5: the winner moves in every input property (with ``resolution_m``, a young node
+        # at the mean of the samples it won, as online k-means places a centre, until eta1) ...
+        rate = eta1
+        if grow_sq > 0.0:
+            wins[s1] += 1.0
+            rate = max(eta1, 1.0 / wins[s1])
+        _move_toward(pos, s1, x0, x1, x2, dim, rate, grid_on, ghead, gnext, gprev, gbucket,
                      gcell, inv_cell)
         if has_col:
-            col[s1, 0] += eta1 * (c0 - col[s1, 0])
-            col[s1, 1] += eta1 * (c1 - col[s1, 1])
-            col[s1, 2] += eta1 * (c2 - col[s1, 2])
+            col[s1, 0] += rate * (c0 - col[s1, 0])
+            col[s1, 1] += rate * (c1 - col[s1, 1])
+            col[s1, 2] += rate * (c2 - col[s1, 2])
         # ... each neighbour in property o only along an edge of o. Step 6: ages.
         for k in range(deg[s1]):
             j = nbr[s1, k]
@@ -277,7 +295,7 @@ def _learn_steps(samples, sample_colors, order,
             j = candidates[q]
             if deg[j] == 0:
                 last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
-                                   util, judged, ghead, gnext, gprev, gbucket, gcell)
+                                   util, judged, wins, ghead, gnext, gprev, gbucket, gcell)
                 n -= 1
                 if s1 == last:
                     s1 = j
@@ -286,22 +304,22 @@ def _learn_steps(samples, sample_colors, order,
                         candidates[q2] = j
         if deg[s1] == 0:
             delete_node(s1, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
-                        util, judged, ghead, gnext, gprev, gbucket, gcell)
+                        util, judged, wins, ghead, gnext, gprev, gbucket, gcell)
             n -= 1
         elif has_nor:
             compute_normal(s1, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
         # Step 8: insertion every lambda steps, until max_nodes
         if phase == 0:
             if forget:
-                n, removed = forget_least_useful(n, err, util, judged, error_scale, util_scale,
-                                                 utility_k, candidates, pos, col, nor, nbr, age,
-                                                 emask, rev, deg, ids, ghead, gnext, gprev,
-                                                 gbucket, gcell)
+                n, removed = forget_least_useful(n, err, util, judged, wins, error_scale,
+                                                 util_scale, utility_k, candidates, pos, col,
+                                                 nor, nbr, age, emask, rev, deg, ids, ghead,
+                                                 gnext, gprev, gbucket, gcell)
                 forgotten += removed
             if n < max_nodes:
                 n = _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
                                  has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
-                                 forget, util, judged, util_scale)
+                                 forget, util, judged, wins, util_scale)
                 ids[n - 1] = next_id
                 next_id += 1
                 if grid_on:
@@ -344,9 +362,36 @@ def _learn_steps(samples, sample_colors, order,
 
 
 @njit(cache=True)
+def _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, age, emask, rev,
+                      deg, has_col, has_nor, tau_col, tau_nor, forget, util, judged, wins,
+                      util_scale):
+    """A new node at the sample (x0, x1[, x2]) with its colour, joined to the winner ``s1``
+    by an edge; it takes the winner's normal, error and (judged) utility. Returns n + 1."""
+    r = n
+    pos[r, 0] = x0
+    pos[r, 1] = x1
+    if pos.shape[1] > 2:
+        pos[r, 2] = x2
+    col[r, 0] = c0 if has_col else col[s1, 0]
+    col[r, 1] = c1 if has_col else col[s1, 1]
+    col[r, 2] = c2 if has_col else col[s1, 2]
+    for a in range(3):
+        nor[r, a] = nor[s1, a]
+    deg[r] = 0
+    add_edge(nbr, age, emask, rev, deg, s1, r,
+             property_bits(col, nor, s1, r, has_col, has_nor, tau_col, tau_nor))
+    err[r] = err[s1]
+    wins[r] = 1.0  # it stands for the one sample it was placed on
+    if forget:
+        util[r] = util[s1] if judged[s1] != 0 else util[s1] / util_scale
+        judged[r] = 1
+    return n + 1
+
+
+@njit(cache=True)
 def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
                  has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
-                 forget, util, judged, util_scale):
+                 forget, util, judged, wins, util_scale):
     """Step 8 i-vi: new node halfway between the max-error node and its max-error neighbour.
 
     With forgetting, the new node is judged and takes the mean utility of the two (GNG-U).
@@ -375,6 +420,7 @@ def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
     err[u] -= alpha * err[u]
     err[f] -= alpha * err[f]
     err[r] = 0.5 * (err[u] + err[f])
+    wins[r] = 1.0
     if forget:
         scaled_u = util[u] if judged[u] != 0 else util[u] / util_scale
         scaled_f = util[f] if judged[f] != 0 else util[f] / util_scale

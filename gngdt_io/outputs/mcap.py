@@ -50,7 +50,7 @@ DEFAULT_MAX_CAMERAS = 16
 #: how often the free space of the file's disk is checked, seconds
 FREE_SPACE_EVERY_S = 1.0
 #: the streams recorded (any other key under ``gngdt/`` makes no channel)
-RECORDED_STREAMS = CAPTURE_STREAMS + LEARNER_STREAMS
+RECORDED_STREAMS = tuple(dict.fromkeys(CAPTURE_STREAMS + LEARNER_STREAMS))
 PROTOBUF_PREFIX = "application/protobuf;"
 
 

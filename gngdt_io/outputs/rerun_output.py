@@ -229,8 +229,12 @@ class RerunOutput(Output):
         self.max_topology_nodes = max_topology_nodes
         self.to_stdout = to_stdout
         self._cameras: list[str] = []
-        #: cameras whose poses come on their own stream (gngdt/<cam>/tf), not with the clouds
-        self._tf_cameras: set[str] = set()
+        #: per camera whose poses come on their own stream (gngdt/<cam>/tf), not with the
+        #: clouds: its last transform (frame sequence, camera-to-world (4, 4))
+        self._transforms: dict[str, tuple[int, np.ndarray]] = {}
+        #: per such camera, its last cloud without a pose (sequence, positions, colors), drawn
+        #: in the world when that frame's transform arrives (a tracked camera's: after learning)
+        self._waiting: dict[str, tuple[int, Any, Any]] = {}
         #: per camera, the last frame sequence of its stream (its end of stream)
         self._last_sequence: dict[str, int] = {}
         self._last_flush = time.monotonic()
@@ -292,9 +296,9 @@ class RerunOutput(Output):
         elif stream == "depth":
             rerun_log.depth(paths, raw_to_image(payload))
         elif stream == "points":
-            self._points(paths, payload, stamp.sequence)
+            self._points(sample.camera, paths, payload, stamp.sequence)
         elif stream == "tf":
-            self._transform(sample.camera, paths, payload)
+            self._transform(sample.camera, paths, payload, stamp.sequence)
         elif stream == "topology":
             self._topology(sample.camera, paths, decode_topology(
                 payload, max_nodes=self.max_topology_nodes), stamp.sequence)
@@ -306,17 +310,7 @@ class RerunOutput(Output):
             self._last_sequence[sample.camera] = decode_stream_end(
                 payload).last_frame_sequence
 
-    def _transform(self, camera: str, paths: EntityPaths, payload: bytes) -> None:
-        """The camera's pose (fixed frame -> camera): its frustum and images follow it."""
-        from schemas.clouds import transform_to_pose
-
-        _, child, matrix = transform_to_pose(payload)
-        if child != camera:  # a transform of another frame: not this camera's pose
-            return
-        self._tf_cameras.add(camera)
-        self.rerun_log.camera_pose(paths, matrix)
-
-    def _points(self, paths: EntityPaths, payload: bytes, sequence: int) -> None:
+    def _points(self, camera: str, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
         from schemas.clouds import cloud_pose, msg_to_cloud
@@ -329,10 +323,31 @@ class RerunOutput(Output):
         if rerun_log.due(paths, "points", sequence, rerun_log.rates.cloud_every):
             # views: the logger decimates, so only the logged points are copied
             positions, colors = msg_to_cloud(message, copy=False)
-            rerun_log.points(paths, positions, colors, pose if moving else None,
-                             log_pose=paths.camera not in self._tf_cameras)
-        elif moving and paths.camera not in self._tf_cameras:
+            transform = self._transforms.get(camera)
+            if moving or transform is None:
+                rerun_log.points(paths, positions, colors, pose if moving else None,
+                                 log_pose=transform is None)
+            elif transform[0] == sequence:  # its transform came first
+                rerun_log.points(paths, positions, colors, transform[1], log_pose=False)
+            else:  # placed when its transform comes
+                self._waiting[camera] = (sequence, positions, colors)
+        elif moving and camera not in self._transforms:
             rerun_log.camera_pose(paths, pose)  # every frame, whether its cloud is logged or not
+
+    def _transform(self, camera: str, paths: EntityPaths, payload: bytes, sequence: int) -> None:
+        """The camera's pose (fixed frame -> camera): its frustum and images follow it, and
+        its cloud of the same frame, waiting without a pose, is drawn in the world."""
+        from schemas.clouds import transform_to_pose
+
+        _, child, matrix = transform_to_pose(payload)
+        if child != camera:  # a transform of another frame: not this camera's pose
+            return
+        self._transforms[camera] = (sequence, matrix)
+        waiting = self._waiting.pop(camera, None)
+        if waiting is not None and waiting[0] == sequence:
+            self.rerun_log.points(paths, waiting[1], waiting[2], matrix)
+        else:
+            self.rerun_log.camera_pose(paths, matrix)
 
     def _topology(self, camera: str, paths: EntityPaths, snapshot: Any, sequence: int) -> None:
         rerun_log = self.rerun_log

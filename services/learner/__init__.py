@@ -3,9 +3,13 @@
 Each cloud on ``gngdt/<cam>/points`` is learned by the learner's per-frame policy
 (`gngdt_core.frame_learner.FrameLearner`: one network, in the frame of the first cloud; the
 learner's profile forgets nodes that stand for nothing any more and rehearses earlier frames of
-a moving camera). After each learned frame the learner publishes the topology (edges per
-property, every clustering of `gngdt_core.clustering.CLUSTERINGS` with persistent cluster ids,
-and persistent node ids), the objects (one per confirmed cluster of ``objects_from``, as a
+a moving camera; a map in a fixed frame grows with the surface seen). Each frame gets the
+learning steps that fit in its share of the time between frames, so the learner keeps up on a
+busy machine. With ``--track``, clouds without a pose are placed by aligning them to the map,
+and the camera's pose is published on ``gngdt/<cam>/tf``. After each learned frame the learner
+publishes the topology (edges per property, every clustering of
+`gngdt_core.clustering.CLUSTERINGS` with persistent cluster ids, and persistent node ids), the
+objects (one per confirmed cluster of ``objects_from``, as a
 foxglove SceneUpdate) and a status message, and every ``scene_every_frames`` frames the whole
 scene as a foxglove SceneUpdate; a queryable on the topology key answers a late joiner with the
 latest topology (`services.learner.serve`). The model is checkpointed periodically and on
@@ -36,6 +40,7 @@ EXAMPLES = """examples:
   gngdt learn --cam left --samples-per-frame 20000 --max-nodes 2000
   gngdt learn --params config/kinect.toml --print-params   # effective values, and from where
   gngdt learn --workspace-m 50 --max-speed 2     # a room-sized robot: tighter pose checks
+  gngdt learn --track                            # unposed clouds: track the camera (odom)
 """
 
 
@@ -69,6 +74,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="publish the foxglove scene on gngdt/<cam>/scene every this many "
                         "learned frames (default 3; 0: never)")
     add_pose_limit_arguments(parser)
+    parser.add_argument("--track", action="store_true", default=None,
+                        help="estimate the camera's pose of clouds that come without one by "
+                        "aligning each to the map; publish it on gngdt/<cam>/tf and learn in "
+                        "the fixed frame 'odom'; frames whose alignment fails are not learned "
+                        "(the status says why)")
     parser.add_argument("--exit-on-eos", action="store_true",
                         help="exit after learning the last frame of a stream (used by `gngdt run`)")
     add_zenoh_arguments(parser)
@@ -82,7 +92,7 @@ def profile_from_args(args: argparse.Namespace) -> Profile:
     flags = {"samples_per_frame": "samples_per_frame", "min_cluster_size": "min_cluster_size",
              "checkpoint_every_frames": "checkpoint_every", "seed": "seed",
              "objects_from": "objects_from", "object_confirm_frames": "object_confirm_frames",
-             "scene_every_frames": "scene_every"}
+             "scene_every_frames": "scene_every", "track": "track"}
     # `gngdt run` has some of these options (and passes them to its learner), not all
     options = {name: getattr(args, flag, None) for name, flag in flags.items()}
     options.update({f"pose_{name}": value for name, value in pose_limit_values(args).items()})

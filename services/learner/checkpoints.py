@@ -1,4 +1,5 @@
-"""The learner's checkpoints: its network, counters and frame saved to a file and resumed from
+"""The learner's checkpoints: its network, counters and frame (and with ``--track`` its camera
+tracker: pose, motion, plane memory, as ``tracker_*`` arrays) saved to a file and resumed from
 it (`gngdt_io.checkpoints` writes and checks the file)."""
 
 from __future__ import annotations
@@ -25,14 +26,20 @@ log = logging.getLogger(__name__)
 #: largest counter a checkpoint may hold: a quarter of the status's and the checkpoint's
 #: 64-bit range, so a resumed learner counts on for ever without overflowing
 MAX_LOADED_COUNTER = 2**62
+#: the tracker's arrays in a checkpoint's state
+TRACKER_PREFIX = "tracker_"
 
 
 def save(learner: FrameLearner, path: Path) -> bool:
     """Checkpoint to ``path``; a failed write (disk full, permissions) is logged, not fatal:
     the learner goes on and the previous checkpoint, replaced atomically, stays intact."""
     counters = {item.name: getattr(learner.counters, item.name) for item in fields(Counters)}
+    state = learner.model.get_state()
+    if learner.tracking is not None:
+        state.update({f"{TRACKER_PREFIX}{key}": value
+                      for key, value in learner.tracking.get_state().items()})
     try:
-        save_checkpoint(path, learner.model.get_state(),
+        save_checkpoint(path, state,
                         {"camera": learner.camera, "counters": counters,
                          "frame_id": learner.frame_id})
     except (OSError, ValueError, OverflowError) as error:  # a full disk; a state out of range
@@ -69,7 +76,15 @@ def resume(path: Path, camera: str, config: LearnerConfig) -> FrameLearner:
         raise CheckpointError(f"checkpoint {path}: frame_id is {frame_id!r}, not a name")
     log.info("resumed from %s: %d nodes, %d steps, in frame %r", path, model.n_nodes_,
              model.n_steps_, frame_id)
-    return FrameLearner(camera, config, model=model, counters=counters, frame_id=frame_id)
+    learner = FrameLearner(camera, config, model=model, counters=counters, frame_id=frame_id)
+    tracker = {key[len(TRACKER_PREFIX):]: value for key, value in state.items()
+               if key.startswith(TRACKER_PREFIX)}
+    if learner.tracking is not None and tracker:
+        try:
+            learner.tracking.set_state(tracker)
+        except (KeyError, ValueError, TypeError) as error:
+            raise CheckpointError(f"checkpoint {path}: {error}") from error
+    return learner
 
 
 def check_workspace(path: Path, state: dict, config: LearnerConfig) -> None:

@@ -8,6 +8,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from gngdt_core.frame_budget import Budget
 from gngdt_core.frame_learner import DEFAULT_MAX_POINTS, FrameLearner, LearnedFrame
 from gngdt_core.objects import ObjectSet
 from gngdt_core.sampling import finite_rows
@@ -66,10 +67,11 @@ def scene_message(learner: FrameLearner, stamp: FrameStamp, learned: LearnedFram
 
 def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
                    latency_percentiles: tuple[float, float], topology: Any | None,
-                   settled: str = "") -> Any:
-    """The ``gngdt.LearnerStatus`` after publishing ``topology`` (None: after a frame that was
-    not learned, e.g. its pose was rejected); ``latency_percentiles``: p50 and p99 of the
-    recent frames (ms); ``settled``: how learning on the stream's last frame stopped."""
+                   settled: str = "", budget: Budget | None = None) -> Any:
+    """The ``gngdt.LearnerStatus`` after publishing ``topology`` (None: none published yet, or
+    after a frame that was not learned, e.g. its pose was rejected); ``latency_percentiles``:
+    p50 and p99 of the recent frames (ms); ``settled``: how learning on the stream's last frame
+    stopped; ``budget``: the last frame's time budget."""
     from schemas.status import encode_status
 
     counters = learner.counters
@@ -90,9 +92,9 @@ def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
         latency_ms=latency_ms,
         latency_p50_ms=latency_percentiles[0],
         latency_p99_ms=latency_percentiles[1],
-        quantization_error=dict(topology.quantization_error) if topology is not None else {},
-        cluster_counts=({c.name: c.cluster_count for c in topology.clusterings}
-                        if topology is not None else {}),
+        quantization_error={} if topology is None else dict(topology.quantization_error),
+        cluster_counts={} if topology is None else {c.name: c.cluster_count
+                                                    for c in topology.clusterings},
         seen_nodes=learner.ghosts.seen_nodes,
         ghost_share=learner.ghosts.ghost_share,
         ghost_distance_m=learner.options.ghost_distance_m,
@@ -101,7 +103,19 @@ def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
         frames_pose_rejected=counters.frames_pose_rejected,
         pose_problem=learner.poses.last_problem,
         settled=settled,
+        frame_budget_ms=0.0 if budget is None else budget.seconds * 1000.0,
+        frame_steps=learner.last_steps,
+        frames_lost_tracking=counters.frames_lost_tracking,
+        tracking=tracking_state(learner),
     )
+
+
+def tracking_state(learner: FrameLearner) -> str:
+    """"" (not tracking), "tracked" or "lost: <why>" for the last cloud (status field)."""
+    if learner.tracking is None:
+        return ""
+    problem = learner.tracking.problem
+    return f"lost: {problem}" if problem else "tracked"
 
 
 class PointsMessage(NamedTuple):

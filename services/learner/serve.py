@@ -3,8 +3,12 @@ publish what it learned, answer late joiners, checkpoint, stop at the stream's e
 
 Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
-memory stays bounded. Objects and scene are published latest-wins (congestion control DROP): a
-consumer that cannot keep up misses updates, and never slows the learner down.
+memory stays bounded. To keep up, each frame gets the learning steps that fit in its share of
+the time between frames, and what was learned is published less often when publishing would
+not fit (`gngdt_core.frame_budget`; the status reports the budget). Objects and
+scene are published latest-wins (congestion control DROP): a consumer that cannot keep up misses
+updates, and never slows the learner down. With ``--track`` the learner also reads the camera's
+calibration, and publishes each tracked cloud's camera pose on ``gngdt/<cam>/tf``.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from gngdt_core.frame_budget import StepBudget
 from gngdt_core.frame_learner import (
     FrameLearner,
     LearnerConfig,
@@ -26,6 +31,7 @@ from gngdt_core.frame_learner import (
     PoseRejectedError,
 )
 from schemas.wire import (
+    ENCODING_FRAME_TRANSFORM,
     ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
     ENCODING_TOPOLOGY,
@@ -52,6 +58,8 @@ log = logging.getLogger(__name__)
 MAX_EOS_BYTES = 64 * 1024
 #: bytes per point a foreign cloud layout may use (gngdt's own uses 15)
 MAX_POINT_STRIDE_BYTES = 64
+#: bytes a calibration message may take (a real one is under 500)
+MAX_CALIBRATION_BYTES = 64 * 1024
 
 
 class LatencyWindow:
@@ -168,6 +176,33 @@ def attachment_bytes(sample: zenoh.Sample) -> bytes | None:
     return attachment.to_bytes()
 
 
+class LatestCalibration:
+    """The camera's latest intrinsics (set from zenoh's thread), for tracking."""
+
+    def __init__(self, learner: FrameLearner) -> None:
+        self.learner = learner
+        self.intrinsics = None
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        from schemas.images import calibration_to_intrinsics
+        from schemas.messages import MessageError
+
+        try:
+            self.intrinsics = calibration_to_intrinsics(
+                payload_bytes(sample, MAX_CALIBRATION_BYTES))
+        except (MessageError, ValueError) as error:
+            self.learner.counters.malformed_messages += 1
+            log.warning("malformed calibration skipped: %s", error)
+
+
+def warn_lost(learner: FrameLearner) -> None:
+    """Warn about a cloud whose camera was not tracked: the first, then every 30th."""
+    count = learner.counters.frames_lost_tracking
+    if count == 1 or count % 30 == 0:
+        log.warning("camera not tracked, frame not learned (%d so far): %s", count,
+                    learner.tracking.problem)
+
+
 def warn_sparingly(error: ValueError, count: int) -> None:
     """Warn about skipped clouds of one kind (another frame, a rejected pose): the first, then
     every 100th (each counted in the status)."""
@@ -204,9 +239,24 @@ class LearnerService:
                                         ENCODING_SCENE_UPDATE, latest_wins=True)
         self._queryable = session.declare_queryable(topic(camera, "topology"), self.latest.reply)
         self._token = session.liveliness().declare_token(f"gngdt/{camera}/learner/alive")
+        options = self.options
+        self.budget = StepBudget(options.frame_time_share,
+                                 min(options.min_samples_per_frame, options.samples_per_frame),
+                                 options.samples_per_frame)
+        self.calibration = LatestCalibration(learner)
+        self._tracking: list = []  # the calibration subscriber and tf publisher (--track)
+        if learner.tracking is not None:
+            self._tracking = [
+                session.declare_subscriber(topic(camera, "calibration"),
+                                           self.calibration.on_sample),
+                declare_publisher(session, topic(camera, "tf"), ENCODING_FRAME_TRANSFORM,
+                                  latest_wins=False)]
+        self._last_topology = None
         self._max_cloud_bytes = self.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
         #: the last learned frame (stamp, positions, colours), kept to settle on at the end
         self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
+        #: the last learned frame was not published yet (the budget put it off)
+        self._unpublished = False
         self.learned_sequence = -1
         self._settled_end = 0.0  # the end of stream (its arrival time) already settled on
         self._frames_since_checkpoint = 0
@@ -240,7 +290,9 @@ class LearnerService:
         self._topology.put(payload, attachment=attachment)
         self.latest.set(payload, attachment)
         percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
-        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled)
+        self._last_topology = topology
+        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled,
+                                self.budget.last)
         self._status.put(status.SerializeToString(), attachment=attachment)
         objects = objects_message(learner, stamp, learner.objects(learned, final=bool(settled)))
         self._objects.put(objects.SerializeToString(), attachment=attachment)
@@ -250,16 +302,12 @@ class LearnerService:
             self._scene.put(scene.SerializeToString(), attachment=attachment)
         return latency_ms
 
-    def _publish_status(self, stamp: FrameStamp) -> None:
-        """A status after a frame that was not learned (its counters moved, the network not)."""
-        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-        percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
-        status = status_message(self.learner, stamp, latency_ms, percentiles, None)
-        self._status.put(status.SerializeToString(), attachment=stamp.to_attachment())
-
-    def handle(self, sample: zenoh.Sample) -> None:
-        """Decode, learn and publish one points sample; a bad one is counted and skipped."""
-        counters = self.learner.counters
+    def handle(self, sample: zenoh.Sample, waited: bool = False) -> None:
+        """Decode, learn and (when due) publish one points sample; a bad one is counted and
+        skipped. ``waited``: the learner was idle until it came (it keeps up)."""
+        started = time.perf_counter()
+        learner = self.learner
+        counters = learner.counters
         counters.frames_received += 1
         self.clouds_shared += through_shared_memory(sample)
         try:
@@ -268,7 +316,11 @@ class LearnerService:
                 self.options.max_points)
             counters.note_sequence(stamp.sequence)
             received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-            self.learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns)
+            self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)
+            learning_before = counters.learning_seconds
+            learned = learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns,
+                                    steps=self.budget.next().steps,
+                                    camera=self.calibration.intrinsics)
         except OtherFrameError as error:  # counted by the learner, warned sparingly
             warn_sparingly(error, counters.frames_other_frame)
             return
@@ -280,13 +332,49 @@ class LearnerService:
             counters.malformed_messages += 1
             log.warning("points message skipped: %s", error)
             return
-        latency_ms = self.publish(stamp, positions, colors)
-        self.latencies.add(latency_ms)
+        if not learned:  # the camera was not tracked: nothing learned, the status says why
+            warn_lost(learner)
+            self._publish_status(stamp)
+            return
+        if learner.tracking is not None and pose is None:
+            self._publish_pose(stamp, frame_id)
+        learned_at = time.perf_counter()
+        self.budget.learned(learner.last_steps, counters.learning_seconds - learning_before,
+                            learned_at - started)
         self.last_frame = (stamp, positions, colors)
         self.learned_sequence = stamp.sequence
-        log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
-                  stamp.sequence, len(positions), received_ms, latency_ms)
+        self._unpublished = True
+        if self.budget.publish_due(learned_at):
+            latency_ms = self.publish_learned(learned_at)
+            log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
+                      stamp.sequence, len(positions), received_ms, latency_ms)
         self._checkpoint_if_due()
+
+    def publish_learned(self, now: float | None = None) -> float:
+        """Publish the last learned frame (learned at ``now``, `time.perf_counter`; default
+        now) and count the time it took in the budget; the latency in ms."""
+        now = time.perf_counter() if now is None else now
+        latency_ms = self.publish(*self.last_frame)
+        self.budget.published(time.perf_counter() - now, now)
+        self.latencies.add(latency_ms)
+        self._unpublished = False
+        return latency_ms
+
+    def _publish_pose(self, stamp: FrameStamp, camera_frame: str) -> None:
+        """The tracked camera's pose: ``odom`` -> the cloud's (camera) frame."""
+        from schemas.clouds import pose_to_transform
+
+        transform = pose_to_transform(self.learner.last_pose, self.learner.frame_id,
+                                      camera_frame, timestamp_ns=stamp.capture_time_ns)
+        self._tracking[1].put(transform.SerializeToString(), attachment=stamp.to_attachment())
+
+    def _publish_status(self, stamp: FrameStamp) -> None:
+        """A status without a new topology (a frame that was not learned)."""
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
+        status = status_message(self.learner, stamp, latency_ms, percentiles,
+                                self._last_topology, "", self.budget.last)
+        self._status.put(status.SerializeToString(), attachment=stamp.to_attachment())
 
     def _checkpoint_if_due(self) -> None:
         self._frames_since_checkpoint += 1
@@ -313,6 +401,7 @@ class LearnerService:
         """Learn until a stop signal, the stream's end (``exit_on_eos``) or a second learner on
         the camera; the exit code."""
         with lifecycle.graceful() as stop:
+            waited = False  # idle since the last frame: the learner keeps up
             while not stop.is_set():
                 if self.instances.conflict.is_set():
                     log.error("stopping: learner %s came first on camera %r",
@@ -320,7 +409,12 @@ class LearnerService:
                     return 2
                 sample = self.points.try_recv()
                 if sample is not None:
-                    self.handle(sample)
+                    self.handle(sample, waited)
+                    waited = False
+                    continue
+                waited = True
+                if self._unpublished:  # idle: what it learned is not left unpublished
+                    self.publish_learned()
                     continue
                 if self.stream_over() and exit_on_eos:
                     break
@@ -334,7 +428,7 @@ class LearnerService:
         self._token.undeclare()
         self.instances.close()
         for entity in (self._queryable, self._eos, self.points, self._topology, self._status,
-                       self._objects, self._scene):
+                       self._objects, self._scene, *self._tracking):
             entity.undeclare()
         if self.learner.counters.frames_received:
             log.info("%d of %d clouds arrived through shared memory", self.clouds_shared,

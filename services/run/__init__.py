@@ -61,6 +61,7 @@ EXAMPLES = """examples:
   gngdt run --realsense                              # the RealSense plugged in, until Ctrl-C
   gngdt run session.db3 --foxglove                   # live in Foxglove at ws://127.0.0.1:8765
   gngdt run recordings/tabletop.mcap --ros2          # + ROS 2 topics, via rmw_zenohd on 7447
+  gngdt run walk.mcap --track                        # camera poses estimated, not read
 """
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -96,11 +97,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--voxel", type=float, metavar="SIZE_M", help="capture voxel size, metres")
     add_camera_arguments(parser)
     parser.add_argument(
-        "--max-points", type=int, default=DEFAULT_MAX_POINTS,
-        help=f"capture's random point cap per frame (default {DEFAULT_MAX_POINTS}; 0: full "
-        "clouds). The learner samples 10,000 points a frame by default and the logger shows "
-        "50,000, so the cap changes neither; on 2 cores at 30 fps it cuts dropped frames from "
-        "~30%% to ~5%%")
+        "--max-points", type=int,
+        help=f"capture's random point cap per frame (default {DEFAULT_MAX_POINTS}, with --track "
+        "0; 0: full clouds). The learner samples 10,000 points a frame by default and the logger "
+        "shows 50,000, so the cap changes neither; on 2 cores at 30 fps it cuts dropped frames "
+        "from ~30%% to ~5%%. Tracking aligns whole depth images: a capped cloud is too sparse")
+    parser.add_argument("--track", action="store_true",
+                        help="estimate the camera's poses by aligning each frame to the map "
+                        "(`gngdt learn --track`; a recording's own poses are ignored): the map "
+                        "is learned in the fixed frame 'odom'")
     parser.add_argument("--params", type=Path, metavar="FILE.toml",
                         help="learner parameters (see `gngdt learn --help`)")
     parser.add_argument("--checkpoint", type=Path, metavar="PATH", help="learner checkpoint")
@@ -322,14 +327,19 @@ def learner_arguments(args: argparse.Namespace) -> list[str]:
                         ("--max-nodes", args.max_nodes)):
         if value is not None:
             arguments += [flag, str(value)]
-    return arguments
+    return [*arguments, "--track"] if args.track else arguments
 
 
 def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None) -> list[str]:
     """Capture's command line; ``veil_ratio`` from the sensor profile (`sensor_veil_ratio`)."""
     arguments = [str(args.recording), "--cam", args.cam]
     arguments += ["--fast"] if args.fast else ["--rate", str(args.rate)]
-    for flag, value in (("--voxel", args.voxel), ("--max-points", args.max_points),
+    if args.track:  # the poses are estimated: a recording's own are not used
+        arguments += ["--fixed-frame", "none"]
+    max_points = args.max_points
+    if max_points is None:  # tracking aligns whole depth images
+        max_points = 0 if args.track else DEFAULT_MAX_POINTS
+    for flag, value in (("--voxel", args.voxel), ("--max-points", max_points),
                         ("--drop-veil", veil_ratio), ("--camera-json", args.camera_json),
                         ("--depth-scale", args.depth_scale)):
         if value is not None:

@@ -1,0 +1,144 @@
+"""The learner's map in a fixed frame and its camera tracking (`FrameLearner` with ``track``):
+posed or tracked clouds build a map that grows with the world, camera-frame clouds keep the
+node budget; a walk without poses is tracked and learned in ``odom``, a frame that cannot be
+aligned is reported and never learned, and a checkpoint carries the tracker on."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gngdt_core import GNGDT
+from gngdt_core.frame_learner import (
+    LEARNER_MODEL_DEFAULTS,
+    FrameLearner,
+    LearnerConfig,
+    LearnerOptions,
+)
+from gngdt_core.geometry import rigid_inverse
+from gngdt_core.kernels.odometry import motion_size
+from gngdt_core.schedule import FrameSchedule
+from gngdt_io.deproject import Deprojector
+from gngdt_io.synth.render import render_scene
+from schemas.status import decode_status
+from schemas.wire import FrameStamp
+from services.learner import checkpoints
+from services.learner.messages import status_message
+
+FRAMES = 10
+
+
+@pytest.fixture(scope="module")
+def walk() -> list:
+    """Every third of the first 30 frames of the virtual Kinect's walk (320x240, 10 fps):
+    (points, colours, frame)."""
+    deproject = Deprojector(0.3, 6.0)
+    frames = list(render_scene("tabletop_walk", 3 * FRAMES, width=320, height=240))[::3]
+    return [(*deproject(frame.depth, frame.color, frame.intrinsics), frame) for frame in frames]
+
+
+def tracking_learner(**options) -> FrameLearner:
+    return FrameLearner("camera", LearnerConfig(options=LearnerOptions(track=True, **options)))
+
+
+def test_a_map_in_a_fixed_frame_grows_with_the_world_a_camera_frame_map_does_not(walk) -> None:
+    points, colors, frame = walk[0]
+    posed = FrameLearner("camera", LearnerConfig())
+    posed.learn(points, colors, "world", frame.pose.matrix)
+    assert (posed.model.resolution_m, posed.model.max_nodes) == (0.1, 20_000)
+    assert posed.model.growth_limit_ > 1_000  # the first view alone needs more than 1,000
+    static = FrameLearner("camera", LearnerConfig())
+    static.learn(points, colors)
+    assert static.model.resolution_m is None and static.model.growth_limit_ == 1_000
+    for model, expected in (({"max_nodes": 300}, (0.1, 300)),
+                            ({"resolution_m": 0}, (None, 20_000))):
+        learner = FrameLearner("camera", LearnerConfig(model=model))
+        learner.learn(points, colors, "world", frame.pose.matrix)
+        assert (learner.model.resolution_m, learner.model.max_nodes) == expected
+
+
+def test_a_static_camera_is_learned_as_before(walk) -> None:
+    """Camera-frame clouds: the paper's node budget and the learner's profile, samples_per_frame
+    steps of every frame, the first one too: the very network plain `GNGDT.partial_fit` calls
+    with the learner's profile give, node for node."""
+    learner = FrameLearner("camera", LearnerConfig(options=LearnerOptions(
+        samples_per_frame=3_000)))
+    plain = GNGDT(**LEARNER_MODEL_DEFAULTS, random_state=0)
+    for points, colors, _ in walk[:4]:
+        learner.learn(points, colors)
+        plain.partial_fit(points, colors, n_steps=3_000)
+    assert learner.model.max_nodes == 1_000 and learner.model.resolution_m is None
+    np.testing.assert_array_equal(learner.model.positions_, plain.positions_)
+    np.testing.assert_array_equal(learner.model.edges("pos"), plain.edges("pos"))
+
+
+def test_the_first_frame_of_a_fixed_frame_map_is_learned_longer(walk) -> None:
+    points, colors, frame = walk[0]
+    learner = FrameLearner("camera", LearnerConfig(options=LearnerOptions(
+        samples_per_frame=3_000, first_frame_steps=50_000)))
+    learner.learn(points, colors, "world", frame.pose.matrix)
+    learner.learn(points, colors, "world", frame.pose.matrix)
+    assert learner.model.n_steps_ == 53_000 and learner.last_steps == 3_000
+
+
+def test_a_walk_without_poses_is_tracked_and_learned_in_odom(walk) -> None:
+    learner = tracking_learner()
+    start = walk[0][2].pose.matrix
+    for points, colors, frame in walk:
+        assert learner.learn(points, colors, "camera", None, camera=frame.intrinsics)
+        truth = rigid_inverse(start) @ frame.pose.matrix
+        moved, turned = motion_size(truth, learner.last_pose)
+        assert moved < 0.01 and turned < 0.5, (frame.index, moved, turned)
+    assert learner.frame_id == "odom" and learner.tracking.problem == ""
+    assert learner.counters.frames_used == FRAMES and learner.counters.frames_lost_tracking == 0
+    travelled = motion_size(np.eye(4), learner.last_pose)[0]
+    assert travelled > 0.2  # the camera did move
+
+
+def test_a_frame_that_cannot_be_aligned_is_reported_and_not_learned(walk) -> None:
+    learner = tracking_learner()
+    for points, colors, frame in walk[:3]:
+        learner.learn(points, colors, "camera", None, camera=frame.intrinsics)
+    steps, pose = learner.model.n_steps_, learner.last_pose
+    elsewhere = next(iter(render_scene("data2", 1, width=320, height=240)))
+    points, colors = Deprojector(0.3, 6.0)(elsewhere.depth, elsewhere.color,
+                                          elsewhere.intrinsics)
+    assert not learner.learn(points, colors, "camera", None, camera=elsewhere.intrinsics)
+    assert learner.tracking.problem in ("little overlap", "few inliers", "large residual",
+                                        "degenerate", "implausible motion")
+    assert learner.model.n_steps_ == steps and learner.last_pose is pose
+    assert learner.counters.frames_lost_tracking == 1 and learner.counters.frames_used == 3
+    status = decode_status(status_message(learner, FrameStamp(3, time.time_ns()), 1.0,
+                                          (1.0, 1.0), None).SerializeToString())
+    assert status.tracking == f"lost: {learner.tracking.problem}"
+    assert status.frames_lost_tracking == 1 and status.frames_used == 3
+    points, colors, frame = walk[3]
+    assert not learner.learn(points, colors, "camera", None, camera=None)
+    assert learner.tracking.problem == "no calibration"
+    assert learner.learn(points, colors, "camera", None, camera=frame.intrinsics)  # back on
+
+
+def test_tracking_needs_a_profile_without_a_frame_schedule() -> None:
+    with pytest.raises(ValueError, match="track"):
+        LearnerConfig(options=LearnerOptions(track=True), schedule=FrameSchedule())
+
+
+def test_a_checkpoint_carries_the_tracker_on(walk, tmp_path: Path) -> None:
+    learner = tracking_learner()
+    for points, colors, frame in walk[:4]:
+        learner.learn(points, colors, "camera", None, camera=frame.intrinsics)
+    path = tmp_path / "learner.npz"
+    assert checkpoints.save(learner, path)
+    resumed = checkpoints.resume(path, "camera", learner.config)
+    np.testing.assert_array_equal(resumed.tracking.odometry.pose_,
+                                  learner.tracking.odometry.pose_)
+    np.testing.assert_array_equal(resumed.tracking.odometry.predict(),
+                                  learner.tracking.odometry.predict())
+    points, colors, frame = walk[4]
+    for each in (learner, resumed):
+        assert each.learn(points, colors, "camera", None, camera=frame.intrinsics)
+    np.testing.assert_allclose(resumed.last_pose, learner.last_pose, atol=1e-9)
+    assert resumed.frame_id == "odom"
