@@ -71,8 +71,9 @@ def data2_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def one_frame_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A single 320x240 frame of the tabletop scene: a static input."""
-    return render_small_recording(tmp_path_factory.mktemp("one_frame"), "tabletop", 1)
+    """A single 320x240 frame of the tabletop scene without a pose: a static camera."""
+    return render_small_recording(tmp_path_factory.mktemp("one_frame"), "tabletop", 1,
+                                  poses=False)
 
 
 @pytest.fixture(scope="session")

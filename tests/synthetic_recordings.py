@@ -5,13 +5,17 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def render_small_recording(directory: Path, scene: str, frames: int) -> Path:
-    """``directory/<scene>_small.mcap``: ``frames`` 320x240 frames of a synthetic scene."""
+def render_small_recording(directory: Path, scene: str, frames: int, poses: bool = True) -> Path:
+    """``directory/<scene>_small.mcap``: ``frames`` 320x240 frames of a synthetic scene, with
+    the camera's poses (a map in the world frame) or without (``poses=False``: a static camera,
+    learned in its own frame)."""
+    from dataclasses import replace
+
     from gngdt_io.mcap_writer import RecordingWriter
     from gngdt_io.synth.render import render_scene
 
     path = directory / f"{scene}_small.mcap"
     with RecordingWriter(path) as writer:
         for frame in render_scene(scene, frames, width=320, height=240):
-            writer.write_frame(frame)
+            writer.write_frame(frame if poses else replace(frame, pose=None))
     return path
