@@ -220,12 +220,14 @@ class Ghosts:
 class LearnedFrame:
     """What one learned frame shows: edges (E, 2) int64 per topology, cluster labels (N,) int32
     per clustering, and per label of each clustering its persistent id (K,) int64 and whether
-    its track is confirmed (K,) bool (`ClusterTracker.confirmed_`)."""
+    its track is confirmed (K,) bool (`ClusterTracker.confirmed_`); ``segment_roles``: (K,) int8
+    role of each segment (`gngdt_core.supports`), judged when the objects are segments."""
 
     edges: dict[str, np.ndarray]
     labels: dict[str, np.ndarray]
     cluster_ids: dict[str, np.ndarray]
     confirmed: dict[str, np.ndarray]
+    segment_roles: np.ndarray | None = None
 
 
 class FrameLearner:
@@ -404,8 +406,11 @@ class FrameLearner:
             tracker = self._trackers[name]
             cluster_ids[name] = tracker.track(model.node_ids_, values)
             confirmed[name] = tracker.tracker.confirmed_
+        # roles are judged only for the objects' clustering (they take a few ms)
+        roles = segmentation.roles if CLUSTERINGS[self.options.objects_from].is_segmentation \
+            else None
         return LearnedFrame(edges=edges, labels=labels, cluster_ids=cluster_ids,
-                            confirmed=confirmed)
+                            confirmed=confirmed, segment_roles=roles)
 
     def objects(self, learned: LearnedFrame, final: bool = False) -> ObjectSet:
         """One object per confirmed cluster of at least ``min_cluster_size`` nodes of the
@@ -414,8 +419,10 @@ class FrameLearner:
         (confirmation only keeps a growing network's flickering fragments out; a stream of a few
         frames would otherwise end without a single object)."""
         name = self.options.objects_from
+        roles = learned.segment_roles if CLUSTERINGS[name].is_segmentation else None
         return self._trackers[name].objects(self.model, learned.labels[name],
-                                            learned.cluster_ids[name], confirmed_only=not final)
+                                            learned.cluster_ids[name], confirmed_only=not final,
+                                            roles=roles)
 
     def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
         """Learn the stream's last frame on until the network is settled: the node budget

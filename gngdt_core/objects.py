@@ -34,7 +34,9 @@ class ObjectSet:
     rotation, box frame -> network frame; column 0 = the axis of largest spread); sizes: (K, 3)
     full box extents along those axes; colors: (K, 3) mean node colour (the input's scale);
     normals: (K, 3) unit dominant normal, sign-invariant mean of the node normals, turned toward
-    the side most node normals face (zeros where no node has a normal).
+    the side most node normals face (zeros where no node has a normal); roles: (K,) int8 what
+    each is (`gngdt_core.supports`: OBJECT, SUPPORT a table or wall something rests on, CLUTTER
+    background structure), judged for segments and OBJECT for clusters of other clusterings.
     """
 
     ids: np.ndarray
@@ -45,6 +47,7 @@ class ObjectSet:
     sizes: np.ndarray
     colors: np.ndarray
     normals: np.ndarray
+    roles: np.ndarray
 
     def __len__(self) -> int:
         return int(self.ids.size)
@@ -81,11 +84,13 @@ def object_labels(labels: np.ndarray, confirmed: np.ndarray, min_size: int) -> n
 
 
 def describe_objects(positions: np.ndarray, colors: np.ndarray | None, normals: np.ndarray | None,
-                     labels: np.ndarray, ids: np.ndarray | None = None) -> ObjectSet:
+                     labels: np.ndarray, ids: np.ndarray | None = None,
+                     roles: np.ndarray | None = None) -> ObjectSet:
     """One object per label 0..K-1 of ``labels`` (N,) int (-1: no object).
 
     positions: (N, 3) node positions; colors: (N, 3) or None; normals: (N, 3) unit or zero
-    (undefined), or None; ids: (K,) int64 id of each label (default: the label itself).
+    (undefined), or None; ids: (K,) int64 id of each label (default: the label itself); roles:
+    (K,) int role of each label (`ObjectSet.roles`; default: every one an OBJECT).
     """
     positions = np.asarray(positions, dtype=np.float64)
     labels = np.asarray(labels).astype(np.int64)
@@ -98,6 +103,11 @@ def describe_objects(positions: np.ndarray, colors: np.ndarray | None, normals: 
         raise ValueError(f"ids must have an entry for every label 0..{n_labels - 1}, got "
                          f"{ids.shape}")
     n_labels = ids.size  # labels without nodes (e.g. dropped as too small) give no object
+    roles = (np.zeros(n_labels, dtype=np.int8) if roles is None
+             else np.asarray(roles, dtype=np.int8)[:n_labels])
+    if roles.size < n_labels:
+        raise ValueError(f"roles must have an entry for every label 0..{n_labels - 1}, got "
+                         f"{roles.shape}")
     member = labels >= 0
     counts = np.bincount(labels[member], minlength=n_labels)
     present = counts > 0  # a label may have no node (e.g. -1 everywhere after filtering)
@@ -133,7 +143,7 @@ def describe_objects(positions: np.ndarray, colors: np.ndarray | None, normals: 
         if normals is not None else np.zeros((k, 3))
     return ObjectSet(ids=ids[keep], node_counts=counts.astype(np.int64), centroids=centroids,
                      centers=centers, rotations=rotations, sizes=sizes, colors=mean_colors,
-                     normals=dominant)
+                     normals=dominant, roles=roles[keep])
 
 
 def _dominant_normals(normals: np.ndarray, index: np.ndarray, k: int) -> np.ndarray:
@@ -183,15 +193,15 @@ class ObjectTracker:
         return self.tracker.update(node_ids, labels)
 
     def objects(self, model: Any, labels: np.ndarray, ids: np.ndarray,
-                confirmed_only: bool = True) -> ObjectSet:
+                confirmed_only: bool = True, roles: np.ndarray | None = None) -> ObjectSet:
         """The confirmed clusters (every one when not ``confirmed_only``) of at least
         ``min_size`` nodes among ``labels`` (the labelling `track` was last given, ``ids`` what
-        it returned) as objects of ``model``."""
+        it returned) as objects of ``model``; ``roles``: each label's (`ObjectSet.roles`)."""
         confirmed = self.tracker.confirmed_
         if not confirmed_only:
             confirmed = np.ones_like(confirmed)
         return describe_objects(model.positions_, model.colors_, model.normals_,
-                                object_labels(labels, confirmed, self.min_size), ids)
+                                object_labels(labels, confirmed, self.min_size), ids, roles)
 
     def update(self, model: Any) -> ObjectSet:
         """The model's objects now (confirmed clusters of at least ``min_size`` nodes); ids

@@ -7,13 +7,16 @@ latest-wins) still shows exactly the newest state. All positions are in the topo
 
 - objects (``gngdt/<cam>/objects``): one entity per object, id ``object/<id>`` (persistent), with
   an oriented cube in the object's colour, a text label, and metadata: ``id``, ``node_count``,
-  ``centroid``, ``size``, ``mean_color``, ``normal`` (space-separated numbers).
+  ``centroid``, ``size``, ``mean_color``, ``normal`` (space-separated numbers) and ``role``
+  (``object``; ``support``, a table or wall something rests on; ``clutter``, background
+  structure): a consumer that wants the objects only keeps ``role == "object"``.
 - scene (``gngdt/<cam>/scene``): entity ``nodes`` (a sphere per node in its learned colour) and
   ``edges/<clustering>`` (a line list per clustering, vertices coloured by cluster).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,9 +30,12 @@ from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletio
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 
+from gngdt_core.supports import OBJECT, ROLE_NAMES
 from schemas.messages import MessageError, ns_to_timestamp, parse_message, timestamp_to_ns
 
 OBJECT_ID_PREFIX = "object/"
+#: the role of an object proper (a ``role`` metadata value; the others are supports and clutter)
+OBJECT_ROLE = ROLE_NAMES[OBJECT]
 #: most objects a decoded objects update may hold; more is refused as malformed
 MAX_OBJECTS = 4096
 #: opacity of object cubes, so the nodes inside stay visible
@@ -62,12 +68,14 @@ def _new_entity(update: SceneUpdate, entity_id: str, timestamp_ns: int,
 def objects_to_scene_update(*, ids: np.ndarray, centers: np.ndarray, quaternions_xyzw: np.ndarray,
                             sizes: np.ndarray, colors: np.ndarray, node_counts: np.ndarray,
                             centroids: np.ndarray, mean_colors: np.ndarray, normals: np.ndarray,
-                            timestamp_ns: int, frame_id: str) -> SceneUpdate:
+                            timestamp_ns: int, frame_id: str,
+                            roles: Sequence[str] | None = None) -> SceneUpdate:
     """One entity per object (row k of every array).
 
     ids: (K,) int64; centers, centroids, normals: (K, 3) metres / unit; quaternions_xyzw: (K, 4);
     sizes: (K, 3) full extents, metres; colors: (K, 3) uint8 display colour of each object;
-    mean_colors: (K, 3) mean node colour (0-255); node_counts: (K,) int.
+    mean_colors: (K, 3) mean node colour (0-255); node_counts: (K,) int; roles: K role names
+    (default: every one an ``object``); the label of any other names its role.
     """
     update = _new_update(timestamp_ns)
     for k in range(len(ids)):
@@ -79,13 +87,14 @@ def objects_to_scene_update(*, ids: np.ndarray, centers: np.ndarray, quaternions
         sx, sy, sz = (float(v) for v in sizes[k])
         entity.cubes.add(pose=pose, size=Vector3(x=sx, y=sy, z=sz),
                          color=_color(colors[k], OBJECT_ALPHA))
-        label = f"#{object_id}"
+        role = OBJECT_ROLE if roles is None else roles[k]
+        label = f"#{object_id}" if role == OBJECT_ROLE else f"#{object_id} {role}"
         entity.texts.add(pose=pose, billboard=True, font_size=14.0, scale_invariant=True,
                          color=_color(colors[k]), text=label)
         for key, value in (("id", str(object_id)), ("node_count", str(int(node_counts[k]))),
                            ("centroid", _words(centroids[k])), ("size", _words(sizes[k])),
                            ("mean_color", _words(mean_colors[k], 3)),
-                           ("normal", _words(normals[k]))):
+                           ("normal", _words(normals[k])), ("role", role)):
             entity.metadata.add(key=key, value=value)
     return update
 
@@ -139,7 +148,7 @@ class ObjectBoxes:
 
     ids: (K,) int64 (-1 where the entity id is not ``object/<int>``); centers: (K, 3);
     half_sizes: (K, 3); quaternions_xyzw: (K, 4); colors: (K, 4) uint8 RGBA; labels: K texts;
-    node_counts: (K,) int64 (0 when not given).
+    node_counts: (K,) int64 (0 when not given); roles: K role names (``object`` when not given).
     """
 
     timestamp_ns: int
@@ -150,6 +159,7 @@ class ObjectBoxes:
     colors: np.ndarray
     labels: list[str]
     node_counts: np.ndarray
+    roles: list[str]
 
 
 def decode_object_boxes(message: SceneUpdate | bytes,
@@ -171,6 +181,7 @@ def decode_object_boxes(message: SceneUpdate | bytes,
         colors=np.zeros((count, 4), dtype=np.uint8),
         labels=[],
         node_counts=np.zeros(count, np.int64),
+        roles=[],
     )
     for k, entity in enumerate(entities):
         cube = entity.cubes[0]
@@ -190,6 +201,7 @@ def decode_object_boxes(message: SceneUpdate | bytes,
         boxes.node_counts[k] = int(count_text) if count_text.isdigit() and len(count_text) < 19 \
             else 0
         boxes.labels.append(entity.texts[0].text if entity.texts else entity.id)
+        boxes.roles.append(metadata.get("role", OBJECT_ROLE))
     values = np.concatenate([boxes.centers.ravel(), boxes.half_sizes.ravel(),
                              boxes.quaternions_xyzw.ravel()])
     if not np.isfinite(values).all():

@@ -32,6 +32,7 @@ def topology_message(learner: FrameLearner, stamp: FrameStamp,
 
 def objects_message(learner: FrameLearner, stamp: FrameStamp, objects: ObjectSet) -> Any:
     """The objects as a ``foxglove.SceneUpdate``, coloured as the logger colours clusters."""
+    from gngdt_core.supports import ROLE_NAMES
     from schemas.cluster_colors import id_colors
     from schemas.scene import objects_to_scene_update
 
@@ -39,7 +40,8 @@ def objects_message(learner: FrameLearner, stamp: FrameStamp, objects: ObjectSet
         ids=objects.ids, centers=objects.centers, quaternions_xyzw=objects.quaternions_xyzw,
         sizes=objects.sizes, colors=id_colors(objects.ids), node_counts=objects.node_counts,
         centroids=objects.centroids, mean_colors=objects.colors, normals=objects.normals,
-        timestamp_ns=stamp.capture_time_ns, frame_id=learner.frame_id or learner.camera)
+        timestamp_ns=stamp.capture_time_ns, frame_id=learner.frame_id or learner.camera,
+        roles=[ROLE_NAMES[role] for role in objects.roles])
 
 
 def scene_message(learner: FrameLearner, stamp: FrameStamp, learned: LearnedFrame) -> Any:
