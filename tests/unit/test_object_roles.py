@@ -4,7 +4,15 @@ support or clutter (issue 26, item 4), in the learner's `ObjectSet` and on the w
 from __future__ import annotations
 
 import numpy as np
-from test_segmentation_rules import TABLE_Y, box, majority, network, rectangle, segment, table
+from test_segmentation_rules import (
+    TABLE_Y,
+    box,
+    majority,
+    network,
+    segment,
+    table,
+    table_wall_and_box,
+)
 
 from gngdt_core.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
 from gngdt_core.objects import describe_objects
@@ -22,11 +30,7 @@ def scene_update_of(objects) -> bytes:
 
 
 def test_a_table_and_a_wall_are_published_as_supports_and_the_box_as_an_object() -> None:
-    rng = np.random.default_rng(0)
-    wall = rectangle((-0.3, TABLE_Y - 0.4, 1.1), (0.6, 0, 0), (0, 0.4, 0), rng)
-    parts = [table(rng, [(-0.06, 0.06, 0.98, 1.1)]), wall,
-             box(rng, (-0.06, 0.06), TABLE_Y, 0.12, (0.98, 1.1))]
-    positions, normals, edges, part = network(parts)
+    positions, normals, edges, part = network(table_wall_and_box(np.random.default_rng(0)))
     result = segment(positions, normals, edges)
     objects = describe_objects(positions, None, normals, result.labels, roles=result.roles)
     segments = [majority(result.labels, part, which)[0] for which in range(3)]

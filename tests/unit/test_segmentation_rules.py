@@ -77,13 +77,16 @@ def segment(positions, normals, edges, **params):
 # ------------------------------------------------------------------------- several supports
 
 
-def test_a_box_leaning_against_a_wall_is_apart_from_the_wall_and_the_table() -> None:
-    rng = np.random.default_rng(0)
+def table_wall_and_box(rng: np.random.Generator) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Parts 0, 1, 2: a table, a wall behind it and a box on the table leaning on the wall."""
     wall = rectangle((-0.3, TABLE_Y - 0.4, 1.1), (0.6, 0, 0), (0, 0.4, 0), rng)
     # the box's back touches the wall; its footprint is cut out of the table
-    parts = [table(rng, [(-0.06, 0.06, 0.98, 1.1)]), wall,
-             box(rng, (-0.06, 0.06), TABLE_Y, 0.12, (0.98, 1.1))]
-    positions, normals, edges, part = network(parts)
+    return [table(rng, [(-0.06, 0.06, 0.98, 1.1)]), wall,
+            box(rng, (-0.06, 0.06), TABLE_Y, 0.12, (0.98, 1.1))]
+
+
+def test_a_box_leaning_against_a_wall_is_apart_from_the_wall_and_the_table() -> None:
+    positions, normals, edges, part = network(table_wall_and_box(np.random.default_rng(0)))
     result = segment(positions, normals, edges)
     table_segment, table_share = majority(result.labels, part, 0)
     wall_segment, wall_share = majority(result.labels, part, 1)
