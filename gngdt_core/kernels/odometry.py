@@ -123,6 +123,24 @@ def node_gradients(positions: np.ndarray, normals: np.ndarray, values: np.ndarra
     return np.linalg.solve(a, b[..., None])[..., 0]
 
 
+@njit(cache=True, inline="always")
+def add_residual(q0, q1, q2, d0, d1, d2, w, r, jac, hessian, gradient):
+    """Add one residual ``r`` with weight ``w`` to the upper triangle of ``hessian`` (6, 6) and
+    to ``gradient`` (6,): its Jacobian over the twist is ``(q x d, d)``, q the point about the
+    twist's centre and d the residual's direction (``jac`` (6,) is scratch)."""
+    jac[0] = q1 * d2 - q2 * d1
+    jac[1] = q2 * d0 - q0 * d2
+    jac[2] = q0 * d1 - q1 * d0
+    jac[3] = d0
+    jac[4] = d1
+    jac[5] = d2
+    for i in range(6):
+        wi = w * jac[i]
+        gradient[i] += wi * r
+        for j in range(i, 6):
+            hessian[i, j] += wi * jac[j]
+
+
 @njit(cache=True)
 def normal_equations(points, anchors, directions, offsets, weights, centre, huber, hessian,
                      gradient):
@@ -151,20 +169,8 @@ def normal_equations(points, anchors, directions, offsets, weights, centre, hube
              + offsets[k])
         a = abs(r)
         w = weights[k] if a <= huber[k] else weights[k] * huber[k] / a
-        q0 = p0 - centre[0]
-        q1 = p1 - centre[1]
-        q2 = p2 - centre[2]
-        jac[0] = q1 * d2 - q2 * d1
-        jac[1] = q2 * d0 - q0 * d2
-        jac[2] = q0 * d1 - q1 * d0
-        jac[3] = d0
-        jac[4] = d1
-        jac[5] = d2
-        for i in range(6):
-            wi = w * jac[i]
-            gradient[i] += wi * r
-            for j in range(i, 6):
-                hessian[i, j] += wi * jac[j]
+        add_residual(p0 - centre[0], p1 - centre[1], p2 - centre[2], d0, d1, d2, w, r, jac,
+                     hessian, gradient)
         cost += w * r * r
         total += weights[k]
     for i in range(6):
@@ -276,20 +282,8 @@ def point_to_plane(points, normals, sigma, rotation, translation, node, gated, a
         q1 = world[k, 1] - centre[1]
         q2 = world[k, 2] - centre[2]
         spread += q0 * q0 + q1 * q1 + q2 * q2
-        d0 = node_normals[i, 0]
-        d1 = node_normals[i, 1]
-        d2 = node_normals[i, 2]
-        jac[0] = q1 * d2 - q2 * d1
-        jac[1] = q2 * d0 - q0 * d2
-        jac[2] = q0 * d1 - q1 * d0
-        jac[3] = d0
-        jac[4] = d1
-        jac[5] = d2
-        for a in range(6):
-            wa = w * jac[a]
-            gradient[a] += wa * r
-            for b in range(a, 6):
-                hessian[a, b] += wa * jac[b]
+        add_residual(q0, q1, q2, node_normals[i, 0], node_normals[i, 1], node_normals[i, 2], w,
+                     r, jac, hessian, gradient)
     for a in range(6):
         for b in range(a):
             hessian[a, b] = hessian[b, a]

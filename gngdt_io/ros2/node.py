@@ -49,7 +49,22 @@ REMOTE = zenoh.Locality.REMOTE
 SampleCallback = Callable[[bytes, Attachment | None], None]
 
 
-class Ros2Publisher:
+class _Endpoint:
+    """What names a ROS 2 publisher or subscription on zenoh: its (validated) topic, type and
+    QoS, the topic key expression, its liveliness token and GID."""
+
+    def __init__(self, node: NodeInfo, entity_id: int, kind: EntityKind, topic: str,
+                 ros_type: str, type_hash: str, qos: Qos) -> None:
+        self.topic = validate_topic_name(topic)
+        self.ros_type = ros_type
+        self.qos = adapt_qos(qos)
+        self.key = topic_keyexpr(node.domain_id, topic, ros_type, type_hash)
+        self.token_key = endpoint_token(node, entity_id, kind, topic, ros_type, type_hash,
+                                        self.qos)
+        self.gid = gid_from_token(self.token_key)
+
+
+class Ros2Publisher(_Endpoint):
     """One ROS 2 publisher: a zenoh publisher on the topic key plus an MP liveliness token."""
 
     def __init__(
@@ -62,14 +77,7 @@ class Ros2Publisher:
         type_hash: str,
         qos: Qos,
     ) -> None:
-        self.topic = validate_topic_name(topic)
-        self.ros_type = ros_type
-        self.qos = adapt_qos(qos)
-        self.key = topic_keyexpr(node.domain_id, topic, ros_type, type_hash)
-        self.token_key = endpoint_token(
-            node, entity_id, EntityKind.PUBLISHER, topic, ros_type, type_hash, self.qos
-        )
-        self.gid = gid_from_token(self.token_key)
+        super().__init__(node, entity_id, EntityKind.PUBLISHER, topic, ros_type, type_hash, qos)
         reliable = self.qos.reliability == Reliability.RELIABLE
         block = reliable and self.qos.history == History.KEEP_ALL
         self._pub = session.declare_publisher(
@@ -102,7 +110,7 @@ class Ros2Publisher:
         self._pub.undeclare()
 
 
-class Ros2Subscription:
+class Ros2Subscription(_Endpoint):
     """One ROS 2 subscription: a zenoh subscriber on the topic key (samples from other sessions
     only) plus an MS token."""
 
@@ -117,14 +125,8 @@ class Ros2Subscription:
         qos: Qos,
         callback: SampleCallback,
     ) -> None:
-        self.topic = validate_topic_name(topic)
-        self.ros_type = ros_type
-        self.qos = adapt_qos(qos)
-        self.key = topic_keyexpr(node.domain_id, topic, ros_type, type_hash)
-        self.token_key = endpoint_token(
-            node, entity_id, EntityKind.SUBSCRIPTION, topic, ros_type, type_hash, self.qos
-        )
-        self.gid = gid_from_token(self.token_key)
+        super().__init__(node, entity_id, EntityKind.SUBSCRIPTION, topic, ros_type, type_hash,
+                         qos)
         self._callback = callback
         if self.qos.durability == Durability.TRANSIENT_LOCAL:
             import zenoh.ext
