@@ -115,11 +115,14 @@ class LearnerOptions:
     pose_max_speed_m_s: float = _pose_limit("max_speed_m_s")
     pose_max_turn_deg_s: float = _pose_limit("max_turn_deg_s")
     pose_max_residual: float = _pose_limit("max_residual")
-    frame_time_share: float = param(0.8, Interval(float, 0.0, 1.0),
+    # off by default: on the walk it learned more frames with fewer steps each, and ended
+    # farther from k-means, quiet and busy (docs/moving-camera.md, "Keeping up")
+    frame_time_share: float = param(0.0, Interval(float, 0.0, 1.0),
                                     "live learner: share of the time between two frames it may "
                                     "spend on a frame; a frame gets the learning steps that fit "
-                                    "(within min_samples_per_frame..samples_per_frame), so it "
-                                    "keeps up on a busy machine; 0: samples_per_frame always")
+                                    "(within min_samples_per_frame..samples_per_frame) and is "
+                                    "published less often when busy; 0 (default): "
+                                    "samples_per_frame steps of every frame taken")
     min_samples_per_frame: int = param(1_000, Interval(int, 1),
                                        "fewest learning steps of a frame under the time budget "
                                        "(at most samples_per_frame)")

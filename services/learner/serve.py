@@ -3,9 +3,10 @@ publish what it learned, answer late joiners, checkpoint, stop at the stream's e
 
 Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
-memory stays bounded. To keep up, each frame gets the learning steps that fit in its share of
-the time between frames, and what was learned is published less often when publishing would
-not fit (`gngdt_core.frame_budget`; the status reports the budget). Objects and
+memory stays bounded. With ``frame_time_share`` > 0 (off by default) each frame gets the
+learning steps that fit in that share of the time between frames, and what was learned is
+published less often when publishing would not fit (`gngdt_core.frame_budget`; the status
+reports the budget). Objects and
 scene are published latest-wins (congestion control DROP): a consumer that cannot keep up misses
 updates, and never slows the learner down. With ``--track`` the learner also reads the camera's
 calibration, and publishes each tracked cloud's camera pose on ``gngdt/<cam>/tf``.
