@@ -71,7 +71,7 @@ def test_a_router_on_a_port_in_use_says_so(free_port: int, spawn: Callable) -> N
     assert "already listens there" in logged and "endpoints []" not in logged
 
 
-@pytest.mark.timeout(60)
+@pytest.mark.timeout(150)
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_the_router_stops_on_the_first_signal_even_while_starting(
     signum: int, free_port: int, tmp_path: Path
@@ -88,8 +88,12 @@ def test_the_router_stops_on_the_first_signal_even_while_starting(
         # KeyboardInterrupt (no traceback) yet Python exited by killing itself with SIGINT
         # (strace) -- CPython's "unhandled KeyboardInterrupt" flag, which code an extension runs
         # through PyRun_* while importing can set; shells report it as 130 all the same
-        assert early.wait(20) in (0, 130, -signum, -signal.SIGINT), (
-            tmp_path / "early.log").read_text()
+        try:
+            code = early.wait(60)  # a loaded machine may still be starting Python
+        except subprocess.TimeoutExpired:
+            pytest.fail("still running 60 s after the signal:\n"
+                        + (tmp_path / "early.log").read_text())
+        assert code in (0, 130, -signum, -signal.SIGINT), (tmp_path / "early.log").read_text()
     # once serving, with zenoh's own log on (RUST_LOG, as zenoh's examples)
     with open(tmp_path / "serving.log", "wb") as output:
         serving = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,
@@ -161,7 +165,9 @@ def test_run_from_a_folder_shadowing_gngdt_admits_only_its_children_and_leaves_n
     log_path = tmp_path / "run.log"
     with open(log_path, "wb") as output:
         run = subprocess.Popen(
-            [str(gngdt), "run", str(tabletop_recording), "--rate", "0.01", "--save",
+            # a replay of minutes: it is still running when the signal comes, however long
+            # the intruder's refusal takes on a loaded machine
+            [str(gngdt), "run", str(tabletop_recording), "--rate", "0.001", "--save",
              str(tmp_path / "run.rrd")], cwd=tmp_path, stdout=output, stderr=output,
             start_new_session=True)
     try:
