@@ -104,3 +104,19 @@ def peak_rss_mb(output: str) -> float:
     """The peak RSS a :func:`with_peak_rss` command printed, in MB."""
     line = next(line for line in output.splitlines() if line.startswith("peak_rss_kb "))
     return int(line.split()[1]) / 1024
+
+
+_DEFAULT_SIGHUP = (
+    "import os, signal, sys\n"
+    "signal.signal(signal.SIGHUP, signal.SIG_DFL)\n"
+    "os.execv(sys.argv[1], sys.argv[1:])\n"
+)
+
+
+def with_default_sighup(command: list[str]) -> list[str]:
+    """``command`` with SIGHUP's default disposition, as a terminal's child has: a suite run
+    under ``nohup`` hands its children SIGHUP ignored, which gngdt honours on purpose; the
+    command's first element must be an executable's path."""
+    import sys
+
+    return [sys.executable, "-c", _DEFAULT_SIGHUP, *command]

@@ -12,7 +12,14 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from processes import alive, bound_sockets, children, log_text, wait_for
+from processes import (
+    alive,
+    bound_sockets,
+    children,
+    log_text,
+    wait_for,
+    with_default_sighup,
+)
 
 from services.plumbing.session import ZenohSetupError, client_config, open_config
 
@@ -76,7 +83,7 @@ def test_a_router_on_a_port_in_use_says_so(free_port: int, spawn: Callable) -> N
 def test_the_router_stops_on_the_first_signal_even_while_starting(
     signum: int, free_port: int, tmp_path: Path
 ) -> None:
-    command = [*GNGDT, "router", "--listen", f"tcp/127.0.0.1:{free_port}"]
+    command = with_default_sighup([*GNGDT, "router", "--listen", f"tcp/127.0.0.1:{free_port}"])
     with open(tmp_path / "early.log", "wb") as output:
         early = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,
                                  start_new_session=True)
@@ -164,12 +171,12 @@ def test_run_from_a_folder_shadowing_gngdt_admits_only_its_children_and_leaves_n
     assert gngdt.exists(), "the gngdt console script (pip install -e .)"
     log_path = tmp_path / "run.log"
     with open(log_path, "wb") as output:
+        # a replay of minutes: it is still running when the signal comes, however long the
+        # intruder's refusal takes on a loaded machine
         run = subprocess.Popen(
-            # a replay of minutes: it is still running when the signal comes, however long
-            # the intruder's refusal takes on a loaded machine
-            [str(gngdt), "run", str(tabletop_recording), "--rate", "0.001", "--save",
-             str(tmp_path / "run.rrd")], cwd=tmp_path, stdout=output, stderr=output,
-            start_new_session=True)
+            with_default_sighup([str(gngdt), "run", str(tabletop_recording), "--rate", "0.001",
+                                 "--save", str(tmp_path / "run.rrd")]),
+            cwd=tmp_path, stdout=output, stderr=output, start_new_session=True)
     try:
         wait_for(lambda: "replaying" in log_path.read_text(), 90, "the services to come up")
         pids = children(run.pid)
