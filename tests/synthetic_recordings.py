@@ -19,3 +19,18 @@ def render_small_recording(directory: Path, scene: str, frames: int, poses: bool
         for frame in render_scene(scene, frames, width=320, height=240):
             writer.write_frame(frame if poses else replace(frame, pose=None))
     return path
+
+
+def render_walk(directory: Path, frames: int, width: int, height: int,
+                fps: float) -> tuple[Path, list]:
+    """``directory/walk.mcap``: ``frames`` frames of the walking camera (``tabletop_walk``) with
+    its poses, and the rendered frames."""
+    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt_io.synth.render import render_scene
+
+    path = directory / "walk.mcap"
+    rendered = list(render_scene("tabletop_walk", frames, width=width, height=height, fps=fps))
+    with RecordingWriter(path) as writer:
+        for frame in rendered:
+            writer.write_frame(frame)
+    return path, rendered

@@ -12,12 +12,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from synthetic_recordings import render_walk
 from test_pipeline import Watcher, log_text, wait_exit
 
 from gngdt_core.geometry import rigid_inverse
 from gngdt_core.kernels.odometry import motion_size
-from gngdt_io.mcap_writer import RecordingWriter
-from gngdt_io.synth.render import render_scene
 from schemas.clouds import transform_to_pose
 from schemas.topology import decode_topology
 from schemas.wire import FrameStamp
@@ -30,12 +29,7 @@ FRAMES = 20
 @pytest.fixture(scope="module")
 def walk(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list]:
     """20 frames 320x240 of the walking camera at 10 fps (2 s), with poses."""
-    path = tmp_path_factory.mktemp("walk") / "walk.mcap"
-    frames = list(render_scene("tabletop_walk", FRAMES, width=320, height=240, fps=10.0))
-    with RecordingWriter(path) as writer:
-        for frame in frames:
-            writer.write_frame(frame)
-    return path, frames
+    return render_walk(tmp_path_factory.mktemp("walk"), FRAMES, 320, 240, fps=10.0)
 
 
 class Transforms:

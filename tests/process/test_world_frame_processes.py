@@ -10,11 +10,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from synthetic_recordings import render_walk
 from test_pipeline import Watcher, log_text, points_publisher, wait_exit
 from test_world_frame import attachment, pose_at, posed_cloud
 
-from gngdt_io.mcap_writer import RecordingWriter
-from gngdt_io.synth.render import render_scene
 from schemas.topology import decode_topology
 from services.plumbing.session import client_config, open_config
 
@@ -24,12 +23,7 @@ FRAMES = 4
 @pytest.fixture(scope="module")
 def walk_recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list]:
     """Four 160x120 frames of the walking camera, with poses; and the rendered frames."""
-    path = tmp_path_factory.mktemp("walk") / "walk.mcap"
-    frames = list(render_scene("tabletop_walk", FRAMES, width=160, height=120, fps=2.0))
-    with RecordingWriter(path) as writer:
-        for frame in frames:
-            writer.write_frame(frame)
-    return path, frames
+    return render_walk(tmp_path_factory.mktemp("walk"), FRAMES, 160, 120, fps=2.0)
 
 
 @pytest.mark.timeout(120)
