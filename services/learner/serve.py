@@ -279,8 +279,9 @@ class LearnerService:
 
     def publish(self, stamp: FrameStamp, positions: np.ndarray, colors: np.ndarray | None,
                 settled: str = "") -> float:
-        """Publish the topology and status after learning a frame, then its objects and (every
-        ``scene_every_frames`` frames, and the settled last one) the scene; the latency in ms."""
+        """Publish the topology after learning a frame, its objects, (every
+        ``scene_every_frames`` frames, and the settled last one) the scene, then the status;
+        the latency in ms."""
         learner = self.learner
         learned = learner.learned_frame()
         topology = topology_message(learner, stamp,
@@ -290,17 +291,18 @@ class LearnerService:
         latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
         self._topology.put(payload, attachment=attachment)
         self.latest.set(payload, attachment)
-        percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
-        self._last_topology = topology
-        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled,
-                                self.budget.last)
-        self._status.put(status.SerializeToString(), attachment=attachment)
         objects = objects_message(learner, stamp, learner.objects(learned, final=bool(settled)))
         self._objects.put(objects.SerializeToString(), attachment=attachment)
         every = self.options.scene_every_frames
         if every and (settled or learner.counters.frames_used % every == 1 % every):
             scene = scene_message(learner, stamp, learned)
             self._scene.put(scene.SerializeToString(), attachment=attachment)
+        # the status last: a consumer that ends on the settled status has everything before it
+        percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
+        self._last_topology = topology
+        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled,
+                                self.budget.last)
+        self._status.put(status.SerializeToString(), attachment=attachment)
         return latency_ms
 
     def handle(self, sample: zenoh.Sample, waited: bool = False) -> None:

@@ -81,10 +81,12 @@ def test_mcap_holds_every_stream_with_foxglove_schemas(recorded_run) -> None:
     assert {(t.parent_frame_id, t.child_frame_id) for t in transforms} == {("world", "camera")}
     scenes = [entry[1] for entry in messages["/camera/scene"]]
     objects = [entry[1] for entry in messages["/camera/objects"]]
-    # one objects update per learned frame and one for the settled network: how many frames the
-    # learner kept up with depends on the machine's load, what it published for them does not
+    # one objects update per learned frame and one for the settled network (published before
+    # the settled status the logger ends on); how many frames the learner kept up with depends
+    # on the machine's load, and so may whether a latest-wins update or two were dropped on the
+    # way to a busy logger
     learned = max(entry[1].frames_used for entry in messages["/camera/learner/status"])
-    assert learned >= 1 and len(objects) == learned + 1 and len(scenes) >= 2
+    assert learned >= 1 and 2 <= len(objects) <= learned + 1 and len(scenes) >= 2
     for update in scenes + objects:
         assert update.deletions[0].type == update.deletions[0].ALL  # the newest state only
     scene = scenes[-1]
