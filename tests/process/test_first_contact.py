@@ -84,30 +84,42 @@ def test_the_router_stops_on_the_first_signal_even_while_starting(
     signum: int, free_port: int, tmp_path: Path
 ) -> None:
     command = with_default_sighup([*GNGDT, "router", "--listen", f"tcp/127.0.0.1:{free_port}"])
-    with open(tmp_path / "early.log", "wb") as output:
-        early = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,
-                                 start_new_session=True)
-        time.sleep(0.3)  # still importing: the signal used to be lost here
-        early.send_signal(signum)
-        # stopped by our handler (0, 130), or by the signal itself when it came before
-        # gngdt's first line ran (on a loaded machine Python may still be starting), or by
-        # SIGINT: with the signal landing in the imports (seen at 0.3-0.6 s), main() caught the
-        # KeyboardInterrupt (no traceback) yet Python exited by killing itself with SIGINT
-        # (strace) -- CPython's "unhandled KeyboardInterrupt" flag, which code an extension runs
-        # through PyRun_* while importing can set; shells report it as 130 all the same
-        try:
-            code = early.wait(60)  # a loaded machine may still be starting Python
-        except subprocess.TimeoutExpired:
-            pytest.fail("still running 60 s after the signal:\n"
-                        + (tmp_path / "early.log").read_text())
-        assert code in (0, 130, -signum, -signal.SIGINT), (tmp_path / "early.log").read_text()
-    # once serving, with zenoh's own log on (RUST_LOG, as zenoh's examples)
-    with open(tmp_path / "serving.log", "wb") as output:
-        serving = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,
-                                   start_new_session=True, env={**os.environ, "RUST_LOG": "info"})
-        wait_for(lambda: "listening on" in (tmp_path / "serving.log").read_text(), 30, "the router")
-        serving.send_signal(signum)
-        assert serving.wait(20) == 0
+    started: list[subprocess.Popen] = []  # stopped by pid whatever happens
+    try:
+        with open(tmp_path / "early.log", "wb") as output:
+            early = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,
+                                     start_new_session=True)
+            started.append(early)
+            time.sleep(0.3)  # still importing: the signal used to be lost here
+            early.send_signal(signum)
+            # stopped by our handler (0, 130), or by the signal itself when it came before
+            # gngdt's first line ran (on a loaded machine Python may still be starting), or by
+            # SIGINT: with the signal landing in the imports (seen at 0.3-0.6 s), main() caught the
+            # KeyboardInterrupt (no traceback) yet Python exited by killing itself with SIGINT
+            # (strace) -- CPython's "unhandled KeyboardInterrupt" flag, which code an extension runs
+            # through PyRun_* while importing can set; shells report it as 130 all the same
+            try:
+                code = early.wait(60)  # a loaded machine may still be starting Python
+            except subprocess.TimeoutExpired:
+                pytest.fail("still running 60 s after the signal:\n"
+                            + (tmp_path / "early.log").read_text())
+            assert code in (0, 130, -signum, -signal.SIGINT), \
+                (tmp_path / "early.log").read_text()
+        # once serving, with zenoh's own log on (RUST_LOG, as zenoh's examples)
+        with open(tmp_path / "serving.log", "wb") as output:
+            serving = subprocess.Popen(command, cwd=REPO_ROOT, stdout=output, stderr=output,
+                                       start_new_session=True,
+                                       env={**os.environ, "RUST_LOG": "info"})
+            started.append(serving)
+            wait_for(lambda: "listening on" in (tmp_path / "serving.log").read_text(), 30,
+                     "the router")
+            serving.send_signal(signum)
+            assert serving.wait(20) == 0
+    finally:
+        for process in started:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
     logged = (tmp_path / "serving.log").read_text()
     assert "Zenoh can be reached at" in logged  # zenoh's own INFO line
     assert f"router stopped ({signal.Signals(signum).name})" in logged
