@@ -422,10 +422,9 @@ class FrameLearner:
         (confirmation only keeps a growing network's flickering fragments out; a stream of a few
         frames would otherwise end without a single object)."""
         name = self.options.objects_from
-        roles = learned.segment_roles if CLUSTERINGS[name].is_segmentation else None
         return self._trackers[name].objects(self.model, learned.labels[name],
                                             learned.cluster_ids[name], confirmed_only=not final,
-                                            roles=roles)
+                                            roles=learned.segment_roles)
 
     def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
         """Learn the stream's last frame on until the network is settled: the node budget
