@@ -83,16 +83,17 @@ class SensorView:
 
     def gap_samples(self, positions: np.ndarray, pairs: np.ndarray,
                     camera_from_model: np.ndarray, margin: float,
-                    samples: int) -> tuple[np.ndarray, np.ndarray]:
+                    samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Of ``samples`` points evenly inside each segment ``pairs`` (P, 2) of ``positions``
-        (model frame, float64): (P,) how many fall where the sensor measured no depth, and (P,)
+        (model frame, float64): (P,) how many fall where the sensor measured no depth, (P,)
         how many where it measured something else (saw through them, or a nearer surface hid
-        them; ``margin`` as a fraction of the depth) or could not see."""
-        missing = np.zeros(len(pairs), dtype=np.int64)
-        blocked = np.zeros(len(pairs), dtype=np.int64)
+        them; ``margin`` as a fraction of the depth) or could not see, and (P,) how many of
+        those a nearer surface hid."""
+        missing, blocked, hidden = (np.zeros(len(pairs), dtype=np.int64) for _ in range(3))
         V.gap_samples(positions, pairs, camera_from_model, self.zmin, self.zmax, self.u_min,
-                      self.v_min, self.inv_cell, float(margin), int(samples), missing, blocked)
-        return missing, blocked
+                      self.v_min, self.inv_cell, float(margin), int(samples), missing, blocked,
+                      hidden)
+        return missing, blocked, hidden
 
 
 def node_spacing(node_positions: np.ndarray) -> float:

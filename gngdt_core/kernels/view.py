@@ -181,18 +181,20 @@ def near_unmeasured(pos, n, camera_from_model, measured, u_min, v_min, inv_cell,
 
 @njit(cache=True)
 def gap_samples(pos, pairs, camera_from_model, zmin, zmax, u_min, v_min, inv_cell, margin,
-                samples, missing, blocked):
+                samples, missing, blocked, hidden):
     """For each pair (i, j) of ``pairs`` (P, 2), of ``samples`` points evenly inside the segment
     from node i to node j: ``missing[p]`` how many fall on unmeasured cells, ``blocked[p]`` how
     many the sensor saw through (in front of the nearest depth of their cell by more than
     ``margin`` times it), saw behind a nearer surface (behind the farthest by as much) or could
-    not see (behind the camera, off the grid)."""
+    not see (behind the camera, off the grid), ``hidden[p]`` how many of those it saw behind a
+    nearer surface."""
     rows, columns = zmax.shape
     point = np.empty((1, 3))
     for p in range(pairs.shape[0]):
         i, j = pairs[p, 0], pairs[p, 1]
         missing[p] = 0
         blocked[p] = 0
+        hidden[p] = 0
         for s in range(1, samples + 1):
             t = s / (samples + 1.0)
             for axis in range(3):
@@ -203,5 +205,8 @@ def gap_samples(pos, pairs, camera_from_model, zmin, zmax, u_min, v_min, inv_cel
                 blocked[p] += 1
             elif zmax[row, column] == 0.0:
                 missing[p] += 1
-            elif z < zmin[row, column] * (1.0 - margin) or z > zmax[row, column] * (1.0 + margin):
+            elif z > zmax[row, column] * (1.0 + margin):
+                blocked[p] += 1
+                hidden[p] += 1
+            elif z < zmin[row, column] * (1.0 - margin):
                 blocked[p] += 1
