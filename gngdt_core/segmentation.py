@@ -42,7 +42,8 @@ position topology is here):
    never bridge two larger segments. Those with no larger neighbour (chains of single nodes
    along cables, thin edges, noise) are no segment (-1).
 
-6. Gaps (with the frame's view only, ``bridge_gap_m`` > 0). Where the sensor measured no depth
+6. Gaps (`gngdt_core.gaps`, whose constants are named here; with the frame's view only,
+   ``bridge_gap_m`` > 0). Where the sensor measured no depth
    (a glossy rim, a dark or shiny patch) the network has no edges, so one object can come out as
    two segments (a mug's inside and outside). Node pairs of two segments closer than
    ``bridge_gap_m`` are judged as edges would be, when the straight line between them crosses
@@ -80,34 +81,12 @@ from functools import cached_property
 import numpy as np
 
 from gngdt_core.clustering import rank_by_size
+from gngdt_core.gaps import GapRules, bridge_gaps
 from gngdt_core.kernels import regions as RK
 from gngdt_core.parameters import Interval, check_fields, from_mapping, param
 from gngdt_core.supports import OBJECT, SegmentRoles, find_supports, segment_roles
 from gngdt_core.view import SensorView
 
-#: points judged along a node pair that may cross a gap of missing depth (step 6)
-GAP_SAMPLES = 6
-#: metres: a node borders a gap when the sensor measured no depth this close to it
-GAP_BORDER_M = 0.005
-#: a sample lies on something the sensor measured when within this share of its depth
-GAP_DEPTH_MARGIN = 0.02
-#: segments across a gap also join when this share of the pairs crossing it (or this many) are
-#: back to back: convex with normals facing away from each other, the two faces of a thin wall
-#: at a rim; a container's mouth adds many concave pairs (its far inner wall seen past the near
-#: rim), which outvote them under the convex share (ycbv's mug: 0.889 -> 0.921 learned from
-#: scratch, 0.820 -> 0.867 streamed; no effect on mosd, whose rims return depth)
-RIM_SHARE = 0.2
-RIM_PAIRS = 5
-#: a segment this share of whose nodes across gaps face others from behind and from inside them
-#: on the image is seen through an opening (a mug's inside past its glossy rim, which may be cut
-#: into pieces) and joins the segment it faces most; chosen on ycbv's mug (0.912 -> 0.941
-#: learned from scratch, 0.879 -> 0.912 streamed, seed-0 networks); at 0.7 the gelatin box
-#: joined the mug in one streamed frame
-ENCLOSED_SHARE = 0.8
-#: ... from at least this many distinct nodes on each side: pairs fanning out of one node are one
-#: node's word (a streamed ycbv network tied the foam brick to the mug by three pairs from one
-#: node; 2, the fewest that is not one node: ycbv streamed merged 0.4 -> 0 per seed, 3 split mugs)
-GAP_MIN_NODES = 2
 #: an edge longer than this many times the shortest edge at either end is left out (1-2 % of
 #: the edges of a learned network; a streamed ycbv network tied the gelatin box to the foam
 #: brick by one 7.4 cm edge between nodes 5-8 mm from their neighbours)
@@ -316,8 +295,8 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     labels = rank_by_size(_absorb_fragments(objects, edges, convex, params.min_segment_nodes),
                           params.min_segment_nodes)
     if view is not None and params.bridge_gap_m > 0 and labels.max() > 0:
-        labels = _bridge_gaps(labels, positions, normals, edges, params, view, camera_from_model,
-                              support_node)
+        labels = bridge_gaps(labels, positions, normals, edges, view, camera_from_model,
+                             support_node, _gap_rules(params))
     at_view_edge = None if view is None else _at_view_edge(positions, view, camera_from_model)
     convex_all = np.zeros(len(all_edges), dtype=bool)
     convex_all[~spanning] = convex
@@ -344,6 +323,12 @@ def _at_view_edge(positions: np.ndarray, view: SensorView,
 
 def _sine(degrees: float) -> float:
     return math.sin(math.radians(degrees))
+
+
+def _gap_rules(params: SegmentationParams) -> GapRules:
+    return GapRules(params.bridge_gap_m, params.min_boundary_edges, params.convex_share,
+                    params.crease_share, _sine(params.concavity_angle_deg),
+                    _sine(params.crease_angle_deg))
 
 
 def _smooth_patches(n: int, edges: np.ndarray, adjacency: tuple, normals: np.ndarray,
@@ -406,195 +391,3 @@ def _absorb_fragments(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
     destination = np.arange(n_labels)
     destination[fragment[best_first][first]] = host[best_first][first]
     return destination[labels]
-
-
-def _bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
-                 edges: np.ndarray, params: SegmentationParams, view: SensorView,
-                 camera_from_model: np.ndarray, support_node: np.ndarray) -> np.ndarray:
-    """(n,) int32 segments after step 6: segments joined across gaps of missing depth; nothing
-    joins a support (``support_node``: (n,) bool nodes on a support plane)."""
-    pairs, pair_key, over_gap = _pairs_across_gaps(labels, positions, edges, params, view,
-                                                   camera_from_model, support_node)
-    if len(pairs) == 0:
-        return labels
-    n_labels = int(labels.max()) + 1
-    rise_of_j, rise_of_i = edge_elevations(positions, normals, pairs)
-    rise = np.maximum(rise_of_j, rise_of_i)
-    convex = rise < _sine(params.concavity_angle_deg)
-    # the two faces of a thin wall (a mug's rim: its outside and its inside) face away from
-    # each other and meet convexly; two objects facing each other across a gap meet concavely
-    opposed = np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]) < 0.0
-    keys, pair_of_key = np.unique(pair_key, return_inverse=True)
-
-    def count(flags: np.ndarray) -> np.ndarray:
-        return np.bincount(pair_of_key, weights=flags, minlength=len(keys))
-
-    def enough(among: np.ndarray) -> np.ndarray:
-        nodes = _nodes_per_side(labels, pairs[among], pair_of_key[among], keys, n_labels)
-        return (count(among) >= params.min_boundary_edges) & (nodes >= GAP_MIN_NODES)
-
-    crossing, convex_count = count(over_gap), count(over_gap & convex)
-    back_to_back = count(over_gap & opposed & convex)
-    enough_over_gap = enough(over_gap)
-    rim = enough_over_gap & ((back_to_back >= RIM_SHARE * crossing)
-                             | (back_to_back >= RIM_PAIRS))
-    if ENCLOSED_SHARE <= 1.0:
-        # a container's inside faces its rim over the gap and behind its wall alike
-        every = np.ones(len(pairs), dtype=bool)
-        rim |= enough(every) & _enclosed(labels, positions, pairs, keys, n_labels,
-                                         camera_from_model)
-    join = rim | (enough_over_gap & (convex_count >= params.convex_share * crossing))
-    if not join.any():
-        return labels
-    creases = count(over_gap & (rise > _sine(params.crease_angle_deg)))
-    root = _join_across_gaps(n_labels, keys // n_labels, keys % n_labels, crossing, creases,
-                             join, rim, convex_count + back_to_back, params.crease_share)
-    merged = labels.copy()
-    on = labels >= 0
-    merged[on] = rank_by_size(root[labels[on]])
-    return merged
-
-
-def _pairs_across_gaps(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
-                       params: SegmentationParams, view: SensorView,
-                       camera_from_model: np.ndarray, support_node: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Node pairs of two segments (neither a support, not judged in step 4) closer than
-    ``bridge_gap_m`` whose straight line crosses a gap: (P, 2) pairs, (P,) their segment pair
-    keys (`_segment_pair_keys`) and (P,) bool ``over_gap``: at least half the line lies where
-    the sensor measured nothing and at most a third where it measured something else. The
-    others returned run partly over a gap and otherwise behind a nearer surface, never where
-    the sensor saw through: from a container's inside to its rim, behind its wall."""
-    from scipy.spatial import cKDTree
-
-    none = (np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64),
-            np.zeros(0, dtype=bool))
-    on_support = np.zeros(int(labels.max()) + 2, dtype=bool)
-    on_support[labels[support_node]] = True
-    candidates = np.flatnonzero(
-        (labels >= 0) & ~on_support[labels]
-        & view.near_unmeasured(positions, camera_from_model, GAP_BORDER_M))
-    if candidates.size < 2:
-        return none
-    pairs = candidates[cKDTree(positions[candidates]).query_pairs(params.bridge_gap_m,
-                                                                  output_type="ndarray")]
-    n_labels = int(labels.max()) + 1
-    pair_key = _segment_pair_keys(labels, pairs, n_labels)
-    # segment pairs with enough shared edges were judged on those edges (step 4)
-    edge_keys, shared = np.unique(_segment_pair_keys(labels, edges, n_labels),
-                                  return_counts=True)
-    judged = edge_keys[(edge_keys >= 0) & (shared >= params.min_boundary_edges)]
-    unjudged = (pair_key >= 0) & ~np.isin(pair_key, judged)
-    pairs, pair_key = pairs[unjudged], pair_key[unjudged]
-    missing, blocked, hidden = view.gap_samples(positions, pairs, camera_from_model,
-                                                GAP_DEPTH_MARGIN, GAP_SAMPLES)
-    over_gap = (2 * missing >= GAP_SAMPLES) & (3 * blocked <= GAP_SAMPLES)
-    keep = over_gap | ((missing > 0) & (blocked == hidden))
-    return pairs[keep], pair_key[keep], over_gap[keep]
-
-
-def _nodes_per_side(labels: np.ndarray, pairs: np.ndarray, pair_of_key: np.ndarray,
-                    keys: np.ndarray, n_labels: int) -> np.ndarray:
-    """(K,) int per segment pair ``keys``: how many distinct nodes the pairs crossing between
-    them have on the side that has fewer (pairs fanning out of one node are one node's word)."""
-    node = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    key = np.concatenate([pair_of_key, pair_of_key]).astype(np.int64)
-    on_low = (labels[node] == keys[key] // n_labels).astype(np.int64)
-    side, counts = np.unique(np.unique((key * 2 + on_low) * len(labels) + node) // len(labels),
-                             return_counts=True)
-    per_side = np.zeros((len(keys), 2), dtype=np.int64)
-    per_side[side // 2, side % 2] = counts
-    return per_side.min(axis=1)
-
-
-def _enclosed(labels: np.ndarray, positions: np.ndarray, pairs: np.ndarray,
-              keys: np.ndarray, n_labels: int, camera_from_model: np.ndarray) -> np.ndarray:
-    """(K,) bool per segment pair ``keys``: one of the two is seen through an opening of the
-    other. Of its nodes with a partner across a gap (``pairs``), at least ``ENCLOSED_SHARE``
-    have their nearest partner in the other, lie behind it (farther from the sensor) and inside
-    it on the image (the partner outside the enclosed segment's convex hull on the image): a
-    mug's inside seen past its glossy rim, not a wall seen past an object in front of it."""
-    camera = positions @ camera_from_model[:3, :3].T + camera_from_model[:3, 3]
-    depth = np.maximum(camera[:, 2], 1e-9)
-    image = camera[:, :2] / depth[:, None]
-    length = np.linalg.norm(positions[pairs[:, 0]] - positions[pairs[:, 1]], axis=1)
-    node = np.concatenate([pairs[:, 0], pairs[:, 1]])
-    partner = np.concatenate([pairs[:, 1], pairs[:, 0]])
-    order = np.lexsort((np.concatenate([length, length]), node))
-    first = np.ones(order.size, dtype=bool)
-    first[1:] = node[order][1:] != node[order][:-1]
-    node, partner = node[order][first], partner[order][first]
-    inner, outer = labels[node].astype(np.int64), labels[partner].astype(np.int64)
-    through = (depth[node] > depth[partner]) & _outside_hulls(image, labels, inner, partner)
-    facing = np.bincount(inner[through] * n_labels + outer[through],
-                         minlength=n_labels * n_labels).reshape(n_labels, n_labels)
-    borders = np.bincount(inner, minlength=n_labels)
-    # the rim may be cut into several segments: what counts is how much of the border faces
-    # some segment through the opening; the enclosed one joins the one it faces most
-    enclosed = facing.sum(axis=1) >= ENCLOSED_SHARE * np.maximum(borders, 1)
-    most = facing.argmax(axis=1)
-    low, high = keys // n_labels, keys % n_labels
-    return (enclosed[low] & (most[low] == high)) | (enclosed[high] & (most[high] == low))
-
-
-def _outside_hulls(image: np.ndarray, labels: np.ndarray, segments: np.ndarray,
-                   points: np.ndarray) -> np.ndarray:
-    """(P,) bool: node ``points[k]`` lies outside the convex hull of segment ``segments[k]`` on
-    the image (``image``: (n, 2) x/z, y/z of every node). A hull, not the distance from the
-    segment's centre: an opening seen at a slant is a wide ellipse, and a rim node past its
-    narrow end can be nearer the centre than the inside's node it faces (ycbv's mug)."""
-    from scipy.spatial import ConvexHull
-
-    outside = np.zeros(len(points), dtype=bool)
-    for segment in np.unique(segments):
-        asked = segments == segment
-        members = image[labels == segment]
-        if len(members) < 3:
-            outside[asked] = True  # no area: nothing lies inside it
-            continue
-        # joggled: a segment whose nodes line up on the image still gets a (thin) hull
-        facets = ConvexHull(members, qhull_options="QJ").equations
-        signed = image[points[asked]] @ facets[:, :2].T + facets[:, 2]
-        outside[asked] = (signed > 0.0).any(axis=1)
-    return outside
-
-
-def _join_across_gaps(n_labels: int, low: np.ndarray, high: np.ndarray, crossing: np.ndarray,
-                      creases: np.ndarray, joinable: np.ndarray, rim: np.ndarray,
-                      strength: np.ndarray, crease_share: float) -> np.ndarray:
-    """(n_labels,) representative of each segment after joining the ``joinable`` segment pairs
-    (low, high), strongest first, each only while at most ``crease_share`` of all the pairs
-    crossing gaps between the two growing unions are creases (as step 4): a box that three
-    pairs tie to a mug's inside stays apart when twenty creases tie it to the mug's outside.
-    A ``rim`` pair (back to back across a thin wall) joins regardless: a container's mouth is
-    full of creases between its inside and its outside."""
-    parent = np.arange(n_labels)
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for k in np.flatnonzero(joinable)[np.argsort(-strength[joinable], kind="stable")]:
-        a, b = find(int(low[k])), find(int(high[k]))
-        if a == b:
-            continue
-        if rim[k]:
-            parent[b] = a
-            continue
-        root_low = np.array([find(int(x)) for x in low])
-        root_high = np.array([find(int(x)) for x in high])
-        between = ((root_low == a) & (root_high == b)) | ((root_low == b) & (root_high == a))
-        if creases[between].sum() <= crease_share * crossing[between].sum():
-            parent[b] = a
-    return np.array([find(x) for x in range(n_labels)])
-
-
-def _segment_pair_keys(labels: np.ndarray, pairs: np.ndarray, n_labels: int) -> np.ndarray:
-    """(P,) int64 key ``low * n_labels + high`` of the segments at the ends of each node pair;
-    -1 where both ends are in one segment (or either in none)."""
-    a = labels[pairs[:, 0]].astype(np.int64)
-    b = labels[pairs[:, 1]].astype(np.int64)
-    key = np.minimum(a, b) * n_labels + np.maximum(a, b)
-    return np.where((a != b) & (a >= 0) & (b >= 0), key, -1)
