@@ -4,7 +4,8 @@ Connected components are relabelled from scratch every frame (``clusters()`` num
 size), but the nodes they are made of persist (``node_ids_``). `ClusterTracker` carries identity by
 node membership: each cluster of the new labelling takes the id of the earlier cluster it shares
 the most nodes with, greedily by shared-node count, each id at most once. A split keeps the id on
-the part holding most of the old nodes; a merge keeps the id of the larger contributor. A cluster
+the part holding most of the old nodes; a merge keeps the id of the larger contributor, but a
+confirmed one's before one not confirmed yet (a fragment that split off and merges back). A cluster
 seen no more is remembered for ``memory_frames`` labellings, so a cluster that dips below the
 minimum size for a moment, or splits off again, gets its id back.
 
@@ -96,6 +97,7 @@ class ClusterTracker:
         for label, track in self._matches(members, member_labels, n_labels):
             assigned[label] = track.track_id
         by_id = {track.track_id: track for track in self._tracks}
+        self._confirmed_absorb(members, member_labels, assigned, by_id)
         order = np.argsort(member_labels, kind="stable")
         bounds = np.searchsorted(member_labels[order], np.arange(n_labels + 1))
         for label in range(n_labels):
@@ -119,6 +121,31 @@ class ClusterTracker:
             key=lambda track: (-track.last_seen, track.track_id))[: self.max_tracks]
         self.confirmed_ = confirmed
         return assigned
+
+    def _confirmed_absorb(self, members: np.ndarray, member_labels: np.ndarray,
+                          assigned: np.ndarray, by_id: dict[int, _Track]) -> None:
+        """A confirmed cluster that merged with a fragment not yet confirmed keeps its id even
+        when the fragment brought more nodes: a label whose match is unconfirmed (or none) takes
+        the id of a confirmed, unmatched cluster that ``min_overlap`` of its surviving nodes
+        went into (most shared first). Segments of a growing network split and merge back; the
+        object must not vanish until its fragment's id is confirmed. ``assigned`` is updated."""
+        taken = set(assigned[assigned >= 0].tolist())
+        offers = []
+        for track in self._tracks:
+            if not track.confirmed or track.track_id in taken:
+                continue
+            surviving = np.isin(members, track.nodes)
+            if not surviving.any():
+                continue
+            shares = np.bincount(member_labels[surviving])
+            label = int(shares.argmax())
+            if shares[label] >= self.min_overlap * surviving.sum():
+                offers.append((int(shares[label]), label, track.track_id))
+        for _, label, track_id in sorted(offers, key=lambda offer: (-offer[0], offer[2])):
+            current = int(assigned[label])
+            if current >= 0 and (current not in by_id or by_id[current].confirmed):
+                continue
+            assigned[label] = track_id
 
     def _matches(self, members: np.ndarray, member_labels: np.ndarray,
                  n_labels: int) -> list[tuple[int, _Track]]:

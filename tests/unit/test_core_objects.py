@@ -85,6 +85,22 @@ def test_a_cluster_is_confirmed_after_confirm_frames_in_a_row_and_stays_confirme
         ClusterTracker(confirm_frames=0)
 
 
+def test_a_confirmed_cluster_keeps_its_id_when_a_larger_fresh_fragment_merges_back():
+    tracker = ClusterTracker(confirm_frames=3)
+    for _ in range(3):
+        (object_id,) = tracker.update(np.arange(20), np.zeros(20, dtype=int)).tolist()
+    assert tracker.confirmed_.tolist() == [True]
+    # the network grows: 8 of its nodes and 10 new ones split off (a new, unconfirmed id) ...
+    nodes = np.arange(30) + np.repeat([0, 80], [20, 10])
+    ids = tracker.update(nodes, np.repeat([0, 1], [12, 18])).tolist()
+    assert ids[0] == object_id and ids[1] != object_id
+    assert tracker.confirmed_.tolist() == [True, False]
+    # ... and merge back: the fragment brought more nodes, the object keeps its id and status
+    ids = tracker.update(nodes, np.zeros(30, dtype=int)).tolist()
+    assert ids == [object_id]
+    assert tracker.confirmed_.tolist() == [True]
+
+
 def test_object_labels_keep_confirmed_clusters_of_min_size_only():
     labels = np.array([0, 0, 0, 1, 1, 1, 2, -1])
     assert object_labels(labels, np.array([True, False, True]), 2).tolist() == [
