@@ -158,6 +158,30 @@ def test_lone_fragments_are_no_segment_and_fragments_by_a_surface_join_it() -> N
     assert (labels[n_plane + 1:] == -1).all()  # the chain has no larger neighbour
 
 
+def test_a_chain_of_fragments_hanging_off_a_surface_joins_it_link_by_link() -> None:
+    # a flat 5 x 5 patch and, off its corner, a chain of four nodes whose normals turn by 50
+    # degrees from node to node (straddling a crease): four one-node patches, only the first
+    # next to the surface
+    side = 5
+    grid = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
+    plane = np.column_stack([grid.reshape(-1, 2) * 0.01, np.ones(side * side)])
+    index = np.arange(side * side).reshape(side, side)
+    plane_edges = np.vstack([np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
+                             np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    chain = np.column_stack([0.05 + 0.01 * np.arange(4), np.zeros(4), np.ones(4)])
+    turn = np.radians(50.0 * np.arange(1, 5))
+    positions = np.vstack([plane, chain])
+    normals = np.vstack([np.tile([0.0, 0.0, -1.0], (side * side, 1)),
+                         np.column_stack([np.sin(turn), np.zeros(4), -np.cos(turn)])])
+    n_plane = side * side
+    links = np.arange(n_plane, n_plane + 4)
+    edges = np.vstack([plane_edges, [[index[-1, 0], links[0]]],
+                       np.column_stack([links[:-1], links[1:]])])
+    result = segment_network(positions, normals, edges, SegmentationParams())
+    assert len(np.unique(result.patches[links])) == 4
+    assert result.n_segments == 1 and (result.labels == 0).all()
+
+
 def _two_sides_of_a_gap(tilt_deg: float, seen_through_the_gap: bool) -> tuple:
     """Two 5 x 6 cm grids of nodes at 0.6 m, the sides x < -1 cm and x > 1 cm of a fold along
     x = 0 (tilt > 0: a ridge toward the sensor, convex; < 0: a valley, concave), with no edge
