@@ -375,34 +375,11 @@ def _absorb_fragments(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
     """Segments below ``min_nodes`` nodes join the adjacent larger segment with the most convex
     edges to them (then the most edges). Only small-to-large moves, so nothing bridges; repeated
     while any moves, so a chain of fragments (nodes straddling a crease, one node wide) joins
-    the segment at its end link by link instead of being left out."""
-    while True:
-        moved = _absorb_fragments_once(labels, edges, convex, min_nodes)
-        if moved is labels:
-            return labels
-        labels = moved
-
-
-def _absorb_fragments_once(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
-                           min_nodes: int) -> np.ndarray:
-    """One round of `_absorb_fragments`; ``labels`` itself when nothing moves."""
-    n_labels = int(labels.max()) + 1
-    small = np.bincount(labels, minlength=n_labels) < min_nodes
-    a, b = labels[edges[:, 0]], labels[edges[:, 1]]
-    source = np.concatenate([a, b])
-    target = np.concatenate([b, a])
-    edge_convex = np.concatenate([convex, convex])
-    moving = small[source] & ~small[target]
-    if not moving.any():
+    the segment at its end link by link instead of being left out
+    (`kernels.regions.absorb_fragments`)."""
+    if labels.size == 0:
         return labels
-    pair = source[moving].astype(np.int64) * n_labels + target[moving]
-    pairs, pair_of_edge = np.unique(pair, return_inverse=True)
-    score = (np.bincount(pair_of_edge, weights=edge_convex[moving]) * (len(edges) + 1)
-             + np.bincount(pair_of_edge))
-    fragment, host = pairs // n_labels, pairs % n_labels
-    best_first = np.lexsort((-score, fragment))
-    first = np.ones(best_first.size, dtype=bool)
-    first[1:] = fragment[best_first][1:] != fragment[best_first][:-1]
-    destination = np.arange(n_labels)
-    destination[fragment[best_first][first]] = host[best_first][first]
-    return destination[labels]
+    small = np.bincount(labels) < min_nodes
+    # only edges at a fragment can move one (large segments never become small)
+    at_fragment = small[labels[edges[:, 0]]] | small[labels[edges[:, 1]]]
+    return RK.absorb_fragments(labels, edges[at_fragment], convex[at_fragment], min_nodes)
