@@ -433,37 +433,3 @@ def node_roughness(n, edges, steepest):
             roughness[edges[k, 1]] = value
     return roughness
 
-
-@njit(cache=True)
-def absorb_fragments(labels, edges, convex, min_nodes):
-    """Segments below ``min_nodes`` nodes join, all at once, the adjacent segment of at least
-    ``min_nodes`` they share the most convex edges with (then the most edges, then the lowest
-    label); repeated until none moves. labels: (n,) int, every node in a segment; edges: (E, 2)
-    node pairs; convex: (E,) bool. Returns the new (n,) int64 labels."""
-    labels = labels.astype(np.int64)
-    n_labels = labels.max() + 1 if labels.size else 0
-    n_edges = edges.shape[0]
-    while True:
-        sizes = np.zeros(n_labels, dtype=np.int64)
-        for label in labels:
-            sizes[label] += 1
-        score = Dict.empty(key_type=types.int64, value_type=types.float64)
-        for e in range(n_edges):
-            for side in range(2):
-                fragment, host = labels[edges[e, side]], labels[edges[e, 1 - side]]
-                if sizes[fragment] < min_nodes <= sizes[host]:
-                    key = fragment * n_labels + host
-                    score[key] = score.get(key, 0.0) + convex[e] * (n_edges + 1.0) + 1.0
-        if len(score) == 0:
-            return labels
-        best_score = np.full(n_labels, -1.0)
-        best_host = np.full(n_labels, -1, dtype=np.int64)
-        for key, value in score.items():
-            fragment, host = key // n_labels, key % n_labels
-            if value > best_score[fragment] or (value == best_score[fragment]
-                                                and host < best_host[fragment]):
-                best_score[fragment] = value
-                best_host[fragment] = host
-        for i in range(labels.size):
-            if best_host[labels[i]] >= 0:
-                labels[i] = best_host[labels[i]]

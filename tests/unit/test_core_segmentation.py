@@ -158,7 +158,7 @@ def test_lone_fragments_are_no_segment_and_fragments_by_a_surface_join_it() -> N
     assert (labels[n_plane + 1:] == -1).all()  # the chain has no larger neighbour
 
 
-def test_a_chain_of_fragments_hanging_off_a_surface_joins_it_link_by_link() -> None:
+def test_a_chain_of_fragments_joins_the_one_surface_it_hangs_off_not_two() -> None:
     # a flat 5 x 5 patch and, off its corner, a chain of four nodes whose normals turn by 50
     # degrees from node to node (straddling a crease): four one-node patches, only the first
     # next to the surface
@@ -179,7 +179,19 @@ def test_a_chain_of_fragments_hanging_off_a_surface_joins_it_link_by_link() -> N
                        np.column_stack([links[:-1], links[1:]])])
     result = segment_network(positions, normals, edges, SegmentationParams())
     assert len(np.unique(result.patches[links])) == 4
-    assert result.n_segments == 1 and (result.labels == 0).all()
+    assert result.n_segments == 1 and (result.labels == 0).all()  # hanging off: joins whole
+    # a second patch at the chain's far end: the chain is the crease between two surfaces; its
+    # ends join their neighbours, the links between them are no one's (nothing bridges)
+    second = plane + np.array([0.09, 0.0, 0.0])
+    positions = np.vstack([positions, second])
+    normals = np.vstack([normals, np.tile([0.0, 0.0, -1.0], (side * side, 1))])
+    offset = n_plane + 4
+    edges = np.vstack([edges, plane_edges + offset, [[links[-1], offset]]])
+    labels = segment_network(positions, normals, edges, SegmentationParams()).labels
+    assert labels[links[0]] == labels[0] and labels[links[-1]] == labels[offset]
+    assert labels[0] != labels[offset]
+    assert (labels[links[1:-1]] == -1).all()
+
 
 
 def _two_sides_of_a_gap(tilt_deg: float, seen_through_the_gap: bool) -> tuple:
