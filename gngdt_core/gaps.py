@@ -209,21 +209,13 @@ def _outside_hulls(image: np.ndarray, labels: np.ndarray, segments: np.ndarray,
     the image (``image``: (n, 2) x/z, y/z of every node). A hull, not the distance from the
     segment's centre: an opening seen at a slant is a wide ellipse, and a rim node past its
     narrow end can be nearer the centre than the inside's node it faces (ycbv's mug)."""
-    from scipy.spatial import ConvexHull
-
     outside = np.zeros(len(points), dtype=bool)
     by_segment = np.argsort(labels, kind="stable")
     starts = np.searchsorted(labels[by_segment], np.arange(int(labels.max()) + 2))
     for segment in np.unique(segments):
         asked = segments == segment
         members = image[by_segment[starts[segment]:starts[segment + 1]]]
-        if len(members) < 3:
-            outside[asked] = True  # no area: nothing lies inside it
-            continue
-        # joggled: a segment whose nodes line up on the image still gets a (thin) hull
-        facets = ConvexHull(members, qhull_options="QJ").equations
-        signed = image[points[asked]] @ facets[:, :2].T + facets[:, 2]
-        outside[asked] = (signed > 0.0).any(axis=1)
+        outside[asked] = RK.outside_convex_hull(members, image[points[asked]])
     return outside
 
 

@@ -377,59 +377,11 @@ def _absorb_fragments(labels: np.ndarray, edges: np.ndarray, convex: np.ndarray,
     A chain of fragments (nodes straddling a crease, one node wide) that touches one larger
     segment only hangs off it and joins it whole; fragments next to several larger segments
     (the crease between them) each join the adjacent one they share the most convex edges
-    with (then the most edges), and the rest of their chain is no one's."""
-    n_labels = int(labels.max()) + 1 if labels.size else 0
-    small = np.bincount(labels, minlength=n_labels) < min_nodes
-    if not small.any():
+    with (then the most edges), and the rest of their chain is no one's
+    (`kernels.regions.absorb_fragments`)."""
+    if labels.size == 0:
         return labels
-    a, b = labels[edges[:, 0]], labels[edges[:, 1]]
-    chain = _fragment_chains(a, b, small)
-    # the larger segments each chain touches: one is the segment it hangs off
-    across = small[a] != small[b]
-    fragment, host = np.where(small[a], a, b)[across], np.where(small[a], b, a)[across]
-    touching = np.unique(chain[fragment].astype(np.int64) * n_labels + host)
-    hosts = np.bincount(touching // n_labels, minlength=n_labels)
-    sole_host = np.full(n_labels, -1, dtype=np.int64)
-    sole_host[touching // n_labels] = touching % n_labels
-    hanging = small & (hosts[chain] == 1)
-    destination = np.arange(n_labels)
-    destination[hanging] = sole_host[chain[hanging]]
-    next_to_one = _absorb_next_to_larger(labels, a, b, convex, small)
-    return np.where(hanging[labels], destination[labels], next_to_one)
-
-
-def _fragment_chains(a: np.ndarray, b: np.ndarray, small: np.ndarray) -> np.ndarray:
-    """(n_labels,) chain of each segment: fragments linked by edges (a[k], b[k]) between two
-    fragments share one; every other segment is a chain of its own."""
-    from scipy.sparse import coo_array
-    from scipy.sparse.csgraph import connected_components
-
-    linked = small[a] & small[b] & (a != b)
-    n_labels = small.size
-    graph = coo_array((np.ones(int(linked.sum()), dtype=np.int8), (a[linked], b[linked])),
-                      shape=(n_labels, n_labels)).tocsr()
-    return connected_components(graph, directed=False)[1]
-
-
-def _absorb_next_to_larger(labels: np.ndarray, a: np.ndarray, b: np.ndarray,
-                           convex: np.ndarray, small: np.ndarray) -> np.ndarray:
-    """(n,) labels with each fragment (``small``) next to a larger segment moved into the one
-    it shares the most convex edges (a[k], b[k]) with, then the most edges."""
-    n_labels = small.size
-    source = np.concatenate([a, b])
-    target = np.concatenate([b, a])
-    edge_convex = np.concatenate([convex, convex])
-    moving = small[source] & ~small[target]
-    if not moving.any():
-        return labels
-    pair = source[moving].astype(np.int64) * n_labels + target[moving]
-    pairs, pair_of_edge = np.unique(pair, return_inverse=True)
-    score = (np.bincount(pair_of_edge, weights=edge_convex[moving]) * (len(a) + 1)
-             + np.bincount(pair_of_edge))
-    fragment, host = pairs // n_labels, pairs % n_labels
-    best_first = np.lexsort((-score, fragment))
-    first = np.ones(best_first.size, dtype=bool)
-    first[1:] = fragment[best_first][1:] != fragment[best_first][:-1]
-    destination = np.arange(n_labels)
-    destination[fragment[best_first][first]] = host[best_first][first]
-    return destination[labels]
+    small = np.bincount(labels) < min_nodes
+    # only edges at a fragment can move one
+    at_fragment = small[labels[edges[:, 0]]] | small[labels[edges[:, 1]]]
+    return RK.absorb_fragments(labels, edges[at_fragment], convex[at_fragment], min_nodes)

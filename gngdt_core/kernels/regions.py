@@ -433,3 +433,100 @@ def node_roughness(n, edges, steepest):
             roughness[edges[k, 1]] = value
     return roughness
 
+
+
+@njit(cache=True)
+def absorb_fragments(labels, edges, convex, min_nodes):
+    """Fragments (segments below ``min_nodes`` nodes) join a larger segment, never bridging
+    two. Fragments linked by edges form chains; a chain that touches exactly one larger segment
+    joins it whole; in any other chain each fragment next to a larger segment joins the one it
+    shares the most convex edges with (then the most edges, then the lowest label).
+
+    labels: (n,) int segment of every node (>= 0); edges: (E, 2) node pairs; convex: (E,) bool.
+    Returns the new (n,) int64 labels."""
+    labels = labels.astype(np.int64)
+    n_labels = labels.max() + 1 if labels.size else 0
+    sizes = np.zeros(n_labels, dtype=np.int64)
+    for label in labels:
+        sizes[label] += 1
+    small = sizes < min_nodes
+    chain = np.arange(n_labels)
+    for e in range(edges.shape[0]):
+        a, b = labels[edges[e, 0]], labels[edges[e, 1]]
+        if small[a] and small[b]:
+            ra, rb = _find(chain, a), _find(chain, b)
+            if ra != rb:
+                chain[max(ra, rb)] = min(ra, rb)
+    # the larger segment each chain touches (-2: several), and each fragment's best neighbour
+    sole_host = np.full(n_labels, -1, dtype=np.int64)
+    score = Dict.empty(key_type=types.int64, value_type=types.float64)
+    for e in range(edges.shape[0]):
+        for side in range(2):
+            fragment, host = labels[edges[e, side]], labels[edges[e, 1 - side]]
+            if not small[fragment] or small[host]:
+                continue
+            root = _find(chain, fragment)
+            if sole_host[root] == -1:
+                sole_host[root] = host
+            elif sole_host[root] != host:
+                sole_host[root] = -2
+            key = fragment * n_labels + host
+            score[key] = score.get(key, 0.0) + convex[e] * (edges.shape[0] + 1.0) + 1.0
+    best_score = np.full(n_labels, -1.0)
+    destination = np.arange(n_labels)
+    for key, value in score.items():
+        fragment, host = key // n_labels, key % n_labels
+        if value > best_score[fragment] or (value == best_score[fragment]
+                                            and host < destination[fragment]):
+            best_score[fragment] = value
+            destination[fragment] = host
+    for label in range(n_labels):
+        if small[label] and sole_host[_find(chain, label)] >= 0:
+            destination[label] = sole_host[_find(chain, label)]
+    return destination[labels]
+
+
+@njit(cache=True)
+def outside_convex_hull(points, queries):
+    """(Q,) bool: which ``queries`` (Q, 2) lie strictly outside the convex hull of ``points``
+    (P >= 1, 2) (Andrew's monotone chain; when the points span no area the hull is a segment
+    or a point and anything off it is outside)."""
+    by_y = np.argsort(points[:, 1], kind="mergesort")
+    order = by_y[np.argsort(points[by_y, 0], kind="mergesort")]  # by x, then y
+    n = len(points)
+    hull = np.empty((2 * n + 1, 2))
+    size = 0
+    for k in range(n):  # lower hull, left to right
+        while size >= 2 and _turn(hull[size - 2], hull[size - 1], points[order[k]]) <= 0.0:
+            size -= 1
+        hull[size] = points[order[k]]
+        size += 1
+    lower = size + 1
+    for k in range(n - 2, -1, -1):  # upper hull, right to left
+        while size >= lower and _turn(hull[size - 2], hull[size - 1], points[order[k]]) <= 0.0:
+            size -= 1
+        hull[size] = points[order[k]]
+        size += 1
+    size = max(size - 1, 1)  # the last point is the first
+    outside = np.zeros(len(queries), dtype=np.bool_)
+    for q in range(len(queries)):
+        if size < 3:  # no area: only what lies on the segment (or the point) is inside
+            outside[q] = not _on_segment(hull[0], hull[size - 1], queries[q])
+            continue
+        for k in range(size):
+            if _turn(hull[k], hull[(k + 1) % size], queries[q]) < 0.0:
+                outside[q] = True
+                break
+    return outside
+
+
+@inlined
+def _turn(o, a, b):
+    """Twice the signed area of (o, a, b): > 0 when b lies left of o -> a."""
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+
+@inlined
+def _on_segment(a, b, q):
+    return (_turn(a, b, q) == 0.0 and min(a[0], b[0]) <= q[0] <= max(a[0], b[0])
+            and min(a[1], b[1]) <= q[1] <= max(a[1], b[1]))
