@@ -409,3 +409,29 @@ def test_pairs_fanning_out_of_one_node_do_not_join_across_a_gap() -> None:
     assert len(np.unique(result.labels[kept & ~far_side])) == 1
     near_side_label = result.labels[~far_side][0]
     assert near_side_label not in result.labels[far_side]
+
+
+def test_outside_convex_hull_agrees_with_qhull() -> None:
+    from scipy.spatial import ConvexHull, Delaunay
+
+    from gngdt_core.kernels.regions import outside_convex_hull
+
+    rng = np.random.default_rng(3)
+    compared = 0
+    for trial in range(200):
+        points = rng.normal(size=(int(rng.integers(3, 60)), 2)) * rng.uniform(0.1, 2.0, 2)
+        if trial % 4 == 0:
+            points = np.round(points, 1)  # repeated and collinear points
+        queries = rng.normal(size=(40, 2)) * 1.5
+        facets = ConvexHull(points).equations
+        clear = np.abs((queries @ facets[:, :2].T + facets[:, 2]).max(axis=1)) > 1e-9
+        expected = Delaunay(points).find_simplex(queries) < 0
+        assert (outside_convex_hull(points, queries) == expected)[clear].all()
+        compared += int(clear.sum())
+    assert compared > 7000
+    # no area: a segment holds only what lies on it, a point only itself
+    line = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]])
+    assert outside_convex_hull(line, np.array([[0.5, 0.5], [0.5, 0.6], [3.0, 3.0]])).tolist() == [
+        False, True, True]
+    assert outside_convex_hull(np.ones((2, 2)), np.array([[1.0, 1.0], [1.0, 2.0]])).tolist() == [
+        False, True]
