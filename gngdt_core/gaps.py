@@ -33,13 +33,12 @@ RIM_SHARE = 0.2
 RIM_PAIRS = 5
 #: a segment this share of whose nodes across gaps face others from behind and from inside them
 #: on the image is seen through an opening (a mug's inside past its glossy rim, which may be cut
-#: into pieces) and joins the segment it faces most; chosen on ycbv's mug (0.912 -> 0.941
-#: learned from scratch, 0.879 -> 0.912 streamed, seed-0 networks); at 0.7 the gelatin box
-#: joined the mug in one streamed frame
+#: into pieces); chosen on ycbv's mug (0.912 -> 0.941 learned from scratch, 0.879 -> 0.912
+#: streamed, seed-0 networks); at 0.7 the gelatin box joined the mug in one streamed frame
 ENCLOSED_SHARE = 0.8
 #: ... and joins each segment that this share of those nodes face (the rim's pieces, the wall
 #: below it), not just the one most face: set to RIM_SHARE before measuring; ycbv from scratch
-#: 0.917 -> 0.930 (5 seeds), mosd unchanged
+#: 0.917 -> 0.930 (5 seeds, cached networks), mosd unchanged
 ENCLOSING_SHARE = 0.2
 #: ... from at least this many distinct nodes on each side: pairs fanning out of one node are one
 #: node's word (a streamed ycbv network tied the foam brick to the mug by three pairs from one

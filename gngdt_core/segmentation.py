@@ -62,11 +62,10 @@ position topology is here):
    a mug's inside past its glossy rim, the rim perhaps cut into pieces), and
    ``ENCLOSING_SHARE`` of them face the other; here a line that runs partly over the gap and
    otherwise behind a nearer surface (from the inside to the rim, behind the container's wall)
-   counts too. Such rim
-   joins hold whatever creases the container's mouth adds; other joins go surest first and
-   only while at most ``crease_share`` of the crossing pairs between the two growing unions
-   are creases. Segments that already share ``min_boundary_edges`` position
-   edges were judged in step 4 and are left as they are.
+   counts too. Such rim joins hold whatever creases the container's mouth adds; other joins
+   go surest first and only while at most ``crease_share`` of the crossing pairs between the
+   two growing unions are creases. Segments that already share ``min_boundary_edges``
+   position edges were judged in step 4 and are left as they are.
 7. Roles (on demand: `Segmentation.roles`, `Segmentation.object_labels`;
    `gngdt_core.supports.segment_roles`): each segment is a support (step 2b), clutter
    (background structure reaching the edge of the view or longer than ``max_object_extent_m``,
