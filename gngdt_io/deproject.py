@@ -53,9 +53,11 @@ class Deprojector:
         return self._slopes
 
     def __call__(
-        self, depth_mm: np.ndarray, color: np.ndarray | None, intrinsics: CameraIntrinsics
+        self, depth_mm: np.ndarray, color: np.ndarray | None, intrinsics: CameraIntrinsics,
+        max_points: int | None = None, rng: np.random.Generator | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None]:
-        """Valid pixels of a depth image as points.
+        """Valid pixels of a depth image as points (with ``max_points``: a uniform random
+        subset of at most that many of them, drawn with ``rng`` before deprojecting).
 
         depth_mm: (H, W) uint16 millimetres (or float, NaN allowed); 0, NaN and depths outside
         [min_depth, max_depth] are dropped. color: (H, W, 3) uint8 registered to depth, or None.
@@ -63,6 +65,8 @@ class Deprojector:
         pixel order.
         """
         z, valid = self._depth_metres(depth_mm, color, intrinsics)
+        if max_points is not None and valid.size > max_points:
+            valid = valid.take(uniform_subset(valid.size, max_points, rng))
         slope_x, slope_y = self.slopes_for(intrinsics)
         # Flat indices and take() are ~10x faster than boolean indexing of the (H, W, k) arrays.
         z_valid = z.take(valid)
@@ -149,6 +153,23 @@ def voxel_downsample(
     return mean_positions, mean_colors
 
 
+def uniform_subset(n: int, k: int, rng: np.random.Generator | None) -> np.ndarray:
+    """(k,) int64 sorted indices: a uniform random k-subset of ``range(n)``, 0 < k < n.
+
+    Each index is drawn with a probability a little above k/n and the surplus dropped at
+    random: given how many were drawn, the draw is a uniform subset of that size, and so is
+    what is left of it (about 3x faster than ``rng.choice(n, k, replace=False)`` and a sort at
+    n = 300,000, k = 50,000)."""
+    if not 0 < k < n:
+        raise ValueError(f"need 0 < k < n, got k={k}, n={n}")
+    rng = rng or np.random.default_rng()
+    share = min(1.0, (k + 4.0 * np.sqrt(k) + 10.0) / n)
+    drawn = np.flatnonzero(rng.random(n, dtype=np.float32) < np.float32(share))
+    if drawn.size < k:  # fewer than expected by over 4 standard deviations
+        return np.sort(rng.choice(n, size=k, replace=False))
+    return np.delete(drawn, rng.choice(drawn.size, size=drawn.size - k, replace=False))
+
+
 def cap_points(
     positions: np.ndarray,
     colors: np.ndarray | None,
@@ -160,8 +181,8 @@ def cap_points(
         raise ValueError(f"max_points must be positive, got {max_points}")
     if len(positions) <= max_points:
         return positions, colors
-    keep = np.sort(rng.choice(len(positions), size=max_points, replace=False))
-    return positions[keep], None if colors is None else colors[keep]
+    keep = uniform_subset(len(positions), max_points, rng)
+    return positions.take(keep, axis=0), None if colors is None else colors.take(keep, axis=0)
 
 
 @dataclass
@@ -198,10 +219,13 @@ class FrameToCloud:
         depth = frame.depth
         if self.options.veil_ratio > 0:
             depth = np.where(veil_pixels(depth, self.options.veil_ratio), 0, depth)
-        positions, colors = self._deproject(depth, frame.color, frame.intrinsics)
-        if self.options.voxel_size_m is not None:
+        if self.options.voxel_size_m is None:  # cap the pixels: only those kept are deprojected
+            positions, colors = self._deproject(depth, frame.color, frame.intrinsics,
+                                                self._max_points, self._rng)
+        else:
+            positions, colors = self._deproject(depth, frame.color, frame.intrinsics)
             positions, colors = voxel_downsample(positions, colors, self.options.voxel_size_m)
-        if len(positions) > self._max_points:
-            positions, colors = cap_points(positions, colors, self._max_points, self._rng)
+            if len(positions) > self._max_points:
+                positions, colors = cap_points(positions, colors, self._max_points, self._rng)
         assert colors is not None
         return positions, colors

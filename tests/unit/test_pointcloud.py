@@ -5,8 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_io.deproject import Deprojector, cap_points, ray_map, voxel_downsample
-from gngdt_io.frame import CameraIntrinsics
+from gngdt_io.deproject import (
+    Deprojector,
+    cap_points,
+    ray_map,
+    uniform_subset,
+    voxel_downsample,
+)
+from gngdt_io.frame import CameraIntrinsics, Frame
 
 INTRINSICS = CameraIntrinsics(width=4, height=3, fx=2.0, fy=4.0, cx=1.5, cy=1.0)
 
@@ -102,6 +108,43 @@ def test_cap_points_keeps_a_subset_of_the_given_size() -> None:
     np.testing.assert_array_equal(capped_colors, colors[rows])
     same, _ = cap_points(positions, colors, 1000, np.random.default_rng(1))
     assert same is positions
+
+
+def test_uniform_subset_draws_every_index_and_pair_equally_often() -> None:
+    rng = np.random.default_rng(7)
+    n, k, trials = 40, 8, 20_000
+    included = np.zeros(n)
+    both_first = 0
+    for _ in range(trials):
+        subset = uniform_subset(n, k, rng)
+        assert subset.shape == (k,) and (np.diff(subset) > 0).all()
+        assert subset[0] >= 0 and subset[-1] < n
+        included[subset] += 1
+        both_first += int(subset[0] == 0 and subset[1] == 1)
+    share = included / trials  # k / n = 0.2 each; one standard deviation is 0.0028
+    assert np.abs(share - k / n).max() < 0.015
+    pair = k * (k - 1) / (n * (n - 1))
+    assert abs(both_first / trials - pair) < 0.01
+    with pytest.raises(ValueError, match="0 < k < n"):
+        uniform_subset(5, 5, rng)
+
+
+def test_a_capped_cloud_is_a_subset_of_the_full_cloud() -> None:
+    from gngdt_io.deproject import CloudOptions, FrameToCloud
+
+    # a slanted wall, every pixel its own colour, some pixels without depth
+    height, width = 30, 40
+    rng = np.random.default_rng(3)
+    depth = (800 + 10 * np.arange(width)[None, :] + np.zeros((height, 1))).astype(np.uint16)
+    depth[rng.random((height, width)) < 0.1] = 0
+    color = rng.integers(0, 256, (height, width, 3), dtype=np.uint8)
+    frame = Frame(0, 1, color, depth, CameraIntrinsics(width, height, 50.0, 50.0, 20.0, 15.0))
+    full_positions, full_colors = FrameToCloud(CloudOptions())(frame)
+    positions, colors = FrameToCloud(CloudOptions(max_points=500))(frame)
+    assert positions.shape == (500, 3) and colors.shape == (500, 3)
+    full = {tuple(row) for row in np.hstack([full_positions, full_colors.astype(np.float32)])}
+    assert all(tuple(row) in full for row in np.hstack([positions, colors.astype(np.float32)]))
+    assert len({tuple(row) for row in positions}) == 500
 
 
 def test_a_voxel_too_small_for_the_extent_is_refused_not_wrapped() -> None:
