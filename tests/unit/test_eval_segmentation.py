@@ -266,3 +266,20 @@ def test_report_on_real_labelled_frames(tmp_path: Path) -> None:
             expected += len(np.unique(truth[(truth >= 2) & (depth > 0)]))
         summary = data["methods"]["gngdt online"]["summary"]
         assert summary["truth_segments"] == expected > 0
+
+
+def test_the_mug_and_boxes_of_real_frames_come_out_whole(tmp_path: Path) -> None:
+    """A floor under the segmentation's quality on ycbv_0000's ten real frames, both modes,
+    seed 0: 0.94 mean best IoU and no object fragmented or merged when this was written (5-seed
+    means 0.933 / 0.939); the bound leaves room for a seed's worth of variation, not for the
+    mug's inside and outside coming apart in half the frames (0.80 did that)."""
+    if not LABELLED.is_dir():
+        pytest.skip(f"real labelled frames not found at {LABELLED} (the repository's sibling "
+                    "../shared)")
+    data = run_eval(LABELLED / "ycbv_0000", tmp_path / "ycbv", "--independent", "--online",
+                    "--no-peer", "--figures", "0", "--seed", "0")
+    for method in ("gngdt independent", "gngdt online"):
+        summary = data["methods"][method]["summary"]
+        assert summary["truth_segments"] == 30
+        assert summary["mean_best_iou"] >= 0.88, method
+        assert summary["fragmented"] <= 3 and summary["merged"] <= 3, method
