@@ -120,15 +120,22 @@ def test_elevations_tell_convex_flat_concave_and_step() -> None:
     assert max(rises["step"]) == pytest.approx(np.sin(np.radians(45.0)))
 
 
-def test_one_concave_edge_does_not_split_a_flat_patch() -> None:
-    # a 10 x 10 grid on a plane with one edge's end normal tilted: the majority rule keeps it
-    side = 10
+def _flat_grid(side: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A side x side grid of nodes 1 cm apart on the plane z = 1 m: positions (side^2, 3),
+    node index (side, side), 4-neighbour edges (E, 2)."""
     grid = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
     positions = np.column_stack([grid.reshape(-1, 2) * 0.01, np.ones(side * side)])
-    normals = np.tile([0.0, 0.0, -1.0], (side * side, 1))
     index = np.arange(side * side).reshape(side, side)
     edges = np.vstack([np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
                        np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    return positions, index, edges
+
+
+def test_one_concave_edge_does_not_split_a_flat_patch() -> None:
+    # a 10 x 10 grid on a plane with one edge's end normal tilted: the majority rule keeps it
+    side = 10
+    positions, _, edges = _flat_grid(side)
+    normals = np.tile([0.0, 0.0, -1.0], (side * side, 1))
     normals[45] = [np.sin(0.6), 0.0, -np.cos(0.6)]
     result = segment_network(positions, normals, edges)
     assert result.n_segments == 1
@@ -139,11 +146,7 @@ def test_lone_fragments_are_no_segment_and_fragments_by_a_surface_join_it() -> N
     # a flat 5 x 5 patch, one node hanging off it, and a separate chain of three nodes whose
     # normals turn by 60 degrees from node to node (a cable): three one-node patches
     side = 5
-    grid = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
-    plane = np.column_stack([grid.reshape(-1, 2) * 0.01, np.ones(side * side)])
-    index = np.arange(side * side).reshape(side, side)
-    plane_edges = np.vstack([np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
-                             np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    plane, index, plane_edges = _flat_grid(side)
     hanging = [[0.05, 0.0, 1.0]]
     chain = [[0.5, 0.0, 1.0], [0.51, 0.0, 1.0], [0.52, 0.0, 1.0]]
     positions = np.vstack([plane, hanging, chain])
@@ -163,11 +166,7 @@ def test_a_chain_of_fragments_joins_the_one_surface_it_hangs_off_not_two() -> No
     # degrees from node to node (straddling a crease): four one-node patches, only the first
     # next to the surface
     side = 5
-    grid = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
-    plane = np.column_stack([grid.reshape(-1, 2) * 0.01, np.ones(side * side)])
-    index = np.arange(side * side).reshape(side, side)
-    plane_edges = np.vstack([np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
-                             np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    plane, index, plane_edges = _flat_grid(side)
     chain = np.column_stack([0.05 + 0.01 * np.arange(4), np.zeros(4), np.ones(4)])
     turn = np.radians(50.0 * np.arange(1, 5))
     positions = np.vstack([plane, chain])
@@ -191,7 +190,6 @@ def test_a_chain_of_fragments_joins_the_one_surface_it_hangs_off_not_two() -> No
     assert labels[links[0]] == labels[0] and labels[links[-1]] == labels[offset]
     assert labels[0] != labels[offset]
     assert (labels[links[1:-1]] == -1).all()
-
 
 
 def _two_sides_of_a_gap(tilt_deg: float, seen_through_the_gap: bool) -> tuple:
