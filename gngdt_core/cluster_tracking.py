@@ -143,7 +143,7 @@ class ClusterTracker:
                 offers.append((int(shares[label]), label, track.track_id))
         for _, label, track_id in sorted(offers, key=lambda offer: (-offer[0], offer[2])):
             current = int(assigned[label])
-            if current >= 0 and (current not in by_id or by_id[current].confirmed):
+            if current >= 0 and by_id[current].confirmed:
                 continue
             assigned[label] = track_id
 

@@ -434,7 +434,6 @@ def node_roughness(n, edges, steepest):
     return roughness
 
 
-
 @njit(cache=True)
 def absorb_fragments(labels, edges, convex, min_nodes):
     """Fragments (segments below ``min_nodes`` nodes) join a larger segment, never bridging
@@ -481,8 +480,10 @@ def absorb_fragments(labels, edges, convex, min_nodes):
             best_score[fragment] = value
             destination[fragment] = host
     for label in range(n_labels):
-        if small[label] and sole_host[_find(chain, label)] >= 0:
-            destination[label] = sole_host[_find(chain, label)]
+        if small[label]:
+            host = sole_host[_find(chain, label)]
+            if host >= 0:
+                destination[label] = host
     return destination[labels]
 
 
