@@ -86,6 +86,8 @@ ABLATIONS: dict[str, tuple[dict, dict]] = {
     "fixed budget 4000 nodes, lambda 50 (track-research)": (
         {}, {"resolution_m": 0, "max_nodes": 4000, "lambda_": 50}),
 }
+#: a busy learner drops up to this many frames after each it takes (`busy_learner`)
+BUSY_DROPS = 8
 #: depth range used by both methods, metres
 DEPTH_RANGE = (0.3, 6.0)
 GHOST_SAMPLE = 10_000
@@ -225,8 +227,10 @@ def ghost_share(model: GNGDT, camera_points: np.ndarray, pose: np.ndarray | None
 
 
 def run_ours(frames: list[Frame], steps: int, seed: int, first_steps: int,
-             tracker: dict | None = None, map_overrides: dict | None = None) -> Run:
-    """The learner with tracking (see the module docstring)."""
+             tracker: dict | None = None, map_overrides: dict | None = None,
+             stamped: bool = True) -> Run:
+    """The learner with tracking (see the module docstring); ``stamped``: frames carry their
+    capture time (else the tracker predicts one motion per frame)."""
     deproject = Deprojector(*DEPTH_RANGE)
     learner = new_learner(seed, steps, True, tracker, map_overrides, first_steps)
     start = frames[0].pose.matrix  # ours is anchored at the true first pose, as the peer
@@ -236,7 +240,9 @@ def run_ours(frames: list[Frame], steps: int, seed: int, first_steps: int,
         started = time.perf_counter()
         points, colors = deproject(frame.depth, frame.color, frame.intrinsics)
         lap = run.lap("deproject", started) if index else started
-        learned = learner.learn(points, colors, "camera", None, camera=frame.intrinsics)
+        learned = learner.learn(points, colors, "camera", None,
+                                frame.timestamp_ns if stamped else None,
+                                camera=frame.intrinsics)
         result = learner.tracking.last
         if index > 0:
             run.lap("track and learn", lap)
@@ -352,6 +358,7 @@ def walk(scene: str, frames: int, args: argparse.Namespace, o3d) -> None:
     print("  ours per frame, median ms: " + ", ".join(
         f"{stage} {np.median(times) * 1000:.1f}" for stage, times in ours.stages.items())
         + f"; map at the end: {ours.nodes} nodes")
+    busy_learner(sequence, truth, args)
     if args.ablations:
         for name, (tracker, overrides) in ABLATIONS.items():
             variant = run_ours(sequence, args.steps, args.seed, args.first_steps, tracker,
@@ -368,6 +375,26 @@ def walk(scene: str, frames: int, args: argparse.Namespace, o3d) -> None:
     print(ghost_line("learned with no poses (camera frame)",
                      run_mapping(sequence, False, args.steps, args.seed, args.first_steps)),
           flush=True)
+
+
+def busy_learner(sequence: list[Frame], truth: list[np.ndarray],
+                 args: argparse.Namespace) -> None:
+    """Ours on the frames a busy live learner takes: after each, the next 1-8 are dropped
+    (drawn at random), with the frames' stamps (the motion continued over the time since the
+    last tracked frame) and without (one frame's motion: the baseline); the first three are
+    taken (a motion is known before the first drop), then also the first drop."""
+    rng = np.random.default_rng(args.seed)
+    taken = [0, 1, 2]
+    while (following := taken[-1] + 1 + int(rng.integers(1, BUSY_DROPS + 1))) < len(sequence):
+        taken.append(following)
+    early = [0, *taken[3:]]  # frames 1 and 2 dropped too: no motion known at the first drop
+    for name, frames, stamped in (("busy learner: with stamps", taken, True),
+                                  ("- one motion per frame", taken, False),
+                                  ("- frames 1 and 2 dropped too", early, True)):
+        run = run_ours([sequence[i] for i in frames], args.steps, args.seed, args.first_steps,
+                       stamped=stamped)
+        print(trajectory_line(f"{name} ({len(frames)} frames)", run,
+                              [truth[i] for i in frames]), flush=True)
 
 
 def tum(args: argparse.Namespace, o3d) -> None:

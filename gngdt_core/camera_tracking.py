@@ -58,12 +58,13 @@ class CameraTracking:
         self.last, self.problem = None, ""
 
     def locate(self, model: Any, positions: np.ndarray, colors: np.ndarray | None,
-               camera: CameraIntrinsics | None) -> Located:
+               camera: CameraIntrinsics | None, stamp_ns: int | None = None) -> Located:
         """The pose of a cloud (``positions`` (N, 3) float32 metres, camera frame, as its
         depth image's valid pixels deprojected with ``camera``; ``colors`` (N, 3) uint8 or
-        None) in the map ``model`` (a `GNGDT` learned in ``TRACKED_FRAME``, or None)."""
+        None; ``stamp_ns`` its capture time, if known) in the map ``model`` (a `GNGDT` learned
+        in ``TRACKED_FRAME``, or None)."""
         if not self.started or model is None or model.n_nodes_ == 0:
-            self.odometry.reset(np.eye(4))
+            self.odometry.reset(np.eye(4), stamp_ns)
             self.problem = ""
             return Located(np.eye(4), True, None)
         if camera is None:
@@ -72,7 +73,8 @@ class CameraTracking:
             return Located(None, False, None)
         organized, image = organize(positions, colors, camera.width, camera.height, camera.fx,
                                     camera.fy, camera.cx, camera.cy)
-        result = self.odometry.track(organized, image, MapSurface.from_model(model))
+        result = self.odometry.track(organized, image, MapSurface.from_model(model),
+                                     stamp_ns=stamp_ns)
         self.last, self.problem = result, result.reason
         return Located(None if result.lost else result.pose, False, result)
 

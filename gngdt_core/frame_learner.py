@@ -294,7 +294,7 @@ class FrameLearner:
         (both counted); a tracked pose is the tracker's to judge."""
         tracked = self.tracking is not None and pose is None
         if tracked:
-            located = self.tracking.locate(self.model, positions, colors, camera)
+            located = self.tracking.locate(self.model, positions, colors, camera, stamp_ns)
             if located.pose is None:
                 self.counters.frames_lost_tracking = min(
                     self.counters.frames_lost_tracking + 1, MAX_COUNTER)

@@ -26,8 +26,11 @@ does against its volume):
   covered points agree with it, their residual is large, some direction stays unconstrained
   even with colour, or the estimate jumps implausibly far from the prediction.
 
-The prediction is the last tracked pose moved on by the last frame-to-frame motion (constant
-velocity); after a loss, the last tracked pose itself. Parameters: `TrackerParams` (a profile's
+The prediction is the last tracked pose moved on by the last motion between tracked frames
+(constant velocity), continued over the time since the last tracked frame when frames carry
+stamps: frames a busy learner dropped, or frames lost, do not leave it behind (for at most
+``coast_s``). When the alignment from the prediction fails it is tried once more from the last
+tracked pose (the camera may have stopped). Parameters: `TrackerParams` (a profile's
 ``[tracker]`` table). Kernels: `gngdt_core.kernels.odometry`.
 """
 
@@ -107,6 +110,11 @@ class TrackerParams:
     motion_model: bool = param(True, Flag(),
                                "predict with the last motion (constant velocity), else the "
                                "last pose")
+    coast_s: float = param(1.0, _NON_NEGATIVE,
+                           "the last motion is continued over the time since the last tracked "
+                           "frame (dropped or lost frames between), for at most this long or "
+                           "the last motion's own span, seconds (frames without stamps: one "
+                           "motion)")
     inverse_variance: bool = param(False, Flag(),
                                    "weight points by 1 / sigma^2 (else all alike)")
     plane_memory: int = param(200, Interval(int, 0),
@@ -182,8 +190,10 @@ class MapOdometry:
 
     ``MapOdometry(params, **overrides)``: `TrackerParams` (default: its defaults) with any of
     its fields overridden by keyword (validated there). Fitted state: ``pose_`` (4, 4) last
-    tracked pose (None before `reset`), ``velocity_`` (4, 4) last frame-to-frame motion,
-    ``n_tracked_``, ``n_lost_``, ``last_`` (the last `TrackingResult`).
+    tracked pose (None before `reset`), ``velocity_`` (4, 4) the motion between the last two
+    tracked frames, ``motion_span_s_`` the seconds it took (0: unknown), ``stamp_ns_`` the last
+    tracked frame's stamp (None: unknown), ``n_tracked_``, ``n_lost_``, ``last_`` (the last
+    `TrackingResult`).
     """
 
     def __init__(self, params: TrackerParams | None = None, **overrides: Any) -> None:
@@ -196,11 +206,13 @@ class MapOdometry:
 
     # ------------------------------------------------------------------ state
 
-    def reset(self, pose: Any = None) -> MapOdometry:
+    def reset(self, pose: Any = None, stamp_ns: int | None = None) -> MapOdometry:
         """Start over at ``pose`` (4, 4) camera-to-map (None: not started: `track` then
-        starts at the identity)."""
+        starts at the identity), the camera's pose at ``stamp_ns`` (if known)."""
         self.pose_ = None if pose is None else _checked_pose(pose)
         self.velocity_ = np.eye(4)
+        self.motion_span_s_ = 0.0
+        self.stamp_ns_ = stamp_ns
         self.n_tracked_ = 0
         self.n_lost_ = 0
         self.last_: TrackingResult | None = None
@@ -212,6 +224,9 @@ class MapOdometry:
         return {
             "pose": np.full((4, 4), np.nan) if self.pose_ is None else self.pose_.copy(),
             "velocity": self.velocity_.copy(),
+            "stamp_ns": np.array([-1 if self.stamp_ns_ is None else self.stamp_ns_],
+                                 dtype=np.int64),
+            "motion_span_s": np.array([self.motion_span_s_]),
             "counters": np.array([self.n_tracked_, self.n_lost_], dtype=np.int64),
             **self.planes.get_state(),
         }
@@ -226,58 +241,91 @@ class MapOdometry:
             self.planes.set_state(state)
             self.pose_ = None if np.isnan(pose).all() else _checked_pose(pose)
             self.velocity_ = _checked_pose(state["velocity"])
+            # absent from older checkpoints: no stamp known, one motion per frame
+            stamp = int(np.asarray(state.get("stamp_ns", [-1]), dtype=np.int64).reshape(-1)[0])
+            span = float(np.asarray(state.get("motion_span_s", [0.0])).reshape(-1)[0])
+            if not math.isfinite(span) or span < 0:
+                raise ValueError("tracker state: motion_span_s must be a duration")
+            self.stamp_ns_, self.motion_span_s_ = (None if stamp < 0 else stamp), span
         except KeyError as error:
             raise ValueError(f"tracker state: no {error.args[0]!r}") from None
         self.n_tracked_, self.n_lost_ = int(counters[0]), int(counters[1])
         self.last_ = None
         return self
 
-    def predict(self) -> np.ndarray:
-        """(4, 4) the pose expected for the next frame."""
+    def predict(self, stamp_ns: int | None = None) -> np.ndarray:
+        """(4, 4) the pose expected for the next frame (taken at ``stamp_ns``, if known)."""
         pose = np.eye(4) if self.pose_ is None else self.pose_
-        return pose @ self.velocity_ if self.params.motion_model else pose.copy()
+        if not self.params.motion_model:
+            return pose.copy()
+        return pose @ OK.scaled_motion(self.velocity_, self._motions_since(stamp_ns))
+
+    def _motions_since(self, stamp_ns: int | None) -> float:
+        """How many of the last motion fit between the last tracked frame and ``stamp_ns``
+        (one when either stamp is unknown), the time capped by ``coast_s``."""
+        if stamp_ns is None or self.stamp_ns_ is None or self.motion_span_s_ <= 0:
+            return 1.0
+        elapsed = max(0.0, (stamp_ns - self.stamp_ns_) * 1e-9)
+        return min(elapsed, max(self.params.coast_s, self.motion_span_s_)) / self.motion_span_s_
 
     # ------------------------------------------------------------------ tracking
 
     def track(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
-              initial_pose: np.ndarray | None = None) -> TrackingResult:
+              initial_pose: np.ndarray | None = None,
+              stamp_ns: int | None = None) -> TrackingResult:
         """Align one frame to ``surface`` and, when tracked, make it the current pose.
 
         points: (H, W, 3) organized cloud, camera frame (x right, y down, z forward), metres,
         NaN where there is no depth; colors: (H, W, 3) RGB 0..255 registered to it, or None;
-        initial_pose: (4, 4) start of the search instead of the prediction.
+        initial_pose: (4, 4) start of the search instead of the prediction; stamp_ns: the
+        frame's capture time, nanoseconds (the prediction covers the time since the last
+        tracked frame).
         """
         started = time.perf_counter()
-        prediction = self.predict() if initial_pose is None else _checked_pose(initial_pose)
+        prediction = (self.predict(stamp_ns) if initial_pose is None
+                      else _checked_pose(initial_pose))
         if points.ndim != 3 or points.shape[2] != 3:
             raise ValueError(f"points must be an organized (H, W, 3) cloud, got {points.shape}")
         if colors is not None and colors.shape[:2] != points.shape[:2]:
             raise ValueError(f"colors {colors.shape} do not match points {points.shape}")
         if len(surface) < 3:
-            return self._finish(prediction, prediction, "no map", started, {})
+            return self._finish(prediction, prediction, "no map", started, {}, stamp_ns)
+        pose, reason, stats = self._align(points, colors, surface, prediction)
+        last = self.pose_
+        if (reason and reason != "too few points" and initial_pose is None
+                and last is not None and not np.array_equal(prediction, last)):
+            # the camera may have stopped (or turned back) since the motion was measured
+            retry = self._align(points, colors, surface, last)
+            if not retry[1]:
+                prediction, (pose, reason, stats) = last, retry
+        if not reason and self.params.plane_memory and surface.ids is not None:
+            self.planes.remember(surface.positions, surface.normals, surface.ids,
+                                 stats["planes"], stats["inlier_nodes"],
+                                 stats["inlier_residuals"], stats["inlier_sigmas"])
+        return self._finish(prediction, pose, reason, started, stats, stamp_ns)
+
+    def _align(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
+               start: np.ndarray) -> tuple[np.ndarray, str, dict[str, Any]]:
+        """Coarse-to-fine ICP from ``start`` (4, 4): the pose found, why it is not to be
+        trusted ("" when it is) and its statistics."""
         p = self.params
         planes = self.planes.anchors(surface.positions, surface.normals, surface.ids,
-                                     prediction[:3, 3])
+                                     start[:3, 3])
         trust = self._trust(surface, planes)
-        pose, stats, iterations = prediction.copy(), {}, 0
+        pose, stats, iterations = start.copy(), {}, 0
         for stride, steps, gate_m in zip(p.strides, p.iterations, p.gates_m, strict=True):
             frame = self._level_points(points, colors, stride)
             if len(frame[0]) < p.min_points:
-                return self._finish(prediction, pose, "too few points", started,
-                                    dict(stats, points=len(frame[0]), iterations=iterations))
+                return pose, "too few points", dict(stats, points=len(frame[0]),
+                                                    iterations=iterations)
             gate = max(gate_m, p.gate_spacing * surface.spacing)
             pose, pairing, drift, done = self._level(frame, surface, planes[0], trust, pose,
                                                      gate, steps)
             iterations += done
         _, stats = self._iterate(frame, surface, planes[0], trust, pose, gate, False,
                                  pairing if drift <= p.requery_m else None)
-        stats["iterations"] = iterations
-        reason = self._judge(stats, prediction, pose)
-        if not reason and p.plane_memory and surface.ids is not None:
-            self.planes.remember(surface.positions, surface.normals, surface.ids, planes,
-                                 stats["inlier_nodes"], stats["inlier_residuals"],
-                                 stats["inlier_sigmas"])
-        return self._finish(prediction, pose, reason, started, stats)
+        stats["iterations"], stats["planes"] = iterations, planes
+        return pose, self._judge(stats, start, pose), stats
 
     def _trust(self, surface: MapSurface, planes: tuple[np.ndarray, ...]) -> np.ndarray:
         """(N,) each node's weight: the surface's, times (after two tracked frames) its plane's
@@ -428,16 +476,17 @@ class MapOdometry:
         return ""
 
     def _finish(self, prediction: np.ndarray, pose: np.ndarray, reason: str, started: float,
-                stats: dict[str, Any]) -> TrackingResult:
+                stats: dict[str, Any], stamp_ns: int | None) -> TrackingResult:
         lost = bool(reason)
-        if lost:
+        if lost:  # the motion is kept: the next frame is predicted over the time since
             self.n_lost_ += 1
-            self.velocity_ = np.eye(4)  # after a loss, predict no motion
         else:
             pose = OK.orthonormalised(pose)
             if self.pose_ is not None:
                 self.velocity_ = rigid_inverse(self.pose_) @ pose
-            self.pose_ = pose
+                known = stamp_ns is not None and self.stamp_ns_ is not None
+                self.motion_span_s_ = max(0.0, (stamp_ns - self.stamp_ns_) * 1e-9) if known else 0.0
+            self.pose_, self.stamp_ns_ = pose, stamp_ns
             self.n_tracked_ += 1
         result = TrackingResult(
             pose=prediction if lost else pose.copy(), lost=lost, reason=reason,

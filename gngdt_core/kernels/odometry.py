@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 from numba import njit
+from scipy.spatial.transform import Rotation
 
 from gngdt_core.geometry import rigid_inverse
 
@@ -33,6 +34,34 @@ def so3_exp(omega: np.ndarray) -> np.ndarray:
         return np.eye(3) + skew(omega)
     k = skew(omega / angle)
     return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def so3_log(rotation: np.ndarray) -> np.ndarray:
+    """(3,) rotation vector, radians, of a (3, 3) rotation (the inverse of `so3_exp`)."""
+    return Rotation.from_matrix(rotation).as_rotvec()
+
+
+def _left_jacobian(omega: np.ndarray) -> np.ndarray:
+    """(3, 3) SO(3)'s left Jacobian at ``omega`` (3,): it maps a screw's axis part to the
+    translation its exponential makes."""
+    angle = float(np.linalg.norm(omega))
+    k = skew(omega)
+    if angle < 1e-6:
+        return np.eye(3) + k / 2.0 + (k @ k) / 6.0
+    return (np.eye(3) + (1.0 - math.cos(angle)) / angle ** 2 * k
+            + (angle - math.sin(angle)) / angle ** 3 * (k @ k))
+
+
+def scaled_motion(motion: np.ndarray, fraction: float) -> np.ndarray:
+    """(4, 4) the rigid ``motion`` continued for ``fraction`` of itself along its screw: 0 gives
+    the identity, 1 the motion, 2 the motion applied twice (a constant velocity's motion over
+    ``fraction`` times the time ``motion`` took)."""
+    omega = so3_log(motion[:3, :3])
+    axis_part = np.linalg.solve(_left_jacobian(omega), motion[:3, 3])
+    scaled = np.eye(4)
+    scaled[:3, :3] = so3_exp(fraction * omega)
+    scaled[:3, 3] = _left_jacobian(fraction * omega) @ (fraction * axis_part)
+    return scaled
 
 
 def update_about(xi: np.ndarray, centre: np.ndarray) -> np.ndarray:

@@ -242,21 +242,104 @@ def test_a_kidnapped_camera_is_lost() -> None:
     np.testing.assert_array_equal(odometry.pose_, START)
 
 
-def test_after_a_loss_the_prediction_stops_and_tracking_resumes() -> None:
+def test_after_a_loss_the_motion_goes_on_and_tracking_resumes() -> None:
+    """A lost frame leaves the motion as it was: the next is predicted one motion on (frames
+    without stamps) and tracked."""
     rects = room()
     surface = surface_of(rects)
     odometry = MapOdometry(min_points=100).reset(START)
-    points, colors = render(rects, moved(START, (0.02, 0, 0), (0, 0, 0)))
-    assert not odometry.track(points, colors, surface).lost
+    for k in (1, 2):
+        points, colors = render(rects, moved(START, (0.02 * k, 0, 0), (0, 0, 0)))
+        assert not odometry.track(points, colors, surface).lost
     empty = np.full((HEIGHT, WIDTH, 3), np.nan)
     lost = odometry.track(empty, None, surface)
     assert lost.lost and lost.reason == "too few points"
-    np.testing.assert_array_equal(odometry.predict(), odometry.pose_)  # no motion assumed
-    truth = moved(START, (0.03, 0.01, 0), (0, 0, 1))
+    assert OK.motion_size(odometry.pose_, odometry.predict())[0] == pytest.approx(0.02, abs=1e-4)
+    truth = moved(START, (0.06, 0.01, 0), (0, 0, 1))
     points, colors = render(rects, truth)
     result = odometry.track(points, colors, surface)
     assert not result.lost
     assert OK.motion_size(truth, result.pose)[0] < 1e-3
+
+
+def walking(odometry: MapOdometry, surface: MapSurface, rects: list[Rect], step: np.ndarray,
+            frames: int, period_ns: int) -> np.ndarray:
+    """Track ``frames`` frames of a camera moving by ``step`` (4, 4) every ``period_ns`` from
+    START (stamped 0): the last true pose."""
+    pose = START
+    for k in range(1, frames + 1):
+        pose = pose @ step
+        points, colors = render(rects, pose)
+        result = odometry.track(points, colors, surface, stamp_ns=k * period_ns)
+        assert not result.lost and OK.motion_size(pose, result.pose)[0] < 2e-3, result
+    return pose
+
+
+STEP = moved(np.eye(4), (0.0, 0.0, 0.06), (0.0, 1.5, 0.0))  # 6 cm forward, 1.5 degrees
+PERIOD_NS = 100_000_000  # 10 frames a second
+
+
+@pytest.mark.parametrize("dropped", [3, 5])
+def test_dropped_frames_are_predicted_over_the_time_they_took(dropped: int) -> None:
+    """A busy learner skipped frames: the motion is continued over the time since the last
+    tracked frame (with one frame's motion the estimate would be ``dropped`` motions, 18-30
+    cm, from the prediction: lost)."""
+    rects = room()
+    surface = surface_of(rects)
+    odometry = MapOdometry(min_points=100).reset(START, 0)
+    pose = walking(odometry, surface, rects, STEP, 2, PERIOD_NS)
+    truth = pose @ np.linalg.matrix_power(STEP, dropped + 1)
+    stamp = (2 + dropped + 1) * PERIOD_NS
+    prediction = odometry.predict(stamp)
+    assert OK.motion_size(truth, prediction)[0] < 1e-3
+    points, colors = render(rects, truth)
+    result = odometry.track(points, colors, surface, stamp_ns=stamp)
+    assert not result.lost, result.reason
+    assert OK.motion_size(truth, result.pose)[0] < 2e-3
+    assert odometry.motion_span_s_ == pytest.approx((dropped + 1) * PERIOD_NS * 1e-9)
+    one_frame = MapOdometry(min_points=100).reset(START)  # the same without stamps
+    walking(one_frame, surface, rects, STEP, 2, PERIOD_NS)
+    assert one_frame.track(points, colors, surface).lost
+
+
+def test_the_motion_is_continued_for_coast_s_at_most() -> None:
+    rects = room()
+    surface = surface_of(rects)
+    odometry = MapOdometry(min_points=100, coast_s=0.3).reset(START, 0)
+    walking(odometry, surface, rects, STEP, 2, PERIOD_NS)
+    later = odometry.predict(2 * PERIOD_NS + 10**9)  # 1 s later: 0.3 s, three motions
+    expected = odometry.pose_ @ np.linalg.matrix_power(odometry.velocity_, 3)
+    assert OK.motion_size(expected, later)[0] < 1e-9
+    np.testing.assert_allclose(odometry.predict(PERIOD_NS), odometry.pose_, atol=1e-12)
+
+
+def test_a_camera_that_stopped_is_found_where_it_was() -> None:
+    """The prediction runs on (0.3 m) past a camera that stopped: the alignment from it fails,
+    the one from the last tracked pose holds."""
+    rects = room()
+    surface = surface_of(rects)
+    fast = moved(np.eye(4), (0.0, 0.0, 0.1), (0.0, 0.0, 0.0))
+    odometry = MapOdometry(min_points=100).reset(START, 0)
+    pose = walking(odometry, surface, rects, fast, 2, PERIOD_NS)
+    stamp = 5 * PERIOD_NS
+    assert OK.motion_size(pose, odometry.predict(stamp))[0] == pytest.approx(0.3, abs=1e-4)
+    points, colors = render(rects, pose)
+    result = odometry.track(points, colors, surface, stamp_ns=stamp)
+    assert not result.lost, result.reason
+    assert OK.motion_size(pose, result.pose)[0] < 1e-3
+    no_retry = MapOdometry(min_points=100).reset(START, 0)  # from the prediction alone
+    walking(no_retry, surface, rects, fast, 2, PERIOD_NS)
+    assert no_retry.track(points, colors, surface, initial_pose=no_retry.predict(stamp)).lost
+
+
+def test_scaled_motion_follows_the_screw() -> None:
+    motion = moved(np.eye(4), (0.05, -0.02, 0.1), (3.0, -8.0, 20.0))
+    np.testing.assert_allclose(OK.scaled_motion(motion, 1.0), motion, atol=1e-12)
+    np.testing.assert_allclose(OK.scaled_motion(motion, 3.0),
+                               np.linalg.matrix_power(motion, 3), atol=1e-12)
+    np.testing.assert_allclose(OK.scaled_motion(motion, 0.0), np.eye(4), atol=1e-12)
+    half = OK.scaled_motion(motion, 0.5)
+    np.testing.assert_allclose(half @ half, motion, atol=1e-12)
 
 
 def test_no_map_is_lost() -> None:
@@ -314,10 +397,15 @@ def test_state_round_trip_continues_the_same() -> None:
     odometry = MapOdometry(min_points=100).reset(START)
     for k in range(1, 3):
         points, colors = render(rects, moved(START, (0.02 * k, 0, 0), (0, 0, k)))
-        assert not odometry.track(points, colors, surface).lost
+        assert not odometry.track(points, colors, surface, stamp_ns=k * PERIOD_NS).lost
     restored = MapOdometry(min_points=100).set_state(
         {key: value.copy() for key, value in odometry.get_state().items()})
-    np.testing.assert_array_equal(restored.predict(), odometry.predict())
+    np.testing.assert_array_equal(restored.predict(5 * PERIOD_NS),
+                                  odometry.predict(5 * PERIOD_NS))
+    old = {key: value for key, value in odometry.get_state().items()  # before stamps were kept
+           if key not in ("stamp_ns", "motion_span_s")}
+    np.testing.assert_allclose(MapOdometry().set_state(old).predict(5 * PERIOD_NS),
+                               odometry.pose_ @ odometry.velocity_, atol=1e-12)
     points, colors = render(rects, moved(START, (0.06, 0, 0), (0, 0, 3)))
     np.testing.assert_allclose(restored.track(points, colors, surface).pose,
                                odometry.track(points, colors, surface).pose)

@@ -31,13 +31,18 @@ from services.learner.messages import status_message
 FRAMES = 10
 
 
+def rendered_walk(frames: int, fps: float) -> list:
+    """The first frames of the virtual Kinect's walk (320x240): (points, colours, frame)."""
+    deproject = Deprojector(0.3, 6.0)
+    rendered = render_scene("tabletop_walk", frames, width=320, height=240, fps=fps)
+    return [(*deproject(frame.depth, frame.color, frame.intrinsics), frame)
+            for frame in rendered]
+
+
 @pytest.fixture(scope="module")
 def walk() -> list:
-    """Every third of the first 30 frames of the virtual Kinect's walk (320x240, 10 fps):
-    (points, colours, frame)."""
-    deproject = Deprojector(0.3, 6.0)
-    frames = list(render_scene("tabletop_walk", 3 * FRAMES, width=320, height=240))[::3]
-    return [(*deproject(frame.depth, frame.color, frame.intrinsics), frame) for frame in frames]
+    """Every third of the first 30 frames at 30 fps (10 frames a second)."""
+    return rendered_walk(3 * FRAMES, 30.0)[::3]
 
 
 def tracking_learner(**options) -> FrameLearner:
@@ -96,6 +101,22 @@ def test_a_walk_without_poses_is_tracked_and_learned_in_odom(walk) -> None:
     assert learner.counters.frames_used == FRAMES and learner.counters.frames_lost_tracking == 0
     travelled = motion_size(np.eye(4), learner.last_pose)[0]
     assert travelled > 0.2  # the camera did move
+
+
+def test_frames_a_busy_learner_dropped_do_not_lose_the_camera() -> None:
+    """Frames 10 and 11 never reached the learner (it was busy; the camera sped up to 9 cm a
+    frame by then): the motion is continued over the 0.3 s since frame 9, and every later
+    frame is tracked (with one frame's motion, frames 12-19 were all lost)."""
+    every_frame = rendered_walk(20, 10.0)  # the walk of tests/process/test_tracking_processes
+    learner = tracking_learner()
+    start = every_frame[0][2].pose.matrix
+    for points, colors, frame in every_frame[:10] + every_frame[12:]:
+        assert learner.learn(points, colors, "camera", None, frame.timestamp_ns,
+                             camera=frame.intrinsics), (frame.index, learner.tracking.problem)
+        truth = rigid_inverse(start) @ frame.pose.matrix
+        moved, turned = motion_size(truth, learner.last_pose)
+        assert moved < 0.02 and turned < 1.0, (frame.index, moved, turned)
+    assert learner.counters.frames_lost_tracking == 0
 
 
 def test_a_frame_that_cannot_be_aligned_is_reported_and_not_learned(walk) -> None:
