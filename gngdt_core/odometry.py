@@ -30,12 +30,17 @@ The prediction is the last tracked pose moved on by the last motion between trac
 (constant velocity), continued over the time since the last tracked frame when frames carry
 stamps: frames a busy learner dropped, or frames lost, do not leave it behind (for at most
 ``coast_s``). When the alignment from the prediction fails it is tried once more from the last
-tracked pose (the camera may have stopped). Parameters: `TrackerParams` (a profile's
+tracked pose (the camera may have stopped). The map's second frame has no motion to go by (the
+camera may have moved far while the first was learned): it is also aligned, at the coarse
+level, from the first frame's pose moved by up to ``search_steps`` coarse gates along each
+camera axis, and starts from the one that keeps the most points agreeing with the map
+(`SEARCH_MARGIN`). Parameters: `TrackerParams` (a profile's
 ``[tracker]`` table). Kernels: `gngdt_core.kernels.odometry`.
 """
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from dataclasses import dataclass, fields, replace
@@ -52,6 +57,11 @@ from gngdt_core.plane_memory import PlaneMemory
 #: why a frame was not tracked (``TrackingResult.reason``)
 LOST_REASONS = ("no map", "too few points", "little overlap", "few inliers", "large residual",
                 "degenerate", "implausible motion")
+
+#: a searched start replaces the prediction when its coarse alignment agrees with this much
+#: more of the frame (overlap times inlier share): a repetitive scene's near-tie keeps the
+#: prediction
+SEARCH_MARGIN = 0.05
 
 _POSITIVE = Interval(float, 0.0, closed="neither")
 _NON_NEGATIVE = Interval(float, 0.0)
@@ -110,6 +120,10 @@ class TrackerParams:
     motion_model: bool = param(True, Flag(),
                                "predict with the last motion (constant velocity), else the "
                                "last pose")
+    search_steps: int = param(3, Interval(int, 0),
+                              "the map's second frame (no motion known yet) is also searched "
+                              "for from the first's pose moved by 1..this many coarse gates "
+                              "along each camera axis; 0: off")
     coast_s: float = param(1.0, _NON_NEGATIVE,
                            "the last motion is continued over the time since the last tracked "
                            "frame (dropped or lost frames between), for at most this long or "
@@ -290,7 +304,10 @@ class MapOdometry:
             raise ValueError(f"colors {colors.shape} do not match points {points.shape}")
         if len(surface) < 3:
             return self._finish(prediction, prediction, "no map", started, {}, stamp_ns)
-        pose, reason, stats = self._align(points, colors, surface, prediction)
+        start = prediction
+        if initial_pose is None and self.n_tracked_ == 0 and self.params.search_steps:
+            start = self._search(points, colors, surface, prediction)
+        pose, reason, stats = self._align(points, colors, surface, start)
         last = self.pose_
         if (reason and reason != "too few points" and initial_pose is None
                 and last is not None and not np.array_equal(prediction, last)):
@@ -304,16 +321,39 @@ class MapOdometry:
                                  stats["inlier_residuals"], stats["inlier_sigmas"])
         return self._finish(prediction, pose, reason, started, stats, stamp_ns)
 
+    def _search(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
+                prediction: np.ndarray) -> np.ndarray:
+        """Where to start aligning a frame with no motion known: ``prediction`` (4, 4), or the
+        pose it moved by 1..``search_steps`` coarse gates along a camera axis whose coarse
+        alignment agrees with ``SEARCH_MARGIN`` more of the frame."""
+        p = self.params
+        starts = [prediction]
+        for axis, sign, k in itertools.product(range(3), (-1.0, 1.0),
+                                               range(1, p.search_steps + 1)):
+            shift = np.eye(4)
+            shift[axis, 3] = sign * k * p.gates_m[0]
+            starts.append(prediction @ shift)
+        agreement = []
+        for start in starts:
+            _, reason, stats = self._align(points, colors, surface, start, levels=1)
+            agreement.append(-1.0 if reason == "too few points"
+                             else stats["overlap"] * stats["inlier_share"])
+        best = int(np.argmax(agreement))
+        return starts[best] if agreement[best] > agreement[0] + SEARCH_MARGIN else prediction
+
     def _align(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
-               start: np.ndarray) -> tuple[np.ndarray, str, dict[str, Any]]:
-        """Coarse-to-fine ICP from ``start`` (4, 4): the pose found, why it is not to be
-        trusted ("" when it is) and its statistics."""
+               start: np.ndarray, levels: int | None = None
+               ) -> tuple[np.ndarray, str, dict[str, Any]]:
+        """Coarse-to-fine ICP from ``start`` (4, 4) over the first ``levels`` levels (None:
+        all): the pose found, why it is not to be trusted ("" when it is) and its
+        statistics."""
         p = self.params
         planes = self.planes.anchors(surface.positions, surface.normals, surface.ids,
                                      start[:3, 3])
         trust = self._trust(surface, planes)
         pose, stats, iterations = start.copy(), {}, 0
-        for stride, steps, gate_m in zip(p.strides, p.iterations, p.gates_m, strict=True):
+        for stride, steps, gate_m in list(zip(p.strides, p.iterations, p.gates_m,
+                                              strict=True))[:levels]:
             frame = self._level_points(points, colors, stride)
             if len(frame[0]) < p.min_points:
                 return pose, "too few points", dict(stats, points=len(frame[0]),

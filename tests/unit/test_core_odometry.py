@@ -332,6 +332,21 @@ def test_a_camera_that_stopped_is_found_where_it_was() -> None:
     assert no_retry.track(points, colors, surface, initial_pose=no_retry.predict(stamp)).lost
 
 
+def test_the_second_frame_is_searched_for() -> None:
+    """No motion is known before the second frame: a camera 40 cm to the side of the first
+    frame's pose is found by the search (from the first pose alone it is not)."""
+    rects = room()
+    surface = surface_of(rects)
+    truth = START @ moved(np.eye(4), (0.4, 0.0, 0.0), (0.0, 0.0, 0.0))
+    points, colors = render(rects, truth)
+    result = MapOdometry(min_points=100).reset(START).track(points, colors, surface)
+    assert not result.lost, result.reason
+    assert OK.motion_size(truth, result.pose)[0] < 2e-3
+    unsearched = MapOdometry(min_points=100, search_steps=0).reset(START).track(
+        points, colors, surface)
+    assert unsearched.lost or OK.motion_size(truth, unsearched.pose)[0] > 0.05
+
+
 def test_scaled_motion_follows_the_screw() -> None:
     motion = moved(np.eye(4), (0.05, -0.02, 0.1), (3.0, -8.0, 20.0))
     np.testing.assert_allclose(OK.scaled_motion(motion, 1.0), motion, atol=1e-12)
