@@ -43,6 +43,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -304,22 +305,32 @@ class MapOdometry:
             raise ValueError(f"colors {colors.shape} do not match points {points.shape}")
         if len(surface) < 3:
             return self._finish(prediction, prediction, "no map", started, {}, stamp_ns)
-        start = prediction
-        if initial_pose is None and self.n_tracked_ == 0 and self.params.search_steps:
-            start = self._search(points, colors, surface, prediction)
+        searched = initial_pose is None and self.n_tracked_ == 0 and self.params.search_steps
+        start = self._search(points, colors, surface, prediction) if searched else prediction
         pose, reason, stats = self._align(points, colors, surface, start)
-        last = self.pose_
-        if (reason and reason != "too few points" and initial_pose is None
-                and last is not None and not np.array_equal(prediction, last)):
-            # the camera may have stopped (or turned back) since the motion was measured
-            retry = self._align(points, colors, surface, last)
-            if not retry[1]:
-                prediction, (pose, reason, stats) = last, retry
+        if reason and reason != "too few points" and initial_pose is None:
+            for retry_start in self._retry_starts(points, colors, surface, prediction, searched):
+                retry = self._align(points, colors, surface, retry_start)
+                if not retry[1]:
+                    prediction, (pose, reason, stats) = retry_start, retry
+                    break
         if not reason and self.params.plane_memory and surface.ids is not None:
             self.planes.remember(surface.positions, surface.normals, surface.ids,
                                  stats["planes"], stats["inlier_nodes"],
                                  stats["inlier_residuals"], stats["inlier_sigmas"])
         return self._finish(prediction, pose, reason, started, stats, stamp_ns)
+
+    def _retry_starts(self, points: np.ndarray, colors: np.ndarray | None,
+                      surface: MapSurface, prediction: np.ndarray, searched: bool
+                      ) -> Iterator[np.ndarray]:
+        """Where to align a frame from when the prediction failed: the last tracked pose (the
+        camera may have stopped), then the searched start (it may be farther on)."""
+        if self.pose_ is not None and not np.array_equal(prediction, self.pose_):
+            yield self.pose_
+        if not searched and self.params.search_steps:
+            start = self._search(points, colors, surface, prediction)
+            if start is not prediction:
+                yield start
 
     def _search(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
                 prediction: np.ndarray) -> np.ndarray:

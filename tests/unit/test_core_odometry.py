@@ -283,7 +283,7 @@ PERIOD_NS = 100_000_000  # 10 frames a second
 def test_dropped_frames_are_predicted_over_the_time_they_took(dropped: int) -> None:
     """A busy learner skipped frames: the motion is continued over the time since the last
     tracked frame (with one frame's motion the estimate would be ``dropped`` motions, 18-30
-    cm, from the prediction: lost)."""
+    cm, from the prediction: lost but for the search)."""
     rects = room()
     surface = surface_of(rects)
     odometry = MapOdometry(min_points=100).reset(START, 0)
@@ -297,7 +297,8 @@ def test_dropped_frames_are_predicted_over_the_time_they_took(dropped: int) -> N
     assert not result.lost, result.reason
     assert OK.motion_size(truth, result.pose)[0] < 2e-3
     assert odometry.motion_span_s_ == pytest.approx((dropped + 1) * PERIOD_NS * 1e-9)
-    one_frame = MapOdometry(min_points=100).reset(START)  # the same without stamps
+    # the same without stamps, nor the search that finds a camera farther on than predicted
+    one_frame = MapOdometry(min_points=100, search_steps=0).reset(START)
     walking(one_frame, surface, rects, STEP, 2, PERIOD_NS)
     assert one_frame.track(points, colors, surface).lost
 
@@ -345,6 +346,26 @@ def test_the_second_frame_is_searched_for() -> None:
     unsearched = MapOdometry(min_points=100, search_steps=0).reset(START).track(
         points, colors, surface)
     assert unsearched.lost or OK.motion_size(truth, unsearched.pose)[0] > 0.05
+
+
+@pytest.mark.parametrize("search_steps", [3, 0])
+def test_a_camera_farther_on_than_predicted_is_searched_for(search_steps: int) -> None:
+    """After a lost frame the camera sped up: 23 cm past the prediction (35 cm past the last
+    tracked pose) neither start holds, the search around the prediction does."""
+    rects = room()
+    surface = surface_of(rects)
+    odometry = MapOdometry(min_points=100, search_steps=search_steps).reset(START, 0)
+    pose = walking(odometry, surface, rects, STEP, 2, PERIOD_NS)
+    assert odometry.track(np.full((HEIGHT, WIDTH, 3), np.nan), None, surface,
+                          stamp_ns=3 * PERIOD_NS).lost
+    truth = pose @ moved(np.eye(4), (0.0, 0.0, 0.35), (0.0, 0.0, 0.0))
+    points, colors = render(rects, truth)
+    result = odometry.track(points, colors, surface, stamp_ns=4 * PERIOD_NS)
+    if search_steps:
+        assert not result.lost, result.reason
+        assert OK.motion_size(truth, result.pose)[0] < 2e-3
+    else:
+        assert result.lost
 
 
 def test_scaled_motion_follows_the_screw() -> None:
