@@ -30,11 +30,11 @@ The prediction is the last tracked pose moved on by the last motion between trac
 (constant velocity), continued over the time since the last tracked frame when frames carry
 stamps: frames a busy learner dropped, or frames lost, do not leave it behind (for at most
 ``coast_s``). When the alignment from the prediction fails it is tried once more from the last
-tracked pose (the camera may have stopped). The map's second frame has no motion to go by (the
-camera may have moved far while the first was learned): it is also aligned, at the coarse
-level, from the first frame's pose moved by up to ``search_steps`` coarse gates along each
-camera axis, and starts from the one that keeps the most points agreeing with the map
-(`SEARCH_MARGIN`). Parameters: `TrackerParams` (a profile's
+tracked pose (the camera may have stopped), then from a searched start: the prediction moved by
+up to ``search_steps`` coarse gates along each camera axis, the one whose coarse alignment keeps
+the most points agreeing with the map (`SEARCH_MARGIN`; the camera may be farther on). The
+map's second frame, with no motion to go by (the camera may have moved far while the first was
+learned), starts from the searched start. Parameters: `TrackerParams` (a profile's
 ``[tracker]`` table). Kernels: `gngdt_core.kernels.odometry`.
 """
 
@@ -122,9 +122,10 @@ class TrackerParams:
                                "predict with the last motion (constant velocity), else the "
                                "last pose")
     search_steps: int = param(3, Interval(int, 0),
-                              "the map's second frame (no motion known yet) is also searched "
-                              "for from the first's pose moved by 1..this many coarse gates "
-                              "along each camera axis; 0: off")
+                              "a frame with no motion known yet (the map's second), or whose "
+                              "alignment from the prediction and the last pose failed, is "
+                              "searched for from the prediction moved by 1..this many coarse "
+                              "gates along each camera axis; 0: off")
     coast_s: float = param(1.0, _NON_NEGATIVE,
                            "the last motion is continued over the time since the last tracked "
                            "frame (dropped or lost frames between), for at most this long or "
@@ -312,7 +313,7 @@ class MapOdometry:
             for retry_start in self._retry_starts(points, colors, surface, prediction, searched):
                 retry = self._align(points, colors, surface, retry_start)
                 if not retry[1]:
-                    prediction, (pose, reason, stats) = retry_start, retry
+                    pose, reason, stats = retry
                     break
         if not reason and self.params.plane_memory and surface.ids is not None:
             self.planes.remember(surface.positions, surface.normals, surface.ids,
@@ -334,9 +335,10 @@ class MapOdometry:
 
     def _search(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
                 prediction: np.ndarray) -> np.ndarray:
-        """Where to start aligning a frame with no motion known: ``prediction`` (4, 4), or the
-        pose it moved by 1..``search_steps`` coarse gates along a camera axis whose coarse
-        alignment agrees with ``SEARCH_MARGIN`` more of the frame."""
+        """Where to start aligning a frame whose prediction is in doubt (no motion known yet,
+        or the alignment from it failed): ``prediction`` (4, 4), or the pose it moved by
+        1..``search_steps`` coarse gates along a camera axis whose coarse alignment agrees with
+        ``SEARCH_MARGIN`` more of the frame."""
         p = self.params
         starts = [prediction]
         for axis, sign, k in itertools.product(range(3), (-1.0, 1.0),
