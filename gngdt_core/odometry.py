@@ -29,10 +29,11 @@ does against its volume):
 The prediction is the last tracked pose moved on by the last motion between tracked frames
 (constant velocity), continued over the time since the last tracked frame when frames carry
 stamps: frames a busy learner dropped, or frames lost, do not leave it behind (for at most
-``coast_s``). When the alignment from the prediction fails it is tried once more from the last
+``coast_s``). When the alignment from the prediction fails it is tried from the last
 tracked pose (the camera may have stopped), then from a searched start: the prediction moved by
-up to ``search_steps`` coarse gates along each camera axis, the one whose coarse alignment keeps
-the most points agreeing with the map (`SEARCH_MARGIN`; the camera may be farther on). The
+up to ``search_steps`` coarse gates along each camera axis or turned by up to ``search_steps``
+times ``search_turn_deg`` about its x and y axes, the one whose coarse alignment keeps the most
+points agreeing with the map (`SEARCH_MARGIN`; the camera may be farther on, or turned). The
 map's second frame, with no motion to go by (the camera may have moved far while the first was
 learned), starts from the searched start. Parameters: `TrackerParams` (a profile's
 ``[tracker]`` table). Kernels: `gngdt_core.kernels.odometry`.
@@ -63,6 +64,10 @@ LOST_REASONS = ("no map", "too few points", "little overlap", "few inliers", "la
 #: more of the frame (overlap times inlier share): a repetitive scene's near-tie keeps the
 #: prediction
 SEARCH_MARGIN = 0.05
+
+#: Gauss-Newton steps of a searched start's coarse alignment at most (the level's own: 8):
+#: enough to tell the starts apart, at half the cost
+SEARCH_ITERATIONS = 4
 
 _POSITIVE = Interval(float, 0.0, closed="neither")
 _NON_NEGATIVE = Interval(float, 0.0)
@@ -126,6 +131,9 @@ class TrackerParams:
                               "alignment from the prediction and the last pose failed, is "
                               "searched for from the prediction moved by 1..this many coarse "
                               "gates along each camera axis; 0: off")
+    search_turn_deg: float = param(8.0, Interval(float, 0.0, 60.0),
+                                   "... and turned by 1..search_steps times this about the "
+                                   "camera's x and y axes, degrees (0: no turns)")
     coast_s: float = param(1.0, _NON_NEGATIVE,
                            "the last motion is continued over the time since the last tracked "
                            "frame (dropped or lost frames between), for at most this long or "
@@ -306,12 +314,13 @@ class MapOdometry:
             raise ValueError(f"colors {colors.shape} do not match points {points.shape}")
         if len(surface) < 3:
             return self._finish(prediction, prediction, "no map", started, {}, stamp_ns)
+        levels = [self._level_points(points, colors, stride) for stride in self.params.strides]
         searched = initial_pose is None and self.n_tracked_ == 0 and self.params.search_steps
-        start = self._search(points, colors, surface, prediction) if searched else prediction
-        pose, reason, stats = self._align(points, colors, surface, start)
+        start = self._search(levels[0], surface, prediction) if searched else prediction
+        pose, reason, stats = self._align(levels, surface, start)
         if reason and reason != "too few points" and initial_pose is None:
-            for retry_start in self._retry_starts(points, colors, surface, prediction, searched):
-                retry = self._align(points, colors, surface, retry_start)
+            for retry_start in self._retry_starts(levels[0], surface, prediction, searched):
+                retry = self._align(levels, surface, retry_start)
                 if not retry[1]:
                     pose, reason, stats = retry
                     break
@@ -321,24 +330,24 @@ class MapOdometry:
                                  stats["inlier_residuals"], stats["inlier_sigmas"])
         return self._finish(prediction, pose, reason, started, stats, stamp_ns)
 
-    def _retry_starts(self, points: np.ndarray, colors: np.ndarray | None,
-                      surface: MapSurface, prediction: np.ndarray, searched: bool
-                      ) -> Iterator[np.ndarray]:
+    def _retry_starts(self, coarse: tuple, surface: MapSurface, prediction: np.ndarray,
+                      searched: bool) -> Iterator[np.ndarray]:
         """Where to align a frame from when the prediction failed: the last tracked pose (the
         camera may have stopped), then the searched start (it may be farther on)."""
         if self.pose_ is not None and not np.array_equal(prediction, self.pose_):
             yield self.pose_
         if not searched and self.params.search_steps:
-            start = self._search(points, colors, surface, prediction)
+            start = self._search(coarse, surface, prediction)
             if start is not prediction:
                 yield start
 
-    def _search(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
-                prediction: np.ndarray) -> np.ndarray:
+    def _search(self, coarse: tuple, surface: MapSurface, prediction: np.ndarray
+                ) -> np.ndarray:
         """Where to start aligning a frame whose prediction is in doubt (no motion known yet,
         or the alignment from it failed): ``prediction`` (4, 4), or the pose it moved by
-        1..``search_steps`` coarse gates along a camera axis whose coarse alignment agrees with
-        ``SEARCH_MARGIN`` more of the frame."""
+        1..``search_steps`` coarse gates along a camera axis (or turned about its x or y axis)
+        whose alignment on the ``coarse`` level agrees with ``SEARCH_MARGIN`` more of the
+        frame."""
         p = self.params
         starts = [prediction]
         for axis, sign, k in itertools.product(range(3), (-1.0, 1.0),
@@ -346,28 +355,31 @@ class MapOdometry:
             shift = np.eye(4)
             shift[axis, 3] = sign * k * p.gates_m[0]
             starts.append(prediction @ shift)
+            if axis < 2 and p.search_turn_deg:  # turned about the camera's x and y axes
+                turn = np.eye(4)
+                turn[:3, :3] = OK.so3_exp(np.radians(sign * k * p.search_turn_deg)
+                                          * np.eye(3)[1 - axis])
+                starts.append(prediction @ turn)
         agreement = []
         for start in starts:
-            _, reason, stats = self._align(points, colors, surface, start, levels=1)
-            agreement.append(-1.0 if reason == "too few points"
+            _, reason, stats = self._align([coarse], surface, start, SEARCH_ITERATIONS)
+            agreement.append(-1.0 if reason in ("too few points", "implausible motion")
                              else stats["overlap"] * stats["inlier_share"])
         best = int(np.argmax(agreement))
         return starts[best] if agreement[best] > agreement[0] + SEARCH_MARGIN else prediction
 
-    def _align(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
-               start: np.ndarray, levels: int | None = None
-               ) -> tuple[np.ndarray, str, dict[str, Any]]:
-        """Coarse-to-fine ICP from ``start`` (4, 4) over the first ``levels`` levels (None:
-        all): the pose found, why it is not to be trusted ("" when it is) and its
-        statistics."""
+    def _align(self, levels: list[tuple], surface: MapSurface, start: np.ndarray,
+               max_steps: int | None = None) -> tuple[np.ndarray, str, dict[str, Any]]:
+        """Coarse-to-fine ICP from ``start`` (4, 4) over ``levels`` (`_level_points`' each,
+        coarse first; fewer than the parameters' levels: the first ones only): the pose found,
+        why it is not to be trusted ("" when it is) and its statistics."""
         p = self.params
         planes = self.planes.anchors(surface.positions, surface.normals, surface.ids,
                                      start[:3, 3])
         trust = self._trust(surface, planes)
         pose, stats, iterations = start.copy(), {}, 0
-        for stride, steps, gate_m in list(zip(p.strides, p.iterations, p.gates_m,
-                                              strict=True))[:levels]:
-            frame = self._level_points(points, colors, stride)
+        for frame, steps, gate_m in zip(levels, p.iterations, p.gates_m, strict=False):
+            steps = steps if max_steps is None else min(steps, max_steps)
             if len(frame[0]) < p.min_points:
                 return pose, "too few points", dict(stats, points=len(frame[0]),
                                                     iterations=iterations)

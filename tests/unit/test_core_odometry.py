@@ -348,6 +348,23 @@ def test_the_second_frame_is_searched_for() -> None:
     assert unsearched.lost or OK.motion_size(truth, unsearched.pose)[0] > 0.05
 
 
+@pytest.mark.parametrize("axis", [0, 1])
+def test_a_camera_that_turned_before_the_second_frame_is_searched_for(axis: int) -> None:
+    """The camera turned 15 degrees (pitch, yaw) while the map's first frame was learned: found
+    by the search's turned starts (without them it is lost)."""
+    rects = room()
+    surface = surface_of(rects)
+    turn = np.eye(4)
+    turn[:3, :3] = OK.so3_exp(np.radians(15.0) * np.eye(3)[axis])
+    truth = START @ turn
+    points, colors = render(rects, truth)
+    result = MapOdometry(min_points=100).reset(START).track(points, colors, surface)
+    assert not result.lost, result.reason
+    assert OK.motion_size(truth, result.pose)[1] < 0.05
+    assert MapOdometry(min_points=100, search_turn_deg=0.0).reset(START).track(
+        points, colors, surface).lost
+
+
 @pytest.mark.parametrize("search_steps", [3, 0])
 def test_a_camera_farther_on_than_predicted_is_searched_for(search_steps: int) -> None:
     """After a lost frame the camera sped up: 23 cm past the prediction (35 cm past the last
