@@ -333,7 +333,7 @@ class MapOdometry:
     def _retry_starts(self, coarse: tuple, surface: MapSurface, prediction: np.ndarray,
                       searched: bool) -> Iterator[np.ndarray]:
         """Where to align a frame from when the prediction failed: the last tracked pose (the
-        camera may have stopped), then the searched start (it may be farther on)."""
+        camera may have stopped), then the searched start (it may be farther on, or turned)."""
         if self.pose_ is not None and not np.array_equal(prediction, self.pose_):
             yield self.pose_
         if not searched and self.params.search_steps:
@@ -371,8 +371,9 @@ class MapOdometry:
     def _align(self, levels: list[tuple], surface: MapSurface, start: np.ndarray,
                max_steps: int | None = None) -> tuple[np.ndarray, str, dict[str, Any]]:
         """Coarse-to-fine ICP from ``start`` (4, 4) over ``levels`` (`_level_points`' each,
-        coarse first; fewer than the parameters' levels: the first ones only): the pose found,
-        why it is not to be trusted ("" when it is) and its statistics."""
+        coarse first; fewer than the parameters' levels: the first ones only), each with at
+        most ``max_steps`` Gauss-Newton steps (None: its own): the pose found, why it is not to
+        be trusted ("" when it is) and its statistics."""
         p = self.params
         planes = self.planes.anchors(surface.positions, surface.normals, surface.ids,
                                      start[:3, 3])
