@@ -289,8 +289,15 @@ class MapOdometry:
         (one when either stamp is unknown), the time capped by ``coast_s``."""
         if stamp_ns is None or self.stamp_ns_ is None or self.motion_span_s_ <= 0:
             return 1.0
-        elapsed = max(0.0, (stamp_ns - self.stamp_ns_) * 1e-9)
+        elapsed = self._seconds_since(stamp_ns)
         return min(elapsed, max(self.params.coast_s, self.motion_span_s_)) / self.motion_span_s_
+
+    def _seconds_since(self, stamp_ns: int | None) -> float:
+        """Seconds from the last tracked frame's stamp to ``stamp_ns`` (0 when either is
+        unknown, or it is not later)."""
+        if stamp_ns is None or self.stamp_ns_ is None:
+            return 0.0
+        return max(0.0, (stamp_ns - self.stamp_ns_) * 1e-9)
 
     # ------------------------------------------------------------------ tracking
 
@@ -550,8 +557,7 @@ class MapOdometry:
             pose = OK.orthonormalised(pose)
             if self.pose_ is not None:
                 self.velocity_ = rigid_inverse(self.pose_) @ pose
-                known = stamp_ns is not None and self.stamp_ns_ is not None
-                self.motion_span_s_ = max(0.0, (stamp_ns - self.stamp_ns_) * 1e-9) if known else 0.0
+                self.motion_span_s_ = self._seconds_since(stamp_ns)
             self.pose_, self.stamp_ns_ = pose, stamp_ns
             self.n_tracked_ += 1
         result = TrackingResult(

@@ -354,9 +354,7 @@ def test_a_camera_that_turned_before_the_second_frame_is_searched_for(axis: int)
     by the search's turned starts (without them it is lost)."""
     rects = room()
     surface = surface_of(rects)
-    turn = np.eye(4)
-    turn[:3, :3] = OK.so3_exp(np.radians(15.0) * np.eye(3)[axis])
-    truth = START @ turn
+    truth = START @ moved(np.eye(4), (0.0, 0.0, 0.0), 15.0 * np.eye(3)[axis])
     points, colors = render(rects, truth)
     result = MapOdometry(min_points=100).reset(START).track(points, colors, surface)
     assert not result.lost, result.reason
