@@ -16,10 +16,11 @@ COPY gngdt_io ./gngdt_io
 COPY gngdt_eval ./gngdt_eval
 COPY services ./services
 COPY config ./config
+COPY gngdt ./gngdt
 RUN pip install . \
     && mkdir -p "$NUMBA_CACHE_DIR" "$XDG_CONFIG_HOME" /recordings /out \
     # Compile the numba kernels once at build time so a container starts learning at once.
-    && python -c "from gngdt_core import GNGDT, make_data2; p, c, _ = make_data2(n_points=2000, random_state=0); GNGDT(max_nodes=50, random_state=0).partial_fit(p, c, n_steps=2000)" \
+    && python -c "from gngdt.core import GNGDT; from gngdt.eval.synthetic import make_data2; p, c, _ = make_data2(n_points=2000, random_state=0); GNGDT(max_nodes=50, random_state=0).partial_fit(p, c, n_steps=2000)" \
     && chmod -R a+rwX /var/cache/gngdt /out
 
 # Unprivileged by default; compose runs services as the invoking user (GNGDT_UID/GNGDT_GID).

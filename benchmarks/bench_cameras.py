@@ -28,14 +28,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pipeline_runs import TRANSPORTS, BenchPipeline, CpuWindow, load_average, percentiles
 
-from services.logger import LIVELINESS_KEY
+from gngdt.services.logger import LIVELINESS_KEY
 
 SCENES = ("tabletop", "tabletop_walk", "tabletop_move", "data2")
 
 
 def render(path: Path, scene: str, frames: int) -> Path:
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     if not path.exists():
         with RecordingWriter(path, compression="lz4") as writer:

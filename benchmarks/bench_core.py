@@ -25,13 +25,15 @@ import time
 
 import numpy as np
 
-from gngdt_core import GNGDT, make_data2
-from gngdt_core.reference import ReferenceGNGDT
+from gngdt.core import GNGDT
+from gngdt.eval.reference import ReferenceGNGDT
+from gngdt.eval.synthetic import make_data2
 
 _FIRST_CALL = """
 import time
 t0 = time.perf_counter()
-from gngdt_core import GNGDT, make_data2
+from gngdt.core import GNGDT
+from gngdt.eval.synthetic import make_data2
 positions, colors, _ = make_data2(n_points=2000, random_state=0)
 t1 = time.perf_counter()
 GNGDT(max_nodes=100, random_state=0).fit(positions, colors, n_steps=1000)
@@ -66,9 +68,9 @@ def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
                      frames: int) -> None:
     """Steps/s at 1,000 nodes without forgetting, with it, and with the learner's whole profile
     (forgetting and rehearsal), on one batch and frame by frame."""
-    from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
-    from gngdt_io.deproject import Deprojector
-    from gngdt_io.synth.render import render_scene
+    from gngdt.core.learner.frame_learner import LEARNER_MODEL_DEFAULTS
+    from gngdt.io.deproject import Deprojector
+    from gngdt.io.synth.render import render_scene
 
     profiles = {"off": {}, "forgetting": {"utility_k": LEARNER_MODEL_DEFAULTS["utility_k"]},
                 "profile": LEARNER_MODEL_DEFAULTS}

@@ -47,13 +47,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS, LEARNER_WORLD_DEFAULTS
-from gngdt_eval.dynamics import DynamicsSettings, DynamicsTracker
-from gngdt_eval.recording_eval import RecordingSettings, frame_points, replay, summarise_over_time
-from gngdt_io.mcap_writer import RecordingWriter
-from gngdt_io.synth.render import SCENE_METADATA, render_scene, scene_metadata
-from gngdt_io.synth.scenes import build_scene
-from services.run import DEFAULT_MAX_POINTS as RUN_MAX_POINTS
+from gngdt.core.learner.frame_learner import LEARNER_MODEL_DEFAULTS, LEARNER_WORLD_DEFAULTS
+from gngdt.eval.dynamics import DynamicsSettings, DynamicsTracker
+from gngdt.eval.recording_eval import RecordingSettings, frame_points, replay, summarise_over_time
+from gngdt.io.mcap.writer import RecordingWriter
+from gngdt.io.synth.render import SCENE_METADATA, render_scene, scene_metadata
+from gngdt.io.synth.scenes import build_scene
+from gngdt.services.run import DEFAULT_MAX_POINTS as RUN_MAX_POINTS
 
 #: scene -> frames rendered (the walk goes out and back: 240 frames at 30 fps)
 SCENES = {"tabletop_walk": 240, "tabletop_vanish": 150, "tabletop_move": 150}
@@ -80,9 +80,9 @@ def record(scene: str, frames: int, width: int, height: int, folder: Path) -> Pa
 
 def record_tum(folder: Path) -> Path | None:
     """The shared TUM frames with their ground-truth poses as a recording (None: absent)."""
-    from gngdt_io.frame import CameraPose
-    from gngdt_io.images import iter_image_frames, load_camera
-    from gngdt_io.pose_files import load_poses
+    from gngdt.io.frame import CameraPose
+    from gngdt.io.images import iter_image_frames, load_camera
+    from gngdt.io.pose_files import load_poses
 
     if not TUM.is_dir():
         return None
@@ -152,11 +152,11 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
     """The walk through capture -> learner -> logger at 30 fps with ``busy`` spinning
     processes beside it; the learner's last status, the end of stream, and every topology's
     node positions by frame sequence."""
-    from schemas.topology import decode_topology
-    from schemas.wire import topic
-    from services.logger import LIVELINESS_KEY
-    from services.plumbing.session import free_tcp_port, open_config
-    from services.run import Observed, Pipeline, RunAccess, wait_until
+    from gngdt.schemas.topology import decode_topology
+    from gngdt.schemas.wire import topic
+    from gngdt.services.logger import LIVELINESS_KEY
+    from gngdt.services.plumbing.session import free_tcp_port, open_config
+    from gngdt.services.run import Observed, Pipeline, RunAccess, wait_until
 
     access = RunAccess(f"tcp/127.0.0.1:{free_tcp_port()}", workdir)
     router = open_config(access.router(), what="router")

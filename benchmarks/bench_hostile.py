@@ -56,12 +56,12 @@ from hostile_recordings import (  # noqa: E402  (benchmarks/, beside this script
 from hostile_trust import print_trust, trust_attacks  # noqa: E402  (benchmarks/, beside this)
 from procstat import gngdt, status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
-from schemas.clouds import cloud_to_msg  # noqa: E402
-from schemas.images import image_to_raw  # noqa: E402
-from schemas.status import decode_status  # noqa: E402
-from schemas.topology import encode_topology  # noqa: E402
-from schemas.wire import FrameStamp  # noqa: E402
-from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
+from gngdt.schemas.clouds import cloud_to_msg  # noqa: E402
+from gngdt.schemas.images import image_to_raw  # noqa: E402
+from gngdt.schemas.status import decode_status  # noqa: E402
+from gngdt.schemas.topology import encode_topology  # noqa: E402
+from gngdt.schemas.wire import FrameStamp  # noqa: E402
+from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 
 MB = 1024 * 1024
 
@@ -162,8 +162,8 @@ def feed(session, rng: np.random.Generator) -> dict[str, int]:
 def hostile_recordings(folder: Path) -> dict[str, Path]:
     from mcap_protobuf.writer import Writer as ProtobufWriter
 
-    from gngdt_io.frame import CameraIntrinsics
-    from schemas.images import intrinsics_to_calibration
+    from gngdt.io.frame import CameraIntrinsics
+    from gngdt.schemas.images import intrinsics_to_calibration
 
     def images(path: Path, shape: tuple[int, int], frames: int, calibrated: bool) -> Path:
         with open(path, "wb") as file, ProtobufWriter(file) as writer:
@@ -203,8 +203,8 @@ def transform_flood(path: Path) -> Path:
     from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
     from mcap.writer import CompressionType, IndexType, Writer
 
-    from gngdt_io.frame import CameraIntrinsics
-    from schemas.images import intrinsics_to_calibration
+    from gngdt.io.frame import CameraIntrinsics
+    from gngdt.schemas.images import intrinsics_to_calibration
 
     ns = 1_000_000_000
     transform = FrameTransform(parent_frame_id="world", child_frame_id="camera")
@@ -305,8 +305,8 @@ def stop_services(processes: dict[str, subprocess.Popen]) -> dict[str, int]:
 def capture_reason(log: Path) -> str:
     """Why capture refused a recording (its ERROR line), else the limit it warned of, else ""."""
     lines = log.read_text().splitlines()
-    reason = next((line.split("ERROR services.capture: ", 1)[1] for line in lines
-                   if "ERROR services.capture: " in line), "")
+    reason = next((line.split("ERROR gngdt.services.capture: ", 1)[1] for line in lines
+                   if "ERROR gngdt.services.capture: " in line), "")
     return reason or next((line.split(": ", 2)[-1] for line in lines
                            if "WARNING" in line and "(--max-" in line), "")
 

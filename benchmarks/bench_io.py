@@ -18,10 +18,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from gngdt_io.frame import CameraIntrinsics, Frame
-from gngdt_io.mcap_reader import read_frames
-from gngdt_io.mcap_writer import RecordingWriter
-from schemas.clouds import cloud_to_msg, msg_to_cloud
+from gngdt.io.frame import CameraIntrinsics, Frame
+from gngdt.io.mcap.reader import read_frames
+from gngdt.io.mcap.writer import RecordingWriter
+from gngdt.schemas.clouds import cloud_to_msg, msg_to_cloud
 
 WIDTH, HEIGHT, FRAMES, POINTS = 640, 480, 30, 300_000
 
@@ -103,7 +103,7 @@ def bench_cloud() -> None:
 
 def bench_synth() -> None:
     try:
-        from gngdt_io.synth.render import SCENES, render_scene
+        from gngdt.io.synth.render import SCENES, render_scene
     except ImportError:
         print("synth: not available")
         return

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gngdt_core import GNGDT
-from gngdt_io.images import iter_image_frames
+from gngdt.core import GNGDT
+from gngdt.io.images import iter_image_frames
 
 LABELLED = Path(__file__).resolve().parents[2] / "shared" / "data" / "labelled"
 PROFILE = {"max_nodes": 4000, "lambda_": 50}

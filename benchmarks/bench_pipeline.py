@@ -41,12 +41,12 @@ from pipeline_runs import (
     shared_memory_use,
 )
 
-from services.logger import LIVELINESS_KEY
+from gngdt.services.logger import LIVELINESS_KEY
 
 
 def render_recording(path: Path, frames: int) -> None:
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     with RecordingWriter(path, compression="lz4") as writer:
         for frame in render_scene("tabletop", frames, width=640, height=480):
@@ -55,7 +55,7 @@ def render_recording(path: Path, frames: int) -> None:
 
 def deprojection_baseline(frame) -> tuple[float, float]:
     """(vectorised ms, Python-loop ms scaled to the full frame) for one frame."""
-    from gngdt_io.deproject import Deprojector
+    from gngdt.io.deproject import Deprojector
 
     deproject = Deprojector()
     deproject(frame.depth, frame.color, frame.intrinsics)
@@ -81,9 +81,9 @@ def deprojection_baseline(frame) -> tuple[float, float]:
 
 def queueing_baseline(recording: Path, samples_per_frame: int, fps: float) -> dict[str, float]:
     """Latency of FIFO vs latest-frame-wins, replaying measured learning times at ``fps``."""
-    from gngdt_core import GNGDT
-    from gngdt_io.mcap_reader import read_frames
-    from services.capture import CloudOptions, FrameToCloud
+    from gngdt.core import GNGDT
+    from gngdt.io.mcap.reader import read_frames
+    from gngdt.services.capture import CloudOptions, FrameToCloud
 
     to_cloud = FrameToCloud(CloudOptions())
     model = GNGDT(random_state=0)
@@ -230,7 +230,7 @@ def main() -> int:
             render_recording(recording, args.frames)
             print(f"rendered {args.frames} frames 640x480 in {time.perf_counter() - started:.1f} s")
 
-        from gngdt_io.mcap_reader import read_frames
+        from gngdt.io.mcap.reader import read_frames
 
         if not args.pipeline_only:
             first = next(iter(read_frames(recording)))

@@ -34,14 +34,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from procstat import cpu_seconds, gngdt, wait_until
 
-from gngdt_core.geometry import CameraIntrinsics
-from gngdt_io.ros2 import messages as m
-from gngdt_io.ros2.markers import encode_graph_markers
-from gngdt_io.ros2.node import Ros2Node
-from gngdt_io.ros2.wire import decode_attachment
-from schemas.clouds import cloud_to_msg
-from schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
-from services.plumbing.session import (
+from gngdt.core.sensor.geometry import CameraIntrinsics
+from gngdt.io.ros2 import messages as m
+from gngdt.io.ros2.markers import encode_graph_markers
+from gngdt.io.ros2.node import Ros2Node
+from gngdt.io.ros2.wire import decode_attachment
+from gngdt.schemas.clouds import cloud_to_msg
+from gngdt.schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
+from gngdt.services.plumbing.session import (
     client_config,
     free_tcp_port,
     open_config,

@@ -7,7 +7,7 @@ the Open3D peer (plane RANSAC + DBSCAN, the baseline) in the same run.
 
 Per set and method: mean best IoU, R@0.5, R@0.75 (pooled over every ground-truth segment, the
 labelled README's score), segments per frame, objects fragmented / merged / missed
-(`gngdt_eval.segment_scores`), milliseconds per frame p50/p90 in all and per phase, and
+(`gngdt.eval.segment_scores`), milliseconds per frame p50/p90 in all and per phase, and
 the time ratio to the peer; for a set named in ``--split`` (mosd_learn split by scene), the same
 rows for each half: parameters are chosen on "tune" (and ycbv_0000), "held_out" is only
 reported. An online run's times leave out its first frame (learned
@@ -36,9 +36,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from procstat import status_mb
 
-from gngdt_eval.report import markdown_table
-from gngdt_eval.segment_scores import FAILURES
-from gngdt_eval.segmentation import PEER, SegmentationEvalSettings, evaluate_segmentation
+from gngdt.eval.report import markdown_table
+from gngdt.eval.segment_scores import FAILURES
+from gngdt.eval.segmentation import PEER, SegmentationEvalSettings, evaluate_segmentation
 
 LABELLED = Path(__file__).resolve().parents[2] / "shared" / "data" / "labelled"
 DEFAULT_SETS = [LABELLED / "mosd_learn", LABELLED / "ycbv_0000"]

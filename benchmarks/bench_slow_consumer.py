@@ -32,16 +32,16 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from procstat import gngdt  # noqa: E402  (benchmarks/, beside this script)
 
-from schemas.status import decode_status  # noqa: E402
-from schemas.topology import decode_topology  # noqa: E402
-from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
-from services.run import DEFAULT_MAX_POINTS  # noqa: E402
+from gngdt.schemas.status import decode_status  # noqa: E402
+from gngdt.schemas.topology import decode_topology  # noqa: E402
+from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
+from gngdt.services.run import DEFAULT_MAX_POINTS  # noqa: E402
 
 #: a client of the router subscribed to everything, whose callback never returns
 NEVER_READS = """
 import sys, time
 sys.path.insert(0, {root!r})
-from services.plumbing.session import client_config, open_config
+from gngdt.services.plumbing.session import client_config, open_config
 session = open_config(client_config([{endpoint!r}]), wait_s=30)
 session.declare_subscriber("gngdt/**", lambda sample: time.sleep(3600))
 print("subscribed", flush=True)
@@ -94,8 +94,8 @@ class Observer:
 
 
 def make_recording(directory: Path) -> Path:
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     path = directory / "loop.mcap"
     with RecordingWriter(path) as writer:

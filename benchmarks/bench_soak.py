@@ -32,9 +32,9 @@ sys.path.insert(0, str(REPO_ROOT))
 
 from procstat import status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
-from schemas.status import LearnerStatusInfo, decode_status  # noqa: E402
-from services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
-from services.run import DEFAULT_MAX_POINTS  # noqa: E402
+from gngdt.schemas.status import LearnerStatusInfo, decode_status  # noqa: E402
+from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
+from gngdt.services.run import DEFAULT_MAX_POINTS  # noqa: E402
 
 
 @dataclass
@@ -56,8 +56,8 @@ class StatusLog:
 
 
 def make_recording(directory: Path, width: int, height: int, frames: int) -> Path:
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     path = directory / "soak.mcap"
     with RecordingWriter(path) as writer:
@@ -69,7 +69,7 @@ def make_recording(directory: Path, width: int, height: int, frames: int) -> Pat
 def start(arguments: list[str], log_path: Path, stdout=None) -> subprocess.Popen:
     with open(log_path, "wb") as log_file:
         return subprocess.Popen(
-            [sys.executable, "-m", "services.cli", *arguments], cwd=REPO_ROOT,
+            [sys.executable, "-m", "gngdt.services.cli", *arguments], cwd=REPO_ROOT,
             stdout=stdout if stdout is not None else log_file, stderr=log_file,
             stdin=subprocess.DEVNULL, start_new_session=True)
 

@@ -4,8 +4,8 @@ RGB-D odometry, in the same run.
 **Ours** is the learner's own per-frame policy with ``track`` (`FrameLearner`, as ``gngdt
 learn --track`` runs it, with the learner's map: resolution 0.1 m): the first frame starts the
 map (the learner's ``first_frame_steps``), then every frame is put back on its pixels from the
-calibration (`organize`), aligned to the map (`gngdt_core.odometry`) and, when tracked, learned
-at the pose found (``--steps`` steps; lost frames are not learned). **The peer** is Open3D's
+calibration (`organize`), aligned to the map (`gngdt.core.odometry.map_odometry`) and, when tracked,
+learned at the pose found (``--steps`` steps; lost frames are not learned). **The peer** is Open3D's
 ``compute_rgbd_odometry`` (hybrid photometric + geometric term, default options but the same
 depth range as ours), frame to frame, each frame started from the last motion; its poses are
 chained. Both start at the first frame's true pose.
@@ -26,7 +26,7 @@ Printed per walk and method: ATE RMSE (after a rigid Horn alignment of the whole
 TUM's evaluate_ate; and anchored: no alignment, both from the true first pose), RPE between
 consecutive frames (translation and rotation RMSE, and worst), lost frames, frames per second
 (ours: the whole per-frame loop — deprojection, map surface, tracking, learning; tracking alone
-in brackets; the peer: its odometry call). Then the ghost share (`gngdt_core.metrics
+in brackets; the peer: its odometry call). Then the ghost share (`gngdt.core.metrics
 .ghost_nodes`, seen nodes farther than 5 cm from the frame; steady state: the second half of the
 frames, mean and worst frame) of maps learned with tracked poses, with the true poses, and with
 no poses (camera frame).
@@ -46,25 +46,25 @@ from pathlib import Path
 
 import numpy as np
 
-from gngdt_core.frame_learner import (
+from gngdt.core.gas.model import GNGDT
+from gngdt.core.kernels import odometry as OK
+from gngdt.core.learner.frame_learner import (
     LEARNER_MODEL_DEFAULTS,
     LEARNER_WORLD_DEFAULTS,
     FrameLearner,
     LearnerConfig,
     LearnerOptions,
 )
-from gngdt_core.geometry import rigid_inverse
-from gngdt_core.kernels import odometry as OK
-from gngdt_core.map_surface import MapSurface
-from gngdt_core.metrics import ghost_nodes
-from gngdt_core.model import GNGDT
-from gngdt_core.odometry import MapOdometry, TrackerParams
-from gngdt_eval.open3d_peer import load_open3d
-from gngdt_io.deproject import Deprojector
-from gngdt_io.frame import Frame
-from gngdt_io.images import iter_image_frames, load_camera
-from gngdt_io.pose_files import load_poses
-from gngdt_io.synth.render import render_scene
+from gngdt.core.metrics import ghost_nodes
+from gngdt.core.odometry.map_odometry import MapOdometry, TrackerParams
+from gngdt.core.odometry.map_surface import MapSurface
+from gngdt.core.sensor.geometry import rigid_inverse
+from gngdt.eval.open3d_peer import load_open3d
+from gngdt.io.deproject import Deprojector
+from gngdt.io.frame import Frame
+from gngdt.io.images import iter_image_frames, load_camera
+from gngdt.io.pose_files import load_poses
+from gngdt.io.synth.render import render_scene
 
 #: scene -> frames rendered at 30 fps (the walk: out and back; the arc: half its period)
 SCENES = {"tabletop_walk": 240, "tabletop": 180}

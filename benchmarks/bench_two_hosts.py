@@ -41,8 +41,8 @@ PLACEMENTS = [
 
 
 def render(path: Path, frames: int) -> None:
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     with RecordingWriter(path, compression="lz4") as writer:
         for frame in render_scene("tabletop", frames, width=640, height=480):

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-GNGDT = [sys.executable, "-m", "services.cli"]
+GNGDT = [sys.executable, "-m", "gngdt.services.cli"]
 
 #: runs a command, then prints the peak RSS of its process tree (every descendant it waited)
 PEAK_RSS = (
@@ -36,7 +36,7 @@ FULL_DISK = (
     "import os, resource, signal, sys\n"
     "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)\n"
     "resource.setrlimit(resource.RLIMIT_FSIZE, (3_000_000, 3_000_000))\n"
-    "os.execv(sys.executable, [sys.executable, '-m', 'services.cli', *sys.argv[1:]])\n"
+    "os.execv(sys.executable, [sys.executable, '-m', 'gngdt.services.cli', *sys.argv[1:]])\n"
 )
 
 
@@ -109,14 +109,14 @@ def line_with(text: str, *needles: str) -> str:
 
 # ----------------------------------------------------------------------------- inputs
 def walk_frames(count: int = 30):
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.synth.render import render_scene
 
     return list(render_scene("tabletop_walk", count, width=160, height=120))
 
 
 def w_first(pose: np.ndarray) -> np.ndarray:
     """What a reader taking x y z w makes of a pose written w x y z."""
-    from gngdt_core.geometry import matrix_to_pose, pose_to_matrix
+    from gngdt.core.sensor.geometry import matrix_to_pose, pose_to_matrix
 
     translation, (x, y, z, w) = matrix_to_pose(pose)
     return pose_to_matrix(translation, [w, x, y, z])
@@ -124,8 +124,8 @@ def w_first(pose: np.ndarray) -> np.ndarray:
 
 def recording(path: Path, frames, pose_of=None) -> Path:
     """``frames`` into a gngdt MCAP, each pose replaced by ``pose_of(index, pose)``."""
-    from gngdt_io.frame import CameraPose
-    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt.io.frame import CameraPose
+    from gngdt.io.mcap.writer import RecordingWriter
 
     with RecordingWriter(path) as writer:
         for index, frame in enumerate(frames):
@@ -141,7 +141,7 @@ def image_folder(folder: Path, frames, depth_of=None) -> Path:
     written w x y z in poses_wxyz.txt."""
     import cv2
 
-    from gngdt_core.geometry import matrix_to_pose
+    from gngdt.core.sensor.geometry import matrix_to_pose
 
     (folder / "color").mkdir(parents=True)
     (folder / "depth").mkdir()
@@ -194,8 +194,8 @@ def pose_attacks(folder: Path) -> list[Attack]:
 
 def crafted_checkpoint(path: Path, **changes) -> Path:
     """A learner checkpoint with a valid digest whose state is changed as ``changes`` say."""
-    from gngdt_core import GNGDT
-    from gngdt_io.checkpoints import save_checkpoint
+    from gngdt.core import GNGDT
+    from gngdt.io.checkpoints import save_checkpoint
 
     rng = np.random.default_rng(0)
     model = GNGDT(max_nodes=60, utility_k=1000.0, replay_share=0.3, random_state=0)
@@ -273,9 +273,9 @@ def forge(folder: Path, role: str) -> None:
     learner's (objects are its own stream), ten times each."""
     import zenoh
 
-    from schemas.status import encode_stream_end
-    from schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
-    from services.plumbing.session import client_config, open_config
+    from gngdt.schemas.status import encode_stream_end
+    from gngdt.schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
+    from gngdt.services.plumbing.session import client_config, open_config
 
     session = open_config(client_config(None, folder / f"{role}.json5"))
     block = zenoh.CongestionControl.BLOCK
@@ -316,8 +316,8 @@ def role_attack(folder: Path) -> list[Attack]:
 # ----------------------------------------------------------------------------- 24.3 the MCAP
 def flood(endpoint: str, key_of, payload: bytes, count: int, seconds: float = 60) -> int:
     """Put ``payload`` on ``key_of(i)`` ``count`` times (or for ``seconds``); how many."""
-    from schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
-    from services.plumbing.session import client_config, open_config
+    from gngdt.schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
+    from gngdt.services.plumbing.session import client_config, open_config
 
     session = open_config(client_config([endpoint]))
     deadline, sent = time.monotonic() + seconds, 0
@@ -340,7 +340,7 @@ def mcap_channels(path: Path) -> int:
 def logger_under(folder: Path, name: str, endpoint: str, feed, wrapper: list[str] | None = None
                  ) -> tuple[Ran, Path]:
     """A logger with --mcap on a fresh router, fed by ``feed(endpoint)``, then interrupted."""
-    from services.plumbing.session import open_config, router_config
+    from gngdt.services.plumbing.session import open_config, router_config
 
     router = open_config(router_config([endpoint]), what="router")
     mcap_path, log = folder / f"{name}.mcap", folder / f"log-{name}.log"
@@ -360,7 +360,7 @@ def logger_under(folder: Path, name: str, endpoint: str, feed, wrapper: list[str
 
 
 def mcap_attacks(folder: Path) -> list[Attack]:
-    from services.plumbing.session import free_tcp_port
+    from gngdt.services.plumbing.session import free_tcp_port
 
     rows = []
     scene = bytes(4 * 1024 * 1024)  # 4 MB scene updates, as fast as they go, for 10 s
@@ -390,7 +390,7 @@ def mcap_attacks(folder: Path) -> list[Attack]:
 
 # ----------------------------------------------------------------------------- 24.4 runs
 def run_attacks(folder: Path) -> list[Attack]:
-    from services.plumbing.session import free_tcp_port
+    from gngdt.services.plumbing.session import free_tcp_port
 
     rows = []
     path = recording(folder / "small.mcap", walk_frames(8))

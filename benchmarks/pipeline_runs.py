@@ -9,7 +9,7 @@ A :class:`Transport` says how large payloads travel on the one host:
   router's TCP links, the baseline;
 - ``zenoh``: zenoh's defaults without gngdt's pools (``GNGDT_SHM_POOL_MB=0``): zenoh copies large
   payloads into its own 16 MiB pool when one is free (how gngdt ran before its pools);
-- ``shm``: gngdt's default, each publisher's own pool (``services.plumbing.session``).
+- ``shm``: gngdt's default, each publisher's own pool (``gngdt.services.plumbing.session``).
 """
 
 from __future__ import annotations
@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 from procstat import REPO_ROOT, cpu_seconds, status_mb
 
-from schemas.wire import FrameStamp
-from services.plumbing import lifecycle
-from services.plumbing.session import (
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.session import (
     SHARED_MEMORY_POOL_ENV,
     client_config,
     free_tcp_port,
@@ -37,7 +37,7 @@ from services.plumbing.session import (
     router_settings,
     settings_file_text,
 )
-from services.run import Child, RunAccess
+from gngdt.services.run import Child, RunAccess
 
 
 @dataclass(frozen=True)
@@ -98,14 +98,14 @@ class Observer:
                 self.alive.discard(str(sample.key_expr))
 
     def _on_status(self, sample) -> None:
-        from schemas.status import decode_status
+        from gngdt.schemas.status import decode_status
 
         status = decode_status(sample.payload.to_bytes())
         with self.lock:
             self.camera(sample.key_expr).status = status
 
     def _on_eos(self, sample) -> None:
-        from schemas.status import decode_stream_end
+        from gngdt.schemas.status import decode_stream_end
 
         end = decode_stream_end(sample.payload.to_bytes())
         with self.lock:
@@ -168,7 +168,7 @@ class BenchPipeline:
         log_path = self.workdir / f"{label}.log"
         log_file = open(log_path, "wb")  # closed in close()
         process = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", *arguments, "--log-level", self.log_level],
+            [sys.executable, "-m", "gngdt.services.cli", *arguments, "--log-level", self.log_level],
             cwd=REPO_ROOT, stdout=log_file, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             env={**lifecycle.child_environment(), **self.transport.environment},
             start_new_session=True)
@@ -246,7 +246,7 @@ class CpuWindow:
                 for name in self.pids}
 
 
-#: what a publisher logs when it is undeclared (services.plumbing.session)
+#: what a publisher logs when it is undeclared (gngdt.services.plumbing.session)
 _SHARED_LINE = re.compile(r"(gngdt/\S+): (\d+) of (\d+) large payloads went through shared memory")
 _CLOUDS_LINE = re.compile(r"(\d+) of (\d+) clouds arrived through shared memory")
 

@@ -16,7 +16,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 def gngdt(*arguments: str, log: Path) -> subprocess.Popen:
     """``gngdt <arguments>`` started in its own session from the repository, output to ``log``."""
     with open(log, "wb") as output:
-        return subprocess.Popen([sys.executable, "-m", "services.cli", *arguments],
+        return subprocess.Popen([sys.executable, "-m", "gngdt.services.cli", *arguments],
                                 cwd=REPO_ROOT, stdout=output, stderr=subprocess.STDOUT,
                                 start_new_session=True)
 

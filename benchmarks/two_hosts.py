@@ -100,7 +100,7 @@ class Host:
 
     def gngdt(self, name: str, *arguments: str) -> subprocess.Popen:
         """``gngdt ARGUMENTS`` on this host."""
-        return self.start(name, sys.executable, "-m", "services.cli", *arguments)
+        return self.start(name, sys.executable, "-m", "gngdt.services.cli", *arguments)
 
     def run(self, *command: str, timeout_s: float = 60) -> subprocess.CompletedProcess:
         """``command`` on this host, to its end."""

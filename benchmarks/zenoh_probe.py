@@ -21,9 +21,9 @@ import threading
 import time
 from pathlib import Path
 
-from schemas.topology import decode_topology
-from schemas.wire import FrameStamp
-from services.plumbing.session import client_config, open_config
+from gngdt.schemas.topology import decode_topology
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.plumbing.session import client_config, open_config
 
 
 def watch(endpoint: str, out: Path) -> None:

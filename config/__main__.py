@@ -1,4 +1,4 @@
-"""`python -m gngdt_config`: where gngdt's example configuration files are installed."""
+"""`python -m gngdt.config`: where gngdt's example configuration files are installed."""
 
 from pathlib import Path
 

@@ -66,7 +66,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="gngdt-figure-") as folder:
         rrd, figure = Path(folder) / "walk.rrd", Path(folder) / "figure.rrd"
         completed = subprocess.run(
-            [sys.executable, "-m", "services.cli", "run", f"synth:tabletop_walk:{args.frames}",
+            [sys.executable, "-m", "gngdt.services.cli", "run",
+             f"synth:tabletop_walk:{args.frames}",
              "--save", str(rrd)], cwd=REPO_ROOT, check=False)
         if completed.returncode != 0:
             log.error("gngdt run failed (exit %d)", completed.returncode)

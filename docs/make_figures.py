@@ -20,7 +20,7 @@ import numpy as np
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))  # runnable from a plain checkout, without `pip install -e`
 
-from gngdt_io.frame import CameraIntrinsics  # noqa: E402
+from gngdt.io.frame import CameraIntrinsics  # noqa: E402
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -60,10 +60,10 @@ class LearnedScene:
 def learn_scene(recording: Path, params: Path | None, samples_per_frame: int,
                 seed: int) -> LearnedScene:
     """Learn every frame of ``recording`` as the live learner would (``--params`` file)."""
-    from gngdt_core import GNGDT
-    from gngdt_io.deproject import Deprojector
-    from gngdt_io.mcap_reader import read_frames
-    from gngdt_io.profiles import load_profile
+    from gngdt.core import GNGDT
+    from gngdt.io.deproject import Deprojector
+    from gngdt.io.mcap.reader import read_frames
+    from gngdt.io.profiles import load_profile
 
     config = load_profile(params).config
     model = GNGDT(**{**config.model, "random_state": seed})
@@ -130,7 +130,7 @@ def make_topology_figure(scene: LearnedScene, out: Path, source: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from gngdt_eval.plots import cluster_colours
+    from gngdt.eval.plots import cluster_colours
 
     model = scene.model
     aspect = scene.intrinsics.height / scene.intrinsics.width

@@ -39,9 +39,9 @@ CLOSE_UP = ((-1.45, -0.85), (2.05, 2.75))
 def posed_frames(folder: Path) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """(camera-frame points (N, 3) m, colours (N, 3) u8, camera-to-world pose (4, 4)) per frame,
     through the importer `gngdt record images --format redwood --poses DIR/poses` uses."""
-    from gngdt_io.deproject import Deprojector
-    from gngdt_io.images import count_image_frames, iter_image_frames
-    from gngdt_io.pose_files import attach_poses, load_poses
+    from gngdt.io.deproject import Deprojector
+    from gngdt.io.images import count_image_frames, iter_image_frames
+    from gngdt.io.pose_files import attach_poses, load_poses
 
     frames = attach_poses(iter_image_frames(folder, "redwood"), load_poses(folder / "poses"),
                           count_image_frames(folder, "redwood"))
@@ -79,8 +79,8 @@ def learn_network(frames: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
                   first_from_world: np.ndarray, seed: int):
     """GNG-DT learned from the posed frames with the learner's parameters: (model, its node
     positions (M, 3) m in the first camera's axes, position error (m) per frame)."""
-    from gngdt_core import GNGDT
-    from gngdt_io.profiles import load_profile
+    from gngdt.core import GNGDT
+    from gngdt.io.profiles import load_profile
 
     model = GNGDT(**{**load_profile(None).config.model, "random_state": seed})
     for points, colors, pose in frames:

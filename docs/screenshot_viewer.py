@@ -32,8 +32,8 @@ HERE = Path(__file__).resolve().parent
 REPO_ROOT = HERE.parent
 sys.path.insert(0, str(REPO_ROOT))
 
-from gngdt_io.outputs.rerun_sinks import rerun_binary  # noqa: E402
-from services.plumbing.session import free_tcp_port  # noqa: E402
+from gngdt.io.outputs.rerun_sinks import rerun_binary  # noqa: E402
+from gngdt.services.plumbing.session import free_tcp_port  # noqa: E402
 
 log = logging.getLogger("screenshot_viewer")
 

@@ -56,9 +56,9 @@ class Clustering:
 
     topologies: the edge sets whose connected components are its clusters (an edge counts where
     every named topology has it), or ``("cvx",)``: the segmentation by local convexity
-    (`gngdt_core.segmentation`), whose segments are not plain components. Every clustering is
-    drawn the same way: nodes and its edges coloured by persistent cluster id, grey outside any
-    cluster (`schemas.cluster_colors`).
+    (`gngdt.core.segmentation.network`), whose segments are not plain components. Every clustering
+    is drawn the same way: nodes and its edges coloured by persistent cluster id, grey outside any
+    cluster (`gngdt.schemas.cluster_colors`).
     """
 
     name: str

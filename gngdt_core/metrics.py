@@ -86,13 +86,13 @@ def ghost_nodes(
 
     node_positions: (N, 3) in the model's frame; camera_points: (M, 3) the batch, camera frame;
     camera_pose: (4, 4) camera-to-model (None: the model is in the camera frame). A node is seen
-    as in `gngdt_core.view.seen_nodes` (depth tolerance ``margin``, a fraction of the depth) and
-    a ghost when it is seen and farther than ``distance`` (the data's units) from every point of
+    as in `gngdt.core.sensor.view.seen_nodes` (depth tolerance ``margin``, a fraction of the depth)
+    and a ghost when it is seen and farther than ``distance`` (the data's units) from every point of
     the batch: the sensor looked there and found nothing. Returns (seen, ghost), (N,) bool each.
     """
     from scipy.spatial import cKDTree
 
-    from gngdt_core.view import seen_nodes
+    from gngdt.core.sensor.view import seen_nodes
 
     nodes = np.asarray(node_positions, dtype=np.float64)
     seen = seen_nodes(nodes, camera_points, camera_pose, margin)

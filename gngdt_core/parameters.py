@@ -5,7 +5,7 @@ defaults and a table of constraints gives type and range (`MODEL_CONSTRAINTS`, f
 `GNG` and `GNGW`); a group of settings that is not an estimator (segmentation, frame schedule,
 learner options) is a frozen dataclass whose fields are declared with `param`, default and
 constraint together, and validated by `check_fields`. `from_mapping` builds such a group from a
-TOML table. Profiles (TOML files) only override these declarations; `gngdt_io.profiles` reads
+TOML table. Profiles (TOML files) only override these declarations; `gngdt.io.profiles` reads
 them, and `gngdt learn --print-params` shows the effective values and where each came from.
 """
 

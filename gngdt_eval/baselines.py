@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_io.deproject import voxel_downsample, voxel_keys
+from gngdt.io.deproject import voxel_downsample, voxel_keys
 
 
 @dataclass(frozen=True)
@@ -47,7 +47,7 @@ def quantization_error(
     """
     from scipy.spatial import cKDTree
 
-    from gngdt_core.metrics import quantization_error as rms_error
+    from gngdt.core.metrics import quantization_error as rms_error
 
     _, winners = cKDTree(representative_positions).query(positions, k=1)
     result = {"pos": rms_error(positions, representative_positions, winners)}

@@ -14,7 +14,7 @@ import logging
 import sys
 from pathlib import Path
 
-from gngdt_eval.paper_common import METHOD_NAMES, METHODS, STOP_RULES, PaperSettings
+from gngdt.eval.paper_common import METHOD_NAMES, METHODS, STOP_RULES, PaperSettings
 
 log = logging.getLogger(__name__)
 
@@ -253,7 +253,7 @@ def _add_segmentation(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Dispatch to the chosen evaluation; bad input is reported as one line, exit code 2."""
-    from gngdt_io.errors import RecordingError
+    from gngdt.io.errors import RecordingError
 
     missing = [name for name in ("matplotlib", "sklearn") if importlib.util.find_spec(name) is None]
     if missing:  # checked first: the plots and references come after minutes of learning
@@ -270,7 +270,7 @@ def main(args: argparse.Namespace) -> int:
 
 
 def _main_paper(args: argparse.Namespace) -> int:
-    from gngdt_eval.paper import run_paper
+    from gngdt.eval.paper import run_paper
 
     options = {"workers": args.workers} if args.workers else {}
     settings = PaperSettings(
@@ -308,7 +308,7 @@ def _in_paper_order(methods: list[str]) -> tuple[str, ...]:
 
 
 def _main_recording(args: argparse.Namespace) -> int:
-    from gngdt_eval.recording_eval import RecordingSettings, evaluate_recording
+    from gngdt.eval.recording_eval import RecordingSettings, evaluate_recording
 
     overrides = {
         name: getattr(args, name)
@@ -322,7 +322,7 @@ def _main_recording(args: argparse.Namespace) -> int:
         )
         if getattr(args, name) is not None
     }
-    from gngdt_eval.dynamics import DynamicsSettings
+    from gngdt.eval.dynamics import DynamicsSettings
 
     if args.utility_k is not None:
         if args.utility_k < 0:
@@ -358,7 +358,7 @@ def _main_recording(args: argparse.Namespace) -> int:
 
 
 def _main_rrd(args: argparse.Namespace) -> int:
-    from gngdt_eval.rrd import evaluate_rrd
+    from gngdt.eval.rrd import evaluate_rrd
 
     out = args.out or Path("report") / args.path.stem
     data = evaluate_rrd(args.path, out)
@@ -367,7 +367,7 @@ def _main_rrd(args: argparse.Namespace) -> int:
 
 
 def _main_segmentation(args: argparse.Namespace) -> int:
-    from gngdt_eval.segmentation import (
+    from gngdt.eval.segmentation import (
         SegmentationEvalSettings,
         evaluate_segmentation,
     )

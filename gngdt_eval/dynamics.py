@@ -1,8 +1,8 @@
 """Metrics over time for a moving camera and a changing scene, per replayed frame.
 
 - **ghost share**: of the nodes the sensor could have seen in the frame (in view, not behind the
-  measured surface; `gngdt_core.view`), the share farther than ``ghost_distance_m`` from every
-  point of the frame (`gngdt_core.metrics.ghost_nodes`): places the sensor looked at and found
+  measured surface; `gngdt.core.sensor.view`), the share farther than ``ghost_distance_m`` from
+  every point of the frame (`gngdt.core.metrics.ghost_nodes`): places the sensor looked at and found
   empty. **stale share**: of all nodes, the share farther than that from the frame's points
   (the issue's measure; in a world-frame map, out-of-view nodes count as stale although they are
   right).
@@ -125,7 +125,7 @@ class Change:
 
 def scene_changes(metadata: dict[str, dict[str, str]]) -> list[Change]:
     """The changes a synthetic recording's ``gngdt.scene`` metadata describes (none if absent)."""
-    from gngdt_io.synth.render import SCENE_METADATA
+    from gngdt.io.synth.render import SCENE_METADATA
 
     scene = metadata.get(SCENE_METADATA)
     if not scene:
@@ -183,7 +183,7 @@ class DynamicsTracker:
         """The frame's metrics once ``model`` has learned it."""
         from scipy.spatial import cKDTree
 
-        from gngdt_core.metrics import ghost_nodes
+        from gngdt.core.metrics import ghost_nodes
 
         s = self.settings
         self.frames_seen += 1
@@ -219,7 +219,7 @@ class DynamicsTracker:
     def world_reference(self, model: Any) -> dict[str, float]:
         """Position error (eq. 17) of the nodes and of k-means with as many centres on the
         world sample, k-means fitted on the other half of it; empty without poses."""
-        from gngdt_eval.baselines import kmeans_reference, quantization_error
+        from gngdt.eval.baselines import kmeans_reference, quantization_error
 
         nodes = np.asarray(model.positions_)
         sample = self.world.points if self.world is not None else np.zeros((0, 3))

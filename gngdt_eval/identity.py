@@ -1,8 +1,8 @@
 """Do objects keep their ids? Persistent cluster ids scored frame by frame.
 
-For each clustering, a `ClusterTracker` gives every cluster a persistent id and the objects are
-the clusters the learner would publish (`gngdt_core.objects.object_labels`: at least ``min_size``
-nodes, seen in ``confirm_frames`` frames in a row). Two figures per clustering:
+For each clustering, a `ClusterIds` gives every cluster a persistent id and the objects are
+the clusters the learner would publish (`gngdt.core.objects.object_set.object_labels`: at least
+``min_size`` nodes, seen in ``confirm_frames`` frames in a row). Two figures per clustering:
 
 - ``tracks_kept``: of the objects of one frame, the share whose id is still an object in the
   next. Needs no ground truth.
@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gngdt_core.cluster_tracking import ClusterTracker
-from gngdt_core.objects import object_labels
+from gngdt.core.objects.ids import ClusterIds
+from gngdt.core.objects.object_set import object_labels
 
 #: a ground-truth segment needs this many points in a frame to be scored there
 MIN_SEGMENT_POINTS = 50
@@ -28,7 +28,7 @@ MIN_SEGMENT_POINTS = 50
 
 @dataclass
 class _ClusteringScore:
-    tracker: ClusterTracker
+    ids: ClusterIds
     previous_objects: set[int] | None = None
     tracks_seen: int = 0
     tracks_kept: int = 0
@@ -61,9 +61,9 @@ class IdentityScore:
         score = self._scores.get(name)
         if score is None:
             score = self._scores[name] = _ClusteringScore(
-                ClusterTracker(confirm_frames=self.confirm_frames))
-        cluster_ids = score.tracker.update(node_ids, node_labels)
-        labels = object_labels(node_labels, score.tracker.confirmed_, self.min_size)
+                ClusterIds(confirm_frames=self.confirm_frames))
+        cluster_ids = score.ids.update(node_ids, node_labels)
+        labels = object_labels(node_labels, score.ids.confirmed_, self.min_size)
         node_objects = np.where(labels >= 0, cluster_ids[np.maximum(labels, 0)]
                                 if len(cluster_ids) else -1, -1)
         present = set(np.unique(node_objects[node_objects >= 0]).tolist())

@@ -24,24 +24,24 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper_common import (
+from gngdt.eval.paper_common import (
     GNGDT_THRESHOLDS,
     GNGW_WEIGHTS,
     PAPER_PARAMETERS,
     RECTANGLES,
     PaperSettings,
 )
-from gngdt_eval.paper_methods import clusterings_of, learn, make_model, trial_seed
-from gngdt_eval.paper_report import render_markdown, write_plots
-from gngdt_eval.paper_rgbd import (
+from gngdt.eval.paper_methods import clusterings_of, learn, make_model, trial_seed
+from gngdt.eval.paper_report import render_markdown, write_plots
+from gngdt.eval.paper_rgbd import (
     build_frame_tasks,
     extract_frames,
     frame_findings,
     summarise_frames,
 )
-from gngdt_eval.paper_summary import colour_fit, differences, findings, select_runs, summarise
-from gngdt_eval.progress import ProgressBar
-from gngdt_eval.report import write_report
+from gngdt.eval.paper_summary import colour_fit, differences, findings, select_runs, summarise
+from gngdt.eval.progress import ProgressBar
+from gngdt.eval.report import write_report
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ def load_dataset(
     The same point cloud serves every trial (as in the paper: one dataset, random sampling per
     trial); cached per process.
     """
-    from gngdt_core import make_data1, make_data2
+    from gngdt.eval.synthetic import make_data1, make_data2
 
     make = make_data1 if dataset == "Data1" else make_data2
     positions, colors, labels = make(
@@ -83,7 +83,7 @@ def load_dataset(
 
 def run_trial(task: TrialTask) -> dict[str, Any]:
     """Learn one run and measure it: quantization errors, clusters, ARI, cluster-centre errors."""
-    from gngdt_core import (
+    from gngdt.core import (
         adjusted_rand_index,
         cluster_centre_errors,
         cluster_count,
@@ -164,7 +164,7 @@ def normal_edge_spread(model: Any, winners: np.ndarray, labels: np.ndarray) -> d
     both ends on one surface: the median sign-invariant normal distance and the share below
     tau_nor (those edges are the surface's normal topology).
     """
-    from gngdt_core.synthetic import (
+    from gngdt.eval.synthetic import (
         DATA2_CYLINDER,
         DATA2_FLOOR,
         DATA2_PRISM_BROWN_FACE,
@@ -218,7 +218,7 @@ def separates_regions(
 
 def data1_centres(scale: float) -> np.ndarray:
     """(4, 2) true centres of Data1's rectangles C1..C4 (Section 3.1.1) times ``scale``."""
-    from gngdt_core import DATA1_CENTRES
+    from gngdt.eval.synthetic import DATA1_CENTRES
 
     return scale * np.asarray(DATA1_CENTRES, dtype=np.float64)
 

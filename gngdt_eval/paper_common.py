@@ -180,7 +180,7 @@ class PaperSettings:
     plus lambda steps per node deleted on the way (at most twice the growth, which no run needs).
     ``stop="steps"``: every run learns exactly ``steps`` steps, adapting on after the budget.
     ``color_noise``: the levels of within-region colour noise to run (std per RGB channel, see
-    `gngdt_core.synthetic`); the first is the main one, the others are shown beside it.
+    `gngdt.eval.synthetic`); the first is the main one, the others are shown beside it.
     ``frames``: RGB-D image folders for Tables 5-6 (the first frame of each, or every frame with
     ``all_frames``), learned ``frame_trials`` times (default: ``trials``).
     """
@@ -232,6 +232,6 @@ class PaperSettings:
 
 
 def _default_noise() -> float:
-    from gngdt_core.synthetic import COLOR_NOISE
+    from gngdt.eval.synthetic import COLOR_NOISE
 
     return COLOR_NOISE

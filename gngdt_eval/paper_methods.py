@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper_common import GNGDT_THRESHOLDS, GNGW_WEIGHTS, METHODS, PAPER_PARAMETERS
+from gngdt.eval.paper_common import GNGDT_THRESHOLDS, GNGW_WEIGHTS, METHODS, PAPER_PARAMETERS
 
 
 def trial_seed(trial: int) -> int:
@@ -40,7 +40,7 @@ def learn(model: Any, positions: np.ndarray, colors: np.ndarray | None, stop: st
 def make_model(method: str, max_nodes: int, random_state: int, **gngdt_extra: Any):
     """A fresh estimator for ``method`` with the paper's Table 1 parameters; ``gngdt_extra``:
     further GNG-DT arguments (forgetting), refused for the other methods."""
-    from gngdt_core import GNG, GNGDT, GNGW
+    from gngdt.core import GNG, GNGDT, GNGW
 
     if gngdt_extra and method != "GNG-DT":
         raise ValueError(f"{method} takes no {sorted(gngdt_extra)}")

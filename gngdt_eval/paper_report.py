@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper_common import (
+from gngdt.eval.paper_common import (
     GNGDT_THRESHOLDS,
     GNGW_WEIGHTS,
     PAPER_FIGURE11_CLUSTERS,
@@ -19,7 +19,7 @@ from gngdt_eval.paper_common import (
     RECTANGLES,
     PaperSettings,
 )
-from gngdt_eval.report import format_mean_std, format_number, markdown_table
+from gngdt.eval.report import format_mean_std, format_number, markdown_table
 
 
 def noise_label(level: float) -> str:
@@ -33,7 +33,7 @@ def write_plots(
     out_dir: Path,
 ) -> list[Path]:
     """Figure 10 per data set and the Figures 8/9 topology grids, for the main noise level."""
-    from gngdt_eval.plots import TopologyPanel, plot_scale_curves, plot_topology_grid
+    from gngdt.eval.plots import TopologyPanel, plot_scale_curves, plot_topology_grid
 
     paths = []
     main = noise_label(settings.color_noise[0])

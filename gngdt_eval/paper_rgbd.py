@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper_common import METHODS, PAPER_WINNERS, PaperSettings
-from gngdt_eval.paper_methods import learn, make_model, trial_seed
-from gngdt_eval.report import mean_std
+from gngdt.eval.paper_common import METHODS, PAPER_WINNERS, PaperSettings
+from gngdt.eval.paper_methods import learn, make_model, trial_seed
+from gngdt.eval.report import mean_std
 
 MILLIMETRES_PER_METRE = 1000.0
 
@@ -55,8 +55,8 @@ def extract_frames(folders: Sequence[str | Path], all_frames: bool, cache_dir: P
         RealFrame]:
     """Deproject the first frame of each folder (every frame with ``all_frames``) into
     ``cache_dir``. Folders in any layout `gngdt record images` reads; RecordingError if not."""
-    from gngdt_io.deproject import Deprojector
-    from gngdt_io.images import detect_format, iter_image_frames
+    from gngdt.io.deproject import Deprojector
+    from gngdt.io.images import detect_format, iter_image_frames
 
     deproject = Deprojector()
     frames = []

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper_common import (
+from gngdt.eval.paper_common import (
     DEGRADED,
     PAPER_FIGURE11_CLUSTERS,
     PAPER_TABLE2,
@@ -20,7 +20,7 @@ from gngdt_eval.paper_common import (
     Cell,
     PaperSettings,
 )
-from gngdt_eval.report import mean_std
+from gngdt.eval.report import mean_std
 
 #: the tables `summarise` fills per data set, method and scale
 CELL_TABLES = ("table2", "table3", "figure10", "clusters", "ari")

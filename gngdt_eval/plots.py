@@ -91,7 +91,7 @@ def plot_topology_grid(
 def _draw_topology(axis, panel: TopologyPanel, three_d: bool) -> None:
     from matplotlib.collections import LineCollection
 
-    from gngdt_core import cluster_count
+    from gngdt.core import cluster_count
 
     colours = cluster_colours(panel.labels)
     positions = np.asarray(panel.positions, dtype=np.float64)

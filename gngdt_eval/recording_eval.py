@@ -7,7 +7,7 @@ learner's per-frame call: with the recording's camera poses the network is learn
 frame (``world_frame``), without them in the camera frame. After every frame we measure the
 quantization errors on that frame's points, the node count, the clusters per topology and, where
 the recording has ground-truth labels, the adjusted Rand index of each clustering (each point
-takes its winner node's cluster), plus the metrics over time of :mod:`gngdt_eval.dynamics`
+takes its winner node's cluster), plus the metrics over time of :mod:`gngdt.eval.dynamics`
 (ghost share, old-place nodes of changed objects, and with poses the error against k-means on
 the world seen so far). On the last frame the references are computed on the same points: k-means
 with as many centres as nodes, a voxel grid downsampled to as many points, and DBSCAN of the raw
@@ -25,18 +25,18 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig, PoseRejectedError
-from gngdt_core.geometry import apply_pose
-from gngdt_eval.dynamics import (
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig, PoseRejectedError
+from gngdt.core.sensor.geometry import apply_pose
+from gngdt.eval.dynamics import (
     CameraView,
     DynamicsSettings,
     DynamicsTracker,
     scene_changes,
 )
-from gngdt_eval.paper_common import METHOD_NAMES, PAPER_PARAMETERS
-from gngdt_eval.paper_methods import clusterings_of, make_model
-from gngdt_eval.recording_report import render_markdown, write_plots
-from gngdt_eval.report import mean_std, write_report
+from gngdt.eval.paper_common import METHOD_NAMES, PAPER_PARAMETERS
+from gngdt.eval.paper_methods import clusterings_of, make_model
+from gngdt.eval.recording_report import render_markdown, write_plots
+from gngdt.eval.report import mean_std, write_report
 
 log = logging.getLogger(__name__)
 
@@ -104,13 +104,13 @@ class RecordingSettings:
 
 
 def _learner_model_default(name: str) -> Any:
-    from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
+    from gngdt.core.learner.frame_learner import LEARNER_MODEL_DEFAULTS
 
     return LEARNER_MODEL_DEFAULTS.get(name)
 
 
 def _learner_default(name: str) -> Any:
-    from gngdt_core.frame_learner import LearnerOptions
+    from gngdt.core.learner.frame_learner import LearnerOptions
 
     return getattr(LearnerOptions(), name)
 
@@ -118,7 +118,7 @@ def _learner_default(name: str) -> Any:
 def _gngdt_default(name: str) -> Any:
     import inspect
 
-    from gngdt_core import GNGDT
+    from gngdt.core import GNGDT
 
     return inspect.signature(GNGDT.__init__).parameters[name].default
 
@@ -149,9 +149,9 @@ class FramePoints:
 
 def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
     """Frames of the recording deprojected like the capture service does (labels with them)."""
-    from gngdt_io.deproject import Deprojector
-    from gngdt_io.mcap_reader import read_frames
-    from gngdt_io.sources.base import DEFAULT_MAX_SKEW_MS
+    from gngdt.io.deproject import Deprojector
+    from gngdt.io.mcap.reader import read_frames
+    from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS
 
     deproject = Deprojector(settings.min_depth_m, settings.max_depth_m)
     # colour and depth paired as capture pairs them, so a ROS 2 bag replays here as it does live
@@ -230,7 +230,7 @@ class MethodReplay:
 
 def learner_config(settings: RecordingSettings, trial: int) -> LearnerConfig:
     """The learner's configuration a replay of ``settings`` learns with (seed ``trial``)."""
-    from gngdt_core.frame_learner import LearnerConfig, LearnerOptions
+    from gngdt.core.learner.frame_learner import LearnerConfig, LearnerOptions
 
     options = LearnerOptions(samples_per_frame=settings.samples_per_frame,
                              min_cluster_size=settings.min_cluster_size,
@@ -244,8 +244,8 @@ def learner_config(settings: RecordingSettings, trial: int) -> LearnerConfig:
 
 def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> dict[str, Any]:
     """One method, one seed, every frame: per-frame metrics and the final model's topology."""
-    from gngdt_eval.identity import IdentityScore
-    from gngdt_io.mcap_reader import recording_metadata
+    from gngdt.eval.identity import IdentityScore
+    from gngdt.io.mcap.reader import recording_metadata
 
     run = MethodReplay(method, trial, settings)
     identity = IdentityScore(settings.min_cluster_size, settings.object_confirm_frames)
@@ -296,7 +296,7 @@ def _frame_record(model: Any, points: FramePoints, labels: dict[str, np.ndarray]
                   identity: Any, learn_seconds: float) -> dict[str, Any]:
     """The metrics of one learned frame; ``labels``: node labels per clustering (scored against
     the ground truth where the frame has it, and tracked for object identity)."""
-    from gngdt_core import adjusted_rand_index, cluster_count
+    from gngdt.core import adjusted_rand_index, cluster_count
 
     error = model.quantization_error(points.positions, points.colors)
     record: dict[str, Any] = {
@@ -324,8 +324,8 @@ def references(
     last: FramePoints, gngdt_model: Any | None, node_counts: set[int], settings: RecordingSettings
 ) -> dict[str, Any]:
     """k-means and voxel grid at each node count, DBSCAN ARI beside GNG-DT's, on the last frame."""
-    from gngdt_core import adjusted_rand_index, cluster_count
-    from gngdt_eval.baselines import dbscan_labels, kmeans_reference, voxel_grid_reference
+    from gngdt.core import adjusted_rand_index, cluster_count
+    from gngdt.eval.baselines import dbscan_labels, kmeans_reference, voxel_grid_reference
 
     positions = last.positions.astype(np.float64)
     colors = last.colors.astype(np.float64)
@@ -380,7 +380,7 @@ def evaluate_recording(
     path: str | Path, settings: RecordingSettings, out_dir: str | Path, progress: bool = True
 ) -> dict[str, Any]:
     """Replay ``path`` through every method and trial; write ``recording.md/.json`` + PNGs."""
-    from gngdt_eval.progress import ProgressBar
+    from gngdt.eval.progress import ProgressBar
 
     path, out_dir = Path(path), Path(out_dir)
     if not path.is_file():

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.paper_methods import clusterings_of
-from gngdt_eval.report import format_mean_std, format_number, markdown_table
+from gngdt.eval.paper_methods import clusterings_of
+from gngdt.eval.report import format_mean_std, format_number, markdown_table
 
 
 def write_plots(
@@ -60,7 +60,7 @@ def _plot_curves(runs: list[dict[str, Any]], refs: dict[str, Any], summary: dict
                  path: Path, out_dir: Path) -> Path:
     """Position and colour error and nodes per frame, per method, beside the last frame's
     k-means and voxel grid at GNG-DT's node count."""
-    from gngdt_eval.plots import plot_method_curves
+    from gngdt.eval.plots import plot_method_curves
 
     methods = list(summary)
     curves = {
@@ -91,7 +91,7 @@ def _plot_curves(runs: list[dict[str, Any]], refs: dict[str, Any], summary: dict
 def _plot_over_time(runs: list[dict[str, Any]], methods: list[str], path: Path,
                     out_dir: Path, ghost_distance_m: float) -> Path:
     """Ghost share, nodes, world error / k-means and old-place nodes per frame, per method."""
-    from gngdt_eval.plots import plot_method_curves
+    from gngdt.eval.plots import plot_method_curves
 
     def curves(key: str, group: str | None = "dynamics") -> dict[str, Any]:
         result = {m: _mean_curve(runs, m, key, group) for m in methods}
@@ -120,7 +120,7 @@ def _plot_over_time(runs: list[dict[str, Any]], methods: list[str], path: Path,
 
 def _plot_ari(runs: list[dict[str, Any]], path: Path, out_dir: Path) -> Path | None:
     """GNG-DT's adjusted Rand index per clustering and frame, trial 0; None without labels."""
-    from gngdt_eval.plots import plot_method_curves
+    from gngdt.eval.plots import plot_method_curves
 
     gngdt_runs = [r for r in runs if r["method"] == "GNG-DT"]
     if not gngdt_runs or "ari" not in gngdt_runs[0]["frames"][0]:
@@ -145,7 +145,7 @@ def _plot_ari(runs: list[dict[str, Any]], path: Path, out_dir: Path) -> Path | N
 def _plot_topologies(runs: list[dict[str, Any]], path: Path, out_dir: Path,
                      min_cluster_size: int) -> Path | None:
     """Trial 0's last-frame topologies, nodes coloured by cluster, four per row."""
-    from gngdt_eval.plots import TopologyPanel, plot_topology_grid
+    from gngdt.eval.plots import TopologyPanel, plot_topology_grid
 
     panels = []
     for run in (r for r in runs if r["trial"] == 0):
@@ -181,7 +181,8 @@ def render_markdown(data: dict[str, Any], plots: list[Path]) -> str:
     parts = [
         f"# Recording evaluation — `{Path(data['recording']).name}`",
         "Replayed offline frame by frame: GNG-DT through the learner's own per-frame policy "
-        "(`gngdt_core.frame_learner.FrameLearner`, as `gngdt learn` runs it), GNG and GNG-W "
+        "(`gngdt.core.learner.frame_learner.FrameLearner`, as `gngdt learn` runs it), "
+        "GNG and GNG-W "
         f"with `partial_fit(points, colors, n_steps={settings['samples_per_frame']:,})` per "
         f"frame; node budget {settings['max_nodes'] or 'the learner’s'}, "
         f"{settings['trials']} trial(s) per method, "
@@ -247,7 +248,7 @@ def _identity_section(summary: dict[str, Any], settings: dict[str, Any]) -> list
     """Persistent cluster ids: tracks kept, ids kept and switched, per method and clustering."""
     text = (
         "Each cluster keeps an id from frame to frame by node membership "
-        "(`gngdt_core.cluster_tracking`); objects are the clusters of at least "
+        "(`gngdt.core.objects.ids`); objects are the clusters of at least "
         f"{settings['min_cluster_size']} nodes seen in {settings['object_confirm_frames']} "
         "frame(s) in a row, as the learner publishes them. *Tracks kept*: share of the objects "
         "of a frame whose id is still an object in the next. With ground truth, each segment is "

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.report import format_number, markdown_table, write_report
+from gngdt.eval.report import format_number, markdown_table, write_report
 
 log = logging.getLogger(__name__)
 
@@ -135,7 +135,7 @@ def evaluate_rrd(path: str | Path, out_dir: str | Path) -> dict[str, Any]:
 
     Returns the JSON data. Raises ``RrdError`` when the file holds no ``metrics/`` scalars.
     """
-    from gngdt_eval.plots import plot_metric_series
+    from gngdt.eval.plots import plot_metric_series
 
     path = Path(path)
     out_dir = Path(out_dir)

@@ -4,8 +4,8 @@ frame and overall beside the classic peer (Open3D plane RANSAC + DBSCAN) in the 
 A labelled set is a folder of frames (the ``redwood`` layout: ``color/``, ``depth/``,
 ``camera.json``) plus ``label/<name>.png`` per frame, uint16: 0 = no label (no depth), 1 =
 background, k >= 2 = a ground-truth segment (``../shared/data/labelled/README.md``). Scores:
-`gngdt_eval.segment_scores`. gngdt runs through the same code as ``gngdt segment``
-(`services.segment.segment_frames`), in each mode asked for.
+`gngdt.eval.segment_scores`. gngdt runs through the same code as ``gngdt segment``
+(`gngdt.services.segment.segment_frames`), in each mode asked for.
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_eval.open3d_peer import PeerParams
-from gngdt_eval.report import format_number, markdown_table, write_report
-from gngdt_eval.segment_scores import FAILURES, RECALL_THRESHOLDS, recall_key
+from gngdt.eval.open3d_peer import PeerParams
+from gngdt.eval.report import format_number, markdown_table, write_report
+from gngdt.eval.segment_scores import FAILURES, RECALL_THRESHOLDS, recall_key
 
 log = logging.getLogger(__name__)
 
@@ -67,7 +67,7 @@ def read_truth(set_dir: Path, name: str, shape: tuple[int, int], index: int) -> 
     missing, unreadable or not of the frame's size."""
     import cv2
 
-    from gngdt_io.errors import RecordingError
+    from gngdt.io.errors import RecordingError
 
     path = set_dir / LABEL_FOLDER / f"{name}.png"
     if not path.is_file():
@@ -103,10 +103,10 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     """Run every method on the labelled set, score it and write the report into ``out``
     (``segmentation.md``, ``segmentation.json``, ``segmentation_<frame>.png``); returns the
     report's data."""
-    from gngdt_eval.open3d_peer import Open3DPeer, load_open3d
-    from gngdt_io.profiles import load_sensor_profile
-    from gngdt_io.segment_frames import make_segmenter, organized_frames, segment_frames
-    from gngdt_io.sources import open_source
+    from gngdt.eval.open3d_peer import Open3DPeer, load_open3d
+    from gngdt.io.profiles import load_sensor_profile
+    from gngdt.io.segment_frames import make_segmenter, organized_frames, segment_frames
+    from gngdt.io.sources import open_source
 
     settings.validate()
     set_dir = Path(set_dir)
@@ -180,8 +180,8 @@ class _MethodRuns:
 
     def run(self, method: str,
             labelled: Iterator[tuple[np.ndarray, dict[str, float], dict]]) -> None:
-        from gngdt_eval.progress import ProgressBar
-        from gngdt_eval.segment_scores import score_frame
+        from gngdt.eval.progress import ProgressBar
+        from gngdt.eval.segment_scores import score_frame
 
         bar = ProgressBar(len(self.frames), method) if self.progress else None
         records, scores, encoded = [], [], []
@@ -246,8 +246,8 @@ def _spread(count: int, wanted: int) -> list[int]:
 
 
 def _method_summary(scores: list, records: list[dict[str, Any]]) -> dict[str, Any]:
-    from gngdt_eval.segment_scores import summarize_scores
-    from gngdt_io.segment_frames import timing_summary
+    from gngdt.eval.segment_scores import summarize_scores
+    from gngdt.io.segment_frames import timing_summary
 
     return {"summary": summarize_scores(scores),
             "milliseconds": timing_summary([record["milliseconds"] for record in records]),
@@ -256,7 +256,7 @@ def _method_summary(scores: list, records: list[dict[str, Any]]) -> dict[str, An
 
 def _figures(out: Path, frames: list[_Frame], predictions: dict[str, list[bytes]],
              drawn: list[int], set_name: str, worst: set[int]) -> list[str]:
-    from gngdt_eval.plots import label_image_colours, plot_image_rows
+    from gngdt.eval.plots import label_image_colours, plot_image_rows
 
     paths = []
     for index in drawn:

@@ -7,5 +7,5 @@ interpolates poses (`tf_tree`), depth deprojection (`deproject`), the virtual Ki
 frame sources behind one interface (`sources`), outputs behind another (`outputs`), checkpoint
 files (`checkpoints`) and output folders written all at once (`staged_directory`).
 
-Imports only `gngdt_core` and `schemas` of gngdt's own packages (ARCHITECTURE.md).
+Imports only `gngdt.core` and `schemas` of gngdt's own packages (ARCHITECTURE.md).
 """

@@ -10,9 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_core.depth import veil_pixels
-from gngdt_io.frame import CameraIntrinsics, Frame
-from schemas.clouds import MAX_CLOUD_POINTS
+from gngdt.core.sensor.depth import veil_pixels
+from gngdt.io.frame import CameraIntrinsics, Frame
+from gngdt.schemas.clouds import MAX_CLOUD_POINTS
 
 
 def ray_map(intrinsics: CameraIntrinsics) -> np.ndarray:

@@ -1,6 +1,6 @@
 """In-memory RGB-D frame types shared by recording readers, writers and the capture service.
 
-``CameraIntrinsics`` lives in :mod:`gngdt_core.geometry` and is re-exported here.
+``CameraIntrinsics`` lives in :mod:`gngdt.core.sensor.geometry` and is re-exported here.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gngdt_core.geometry import CameraIntrinsics
+from gngdt.core.sensor.geometry import CameraIntrinsics
 
 __all__ = ["DEFAULT_FIXED_FRAME", "CameraIntrinsics", "CameraPose", "Frame"]
 

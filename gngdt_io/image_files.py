@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.mcap_limits import ReadLimits
+from gngdt.io.errors import RecordingError
+from gngdt.io.mcap.limits import ReadLimits
 
 __all__ = ["MAX_IMAGE_FILE_PIXELS", "check_depth_dtype", "is_regular_file", "read_image"]
 

@@ -30,9 +30,9 @@ from pathlib import Path
 
 import numpy as np
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.frame import CameraIntrinsics, Frame
-from gngdt_io.image_files import check_depth_dtype, is_regular_file, read_image
+from gngdt.io.errors import RecordingError
+from gngdt.io.frame import CameraIntrinsics, Frame
+from gngdt.io.image_files import check_depth_dtype, is_regular_file, read_image
 
 __all__ = ["FORMATS", "CameraParameters", "count_image_frames", "iter_image_frames", "load_camera"]
 

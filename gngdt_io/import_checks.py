@@ -1,7 +1,7 @@
 """What an import of frames checks while it reads them (``gngdt record images``): the depth each
 frame holds (its range, said at the end; implausible units warned about) and, with poses, every
-posed frame against its own depth, as the learner checks them (`gngdt_core.pose_checks`). When
-poses are rejected, the usual misreadings of a pose file (quaternion order, inverted
+posed frame against its own depth, as the learner checks them (`gngdt.core.odometry.pose_checks`).
+When poses are rejected, the usual misreadings of a pose file (quaternion order, inverted
 transforms, units) are tried on the same frames to name the likely cause.
 
 The pose limits are command-line options shared by ``gngdt learn`` and ``gngdt record images``
@@ -14,10 +14,10 @@ import argparse
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
-from gngdt_core.depth import DepthRange
-from gngdt_core.pose_checks import PoseAudit, PoseLimits
-from gngdt_io.deproject import Deprojector
-from gngdt_io.frame import Frame
+from gngdt.core.odometry.pose_checks import PoseAudit, PoseLimits
+from gngdt.core.sensor.depth import DepthRange
+from gngdt.io.deproject import Deprojector
+from gngdt.io.frame import Frame
 
 #: command-line option -> the `PoseLimits` field it sets
 POSE_LIMIT_OPTIONS = {"workspace_m": "workspace_m", "max_speed": "max_speed_m_s",

@@ -5,7 +5,7 @@ Every pose is camera-to-world (the camera's pose in the fixed frame ``world``), 
 
 - a **TUM trajectory** file: ``timestamp tx ty tz qx qy qz qw`` per line (``#`` comments, commas
   also separate numbers); each frame's pose is interpolated at the frame's stamp
-  (:class:`~gngdt_io.tf_tree.TransformTree`), and a frame outside the trajectory's
+  (:class:`~gngdt.io.tf_tree.TransformTree`), and a frame outside the trajectory's
   span is an error;
 - a file with ``tx ty tz qx qy qz qw`` per line, no timestamp: one pose per frame, in order;
 - a **folder** of per-frame files (``pose/NNNNNN.txt``, taken in name order), each holding a 4x4
@@ -30,17 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
-from gngdt_core.geometry import (
+from gngdt.core.odometry.pose_checks import PoseLimits
+from gngdt.core.sensor.geometry import (
     QUATERNION_TOLERANCE,
     TransformError,
     matrix_to_pose,
     pose_to_matrix,
     quaternions_to_rotations,
 )
-from gngdt_core.pose_checks import PoseLimits
-from gngdt_io.errors import RecordingError
-from gngdt_io.frame import DEFAULT_FIXED_FRAME, CameraPose, Frame
-from gngdt_io.tf_tree import TransformTree
+from gngdt.io.errors import RecordingError
+from gngdt.io.frame import DEFAULT_FIXED_FRAME, CameraPose, Frame
+from gngdt.io.tf_tree import TransformTree
 
 __all__ = ["PoseFile", "attach_poses", "load_poses"]
 

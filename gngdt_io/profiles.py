@@ -1,7 +1,7 @@
 """The one reader of parameter files (TOML): `gngdt learn --params`, `gngdt run --params`,
 `gngdt segment --params` and evaluation all read profiles here.
 
-A profile only overrides what `gngdt_core.parameters` declares. Tables: ``[gngdt]`` (`GNGDT`
+A profile only overrides what `gngdt.core.parameters` declares. Tables: ``[gngdt]`` (`GNGDT`
 constructor arguments; ``lambda`` means ``lambda_``), ``[learner]`` (`LearnerOptions`),
 ``[segmentation]`` (`SegmentationParams`), ``[tracker]`` (`TrackerParams`: the camera tracking
 of ``track``) and ``[frames]`` (`FrameSchedule`: a sensor profile's frame schedule; with it, the
@@ -20,20 +20,20 @@ from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
-from gngdt_core.frame_learner import (
+from gngdt.core.gas.model import GNGDT
+from gngdt.core.learner.frame_learner import (
     LEARNER_MODEL_DEFAULTS,
     LEARNER_WORLD_DEFAULTS,
     LearnerConfig,
     LearnerOptions,
 )
-from gngdt_core.model import GNGDT
-from gngdt_core.odometry import TrackerParams
-from gngdt_core.parameters import from_mapping
-from gngdt_core.schedule import FrameSchedule
-from gngdt_core.segmentation import SegmentationParams
+from gngdt.core.learner.stream_learner import FrameSchedule
+from gngdt.core.odometry.map_odometry import TrackerParams
+from gngdt.core.parameters import from_mapping
+from gngdt.core.segmentation.network import SegmentationParams
 
 #: the sensor profile `gngdt segment` uses without ``--params``, a file of the installed
-#: ``gngdt_config`` package (the repository's config/)
+#: ``gngdt.config`` package (the repository's config/)
 DEFAULT_SENSOR_PROFILE = "kinect.toml"
 #: where a value comes from when no file or option sets it
 LEARNER_DEFAULT = "the learner's default"
@@ -114,15 +114,15 @@ def read_toml(path: Path) -> dict[str, Any]:
 
 def default_sensor_profile() -> Path:
     """Where the default sensor profile is installed (config/kinect.toml in a checkout)."""
-    import gngdt_config
+    import gngdt.config
 
     # a namespace package in an editable install: its folders, not a __file__
-    for folder in gngdt_config.__path__:
+    for folder in gngdt.config.__path__:
         candidate = Path(folder) / DEFAULT_SENSOR_PROFILE
         if candidate.is_file():
             return candidate
     raise ValueError(f"the default sensor profile {DEFAULT_SENSOR_PROFILE} is not installed "
-                     f"with gngdt_config ({list(gngdt_config.__path__)}); give --params")
+                     f"with gngdt_config ({list(gngdt.config.__path__)}); give --params")
 
 
 def load_profile(path: Path | None, base_model: dict[str, Any] | None = None) -> Profile:

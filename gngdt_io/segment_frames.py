@@ -1,6 +1,6 @@
 """Segments of every frame of a source: each frame deprojected to an organized point array and
-segmented by GNG-DT (`gngdt_core.frame_segmenter.FrameSegmenter`), online or independent; what
-`gngdt segment` writes and `gngdt eval segmentation` scores."""
+segmented by GNG-DT (`gngdt.core.learner.frame_segmenter.FrameSegmenter`), online or independent;
+what `gngdt segment` writes and `gngdt eval segmentation` scores."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_core.frame_segmenter import FrameResult, FrameSegmenter
-from gngdt_io.deproject import Deprojector
-from gngdt_io.frame import Frame
-from gngdt_io.profiles import Profile
-from gngdt_io.sources import FrameSource
+from gngdt.core.learner.frame_segmenter import FrameResult, FrameSegmenter
+from gngdt.io.deproject import Deprojector
+from gngdt.io.frame import Frame
+from gngdt.io.profiles import Profile
+from gngdt.io.sources import FrameSource
 
 
 @dataclass
@@ -66,6 +66,6 @@ def timing_summary(per_frame: list[dict[str, float]]) -> dict[str, dict[str, flo
 
 
 def make_segmenter(profile: Profile, seed: int = 0) -> FrameSegmenter:
-    """The frame segmenter a sensor profile describes (`gngdt_io.profiles`)."""
+    """The frame segmenter a sensor profile describes (`gngdt.io.profiles`)."""
     config = profile.config
     return FrameSegmenter(config.model, config.segmentation, profile.segmenter_schedule(), seed)

@@ -8,7 +8,7 @@ Static transforms (``/tf_static``) hold at every time; the others are interpolat
 requested time (linear translation, spherical-linear rotation) between the two samples around
 it, and held for at most ``max_extrapolation_ns`` beyond the first or last sample.
 
-Quaternions are (x, y, z, w), checked as :mod:`gngdt_core.geometry` does (the rigid-transform
+Quaternions are (x, y, z, w), checked as :mod:`gngdt.core.sensor.geometry` does (the rigid-transform
 math lives there; ``TransformError``, ``QUATERNION_TOLERANCE``, ``pose_to_matrix``,
 ``matrix_to_pose`` and ``unit_quaternion`` are re-exported here).
 """
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gngdt_core.geometry import (
+from gngdt.core.sensor.geometry import (
     QUATERNION_TOLERANCE,
     TransformError,
     checked_translation,

@@ -1,20 +1,20 @@
 """gngdt's wire schemas: generated protobuf bindings and numpy packing helpers (by message family
 in ``messages``, ``images``, ``clouds``, ``topology``, ``status``).
 
-``gngdt_pb2`` is generated from ``gngdt.proto`` by ``python -m schemas.generate`` and checked in.
-Foxglove's own messages come from the ``foxglove-schemas-protobuf`` package.
+``gngdt_pb2`` is generated from ``gngdt.proto`` by ``python -m gngdt.schemas.generate`` and checked
+in. Foxglove's own messages come from the ``foxglove-schemas-protobuf`` package.
 """
 
-from schemas import gngdt_pb2
-from schemas.clouds import cloud_to_msg, msg_to_cloud
-from schemas.images import (
+from gngdt.schemas import gngdt_pb2
+from gngdt.schemas.clouds import cloud_to_msg, msg_to_cloud
+from gngdt.schemas.images import (
     calibration_to_intrinsics,
     image_to_raw,
     intrinsics_to_calibration,
     raw_to_image,
 )
-from schemas.messages import MessageError, pack_array, parse_message, unpack_array
-from schemas.status import (
+from gngdt.schemas.messages import MessageError, pack_array, parse_message, unpack_array
+from gngdt.schemas.status import (
     LearnerStatusInfo,
     StreamEndInfo,
     decode_status,
@@ -22,7 +22,7 @@ from schemas.status import (
     encode_status,
     encode_stream_end,
 )
-from schemas.topology import TopologySnapshot, decode_topology, encode_topology
+from gngdt.schemas.topology import TopologySnapshot, decode_topology, encode_topology
 
 __all__ = [
     "LearnerStatusInfo",

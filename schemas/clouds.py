@@ -2,8 +2,8 @@
 layout and any other), a cloud's pose, (4, 4) matrices -> foxglove FrameTransform.
 
 Decoded clouds are fresh, writable, C-contiguous arrays, except ``msg_to_cloud(..., copy=False)``:
-read-only strided views. Decoders raise :class:`~schemas.messages.MessageError` for anything
-malformed (see :mod:`schemas.messages`).
+read-only strided views. Decoders raise :class:`~gngdt.schemas.messages.MessageError` for anything
+malformed (see :mod:`gngdt.schemas.messages`).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 
-from gngdt_core.geometry import TransformError, matrix_to_pose, pose_to_matrix
-from schemas.messages import MessageError, ns_to_timestamp, parse_message
+from gngdt.core.sensor.geometry import TransformError, matrix_to_pose, pose_to_matrix
+from gngdt.schemas.messages import MessageError, ns_to_timestamp, parse_message
 
 __all__ = [
     "CLOUD_POINT_STRIDE",
@@ -36,7 +36,7 @@ __all__ = [
 CLOUD_POINT_STRIDE = 15
 
 #: Largest cloud a learner accepts by default and a capture publishes: 30 MB on the wire,
-#: within zenoh's message limit (services.plumbing.MAX_MESSAGE_BYTES).
+#: within zenoh's message limit (gngdt.services.plumbing.MAX_MESSAGE_BYTES).
 MAX_CLOUD_POINTS = 2_000_000
 
 _NUMERIC_TYPES: dict[int, np.dtype] = {
@@ -191,7 +191,7 @@ def cloud_pose(message: PointCloud | bytes) -> np.ndarray:
 
     An unset orientation (all zero, as a publisher that never set the pose leaves it) is the
     identity. Raises :class:`MessageError` naming the frame for non-finite numbers or a quaternion
-    that is not of unit length (see ``gngdt_core.geometry.QUATERNION_TOLERANCE``).
+    that is not of unit length (see ``gngdt.core.sensor.geometry.QUATERNION_TOLERANCE``).
     """
     message = parse_message(PointCloud, message)
     position, rotation = message.pose.position, message.pose.orientation

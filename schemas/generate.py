@@ -1,7 +1,7 @@
 """Regenerate the checked-in Python bindings from ``schemas/*.proto``.
 
-Usage: ``python -m schemas.generate [--out DIR]``. Runs protoc from grpcio-tools, so nothing beyond
-the test dependencies is needed. The bindings are checked in so that users need no protoc;
+Usage: ``python -m gngdt.schemas.generate [--out DIR]``. Runs protoc from grpcio-tools, so nothing
+beyond the test dependencies is needed. The bindings are checked in so that users need no protoc;
 ``tests/unit/test_schemas.py`` fails when they drift from the .proto files.
 """
 

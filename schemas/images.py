@@ -2,7 +2,8 @@
 foxglove CameraCalibration (and ROS CameraInfo's K).
 
 Decoded images are fresh, writable, C-contiguous arrays; decoders raise
-:class:`~schemas.messages.MessageError` for anything malformed (see :mod:`schemas.messages`).
+:class:`~gngdt.schemas.messages.MessageError` for anything malformed (see
+:mod:`gngdt.schemas.messages`).
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
-from gngdt_core.geometry import CameraIntrinsics
-from schemas.messages import MessageError, little_endian, ns_to_timestamp, parse_message
+from gngdt.core.sensor.geometry import CameraIntrinsics
+from gngdt.schemas.messages import MessageError, little_endian, ns_to_timestamp, parse_message
 
 __all__ = [
     "MAX_IMAGE_PIXELS",

@@ -20,7 +20,7 @@ import numpy as np
 from google.protobuf.message import Message
 from google.protobuf.timestamp_pb2 import Timestamp
 
-import schemas.gngdt_pb2 as gngdt_pb2
+import gngdt.schemas.gngdt_pb2 as gngdt_pb2
 
 __all__ = [
     "NANOS_PER_SECOND",

@@ -30,8 +30,8 @@ from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletio
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 
-from gngdt_core.supports import OBJECT, ROLE_NAMES
-from schemas.messages import MessageError, ns_to_timestamp, parse_message, timestamp_to_ns
+from gngdt.core.segmentation.supports import OBJECT, ROLE_NAMES
+from gngdt.schemas.messages import MessageError, ns_to_timestamp, parse_message, timestamp_to_ns
 
 OBJECT_ID_PREFIX = "object/"
 #: the role of an object proper (a ``role`` metadata value; the others are supports and clutter)

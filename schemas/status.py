@@ -8,8 +8,8 @@ from typing import Any, TypeVar
 
 from google.protobuf.message import Message
 
-import schemas.gngdt_pb2 as gngdt_pb2
-from schemas.messages import MessageT, ns_to_timestamp, parse_message, timestamp_to_ns
+import gngdt.schemas.gngdt_pb2 as gngdt_pb2
+from gngdt.schemas.messages import MessageT, ns_to_timestamp, parse_message, timestamp_to_ns
 
 __all__ = [
     "LearnerStatusInfo",

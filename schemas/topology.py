@@ -2,7 +2,7 @@
 
 Arrays of a decoded :class:`TopologySnapshot` are read-only views on the message bytes
 (zero-copy); ``.copy()`` them to modify. :func:`decode_topology` raises
-:class:`~schemas.messages.MessageError` for anything malformed or beyond the limits below.
+:class:`~gngdt.schemas.messages.MessageError` for anything malformed or beyond the limits below.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-import schemas.gngdt_pb2 as gngdt_pb2
-from schemas.messages import (
+import gngdt.schemas.gngdt_pb2 as gngdt_pb2
+from gngdt.schemas.messages import (
     MessageError,
     ns_to_timestamp,
     pack_array,
@@ -35,7 +35,7 @@ __all__ = [
 ]
 
 #: What a GNG-DT learner can send, enforced before anything is allocated: a node keeps at most
-#: 16 neighbours (``gngdt_core.kernels.layout.MAX_DEGREE``), so an edge set holds at most 8 edges a
+#: 16 neighbours (``gngdt.core.kernels.layout.MAX_DEGREE``), so an edge set holds at most 8 edges a
 #: node; a learner publishes a handful of named edge sets and clusterings.
 MAX_TOPOLOGY_NODES = 1_000_000
 MAX_EDGES_PER_NODE = 8

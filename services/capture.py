@@ -2,7 +2,7 @@
 
 The source is a recording (gngdt's MCAP, a ROS 2 bag, a RealSense ``.db3``/``.bag``), a folder of
 RGB-D images, a synthetic scene (``synth:<scene>[:<frames>]``) or a live RealSense
-(``--realsense [SERIAL]``): anything `gngdt_io.sources` opens. A live camera paces itself; a
+(``--realsense [SERIAL]``): anything `gngdt.io.sources` opens. A live camera paces itself; a
 camera lost mid-stream ends the stream (end of stream published, exit status 1).
 
 Each frame is stamped with a monotonically increasing sequence number and the wall-clock time
@@ -10,7 +10,7 @@ at which it is replayed (its "capture time" as a live camera would give it), so 
 downstream is measured against the moment the frame entered the pipeline. After the last frame
 an end-of-stream message (``gngdt.StreamEnd``) is published, unless ``--loop`` replays forever.
 
-When the recording has camera poses (``/tf``, see ``gngdt_io.mcap_reader``), each cloud is
+When the recording has camera poses (``/tf``, see ``gngdt.io.mcap.reader``), each cloud is
 published with its pose: points in the camera frame, ``frame_id`` the fixed frame
 (``--fixed-frame``, default the first of world/map/odom found), ``pose`` the camera's pose in
 it, and the camera's pose on ``gngdt/<cam>/tf`` (``foxglove.FrameTransform`` fixed frame ->
@@ -30,11 +30,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gngdt_io.deproject import CloudOptions, FrameToCloud
-from gngdt_io.mcap_limits import ReadLimits
-from gngdt_io.sources.base import DEFAULT_MAX_SKEW_MS, SourceOptions
-from schemas.clouds import MAX_CLOUD_POINTS
-from schemas.wire import (
+from gngdt.io.deproject import CloudOptions, FrameToCloud
+from gngdt.io.mcap.limits import ReadLimits
+from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS, SourceOptions
+from gngdt.schemas.clouds import MAX_CLOUD_POINTS
+from gngdt.schemas.wire import (
     DEFAULT_CAMERA,
     ENCODING_CALIBRATION,
     ENCODING_FRAME_TRANSFORM,
@@ -44,8 +44,8 @@ from schemas.wire import (
     FrameStamp,
     topic,
 )
-from services.plumbing import lifecycle
-from services.plumbing.session import (
+from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.session import (
     SharedMemoryPublisher,
     ZenohSetupError,
     add_zenoh_arguments,
@@ -57,8 +57,8 @@ from services.plumbing.session import (
 if TYPE_CHECKING:
     import zenoh
 
-    from gngdt_io.frame import CameraIntrinsics, Frame
-    from gngdt_io.sources import FrameSource
+    from gngdt.io.frame import CameraIntrinsics, Frame
+    from gngdt.io.sources import FrameSource
 
 log = logging.getLogger(__name__)
 
@@ -99,7 +99,7 @@ def add_source_arguments(parser: argparse.ArgumentParser) -> None:
 
 def source_spec(args: argparse.Namespace) -> str:
     """The source SOURCE or ``--realsense`` names; ValueError unless exactly one is given."""
-    from gngdt_io.sources.realsense import live_spec
+    from gngdt.io.sources.realsense import live_spec
 
     if (args.recording is None) == (args.realsense is None):
         raise ValueError("give a SOURCE (a recording, a folder, synth:<scene>) or --realsense "
@@ -238,8 +238,8 @@ class CapturePublisher:
     ) -> None:
         """Calibration (when new), colour, depth, the camera's pose (posed frames) and the
         cloud unless ``positions`` is None."""
-        from schemas.clouds import cloud_to_wire, pose_to_transform
-        from schemas.images import image_to_raw, intrinsics_to_calibration
+        from gngdt.schemas.clouds import cloud_to_wire, pose_to_transform
+        from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
 
         attachment = stamp.to_attachment()
         time_ns = stamp.capture_time_ns
@@ -267,7 +267,7 @@ class CapturePublisher:
         self.points.put(cloud, attachment=attachment)
 
     def publish_end(self, frames_sent: int, last_sequence: int, recording: str) -> None:
-        from schemas.status import encode_stream_end
+        from gngdt.schemas.status import encode_stream_end
 
         now = time.time_ns()
         message = encode_stream_end(
@@ -302,7 +302,7 @@ class Replay:
         self.frames_read = 0
 
     def __iter__(self) -> Iterator[Frame]:
-        from gngdt_io.errors import RecordingError
+        from gngdt.io.errors import RecordingError
 
         while not self.stop.is_set():
             yielded = 0
@@ -358,8 +358,8 @@ class ReplayClock:
 
 
 def main(args: argparse.Namespace) -> int:
-    from gngdt_io.errors import RecordingError
-    from gngdt_io.sources import open_source
+    from gngdt.io.errors import RecordingError
+    from gngdt.io.sources import open_source
 
     try:
         args.recording = source_spec(args)

@@ -15,15 +15,15 @@ import sys
 
 #: subcommand -> (module, one-line help). Order is the order shown by ``gngdt --help``.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
-    "run": ("services.run", "run capture, learner and logger on one recording (loopback)"),
-    "capture": ("services.capture", "replay a recording as a camera on zenoh"),
-    "learn": ("services.learner", "learn GNG-DT topologies from a camera's point clouds"),
-    "log": ("services.logger", "log every gngdt stream to rerun"),
-    "router": ("services.router", "run a zenoh router for standalone services"),
-    "record": ("services.record", "make recordings: synthetic scenes or real RGB-D frames"),
-    "segment": ("services.segment", "segment RGB-D frames: a label image per frame"),
-    "ros2": ("services.ros2", "bridge to ROS 2 (rmw_zenoh): camera topics in, results out"),
-    "eval": ("gngdt_eval.cli", "evaluate: the paper's tables, recordings, logged runs"),
+    "run": ("gngdt.services.run", "run capture, learner and logger on one recording (loopback)"),
+    "capture": ("gngdt.services.capture", "replay a recording as a camera on zenoh"),
+    "learn": ("gngdt.services.learner", "learn GNG-DT topologies from a camera's point clouds"),
+    "log": ("gngdt.services.logger", "log every gngdt stream to rerun"),
+    "router": ("gngdt.services.router", "run a zenoh router for standalone services"),
+    "record": ("gngdt.services.record", "make recordings: synthetic scenes or real RGB-D frames"),
+    "segment": ("gngdt.services.segment", "segment RGB-D frames: a label image per frame"),
+    "ros2": ("gngdt.services.ros2", "bridge to ROS 2 (rmw_zenoh): camera topics in, results out"),
+    "eval": ("gngdt.eval.cli", "evaluate: the paper's tables, recordings, logged runs"),
 }
 
 EPILOG = """examples:
@@ -95,14 +95,14 @@ def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParse
 
 
 def main(argv: list[str] | None = None) -> int:
-    from services.plumbing import lifecycle
+    from gngdt.services.plumbing import lifecycle
 
     # One try from the handlers' installation on: a stop signal raises KeyboardInterrupt
     # wherever start-up stands (inside install() once its first handler is set, or while logging
     # is configured), and one escaping main() made Python kill itself with SIGINT (exit -2).
     try:
         lifecycle.install()  # first: a signal during the imports below must stop us too
-        from schemas.images import MAX_IMAGE_PIXELS
+        from gngdt.schemas.images import MAX_IMAGE_PIXELS
 
         # before OpenCV loads: the largest image it may decode, rather than its own 2**30
         # pixels (3 GB for a few kilobytes of PNG)

@@ -11,11 +11,11 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.frame import Frame
+from gngdt.io.errors import RecordingError
+from gngdt.io.frame import Frame
 
 if TYPE_CHECKING:
-    from gngdt_io.import_checks import ImportChecks
+    from gngdt.io.import_checks import ImportChecks
 
 logger = logging.getLogger(__name__)
 
@@ -59,10 +59,10 @@ IMAGES_EXAMPLES = """examples:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``synth`` and ``images`` sub-subcommands."""
-    from gngdt_io.images import FORMATS
-    from gngdt_io.import_checks import add_pose_limit_arguments
-    from gngdt_io.mcap_writer import COLOR_FORMATS, COMPRESSIONS
-    from gngdt_io.synth.render import SCENES
+    from gngdt.io.images import FORMATS
+    from gngdt.io.import_checks import add_pose_limit_arguments
+    from gngdt.io.mcap.writer import COLOR_FORMATS, COMPRESSIONS
+    from gngdt.io.synth.render import SCENES
 
     kinds = parser.add_subparsers(dest="record_kind", required=True, metavar="KIND")
 
@@ -170,7 +170,7 @@ def write_recording(
     ``metadata``: named MCAP metadata records; ``checks``: what the frames are checked for on
     their way (an import's depth and poses). The file is written beside ``args.out`` and takes
     its place only when complete and its poses usable (else exit 2, ``args.out`` untouched)."""
-    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt.io.mcap.writer import RecordingWriter
 
     started = time.perf_counter()
     partial = args.out.with_name(f".{args.out.name}.partial-{os.getpid()}")
@@ -219,7 +219,7 @@ def report_checks(checks: ImportChecks) -> bool:
 
 def _synth_frames(args: argparse.Namespace) -> Iterable[Frame]:
     try:
-        from gngdt_io.synth.render import SCENES, render_scene
+        from gngdt.io.synth.render import SCENES, render_scene
     except ImportError as error:
         raise ValueError(f"the synthetic renderer is not available ({error})") from error
     if args.scene not in SCENES:
@@ -238,7 +238,7 @@ def _synth_frames(args: argparse.Namespace) -> Iterable[Frame]:
 
 def image_format(args: argparse.Namespace) -> str:
     """The folder's layout: ``--format``, else detected (RecordingError when ambiguous)."""
-    from gngdt_io.images import detect_format
+    from gngdt.io.images import detect_format
 
     return args.image_format or detect_format(args.directory)
 
@@ -246,7 +246,7 @@ def image_format(args: argparse.Namespace) -> str:
 def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     from dataclasses import replace
 
-    from gngdt_io.images import iter_image_frames, load_camera
+    from gngdt.io.images import iter_image_frames, load_camera
 
     camera = load_camera(args.directory, image_format(args), args.camera_json)
     overrides = {
@@ -262,8 +262,8 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
     )
     if args.poses is None:
         return frames
-    from gngdt_io.images import count_image_frames
-    from gngdt_io.pose_files import attach_poses, load_poses
+    from gngdt.io.images import count_image_frames
+    from gngdt.io.pose_files import attach_poses, load_poses
 
     poses = load_poses(args.poses)  # every pose error before the first frame is written
     count = count_image_frames(args.directory, image_format(args), fps=args.fps)
@@ -271,8 +271,8 @@ def _image_frames(args: argparse.Namespace) -> Iterable[Frame]:
 
 
 def _synth_metadata(args: argparse.Namespace) -> dict[str, dict[str, str]]:
-    from gngdt_io.synth.render import SCENE_METADATA, scene_metadata
-    from gngdt_io.synth.scenes import build_scene
+    from gngdt.io.synth.render import SCENE_METADATA, scene_metadata
+    from gngdt.io.synth.scenes import build_scene
 
     return {SCENE_METADATA: scene_metadata(build_scene(args.scene), args.fps)}
 
@@ -303,7 +303,7 @@ class Take:
 def record_realsense(source: Any, args: argparse.Namespace) -> int:
     """Record ``source`` (a `RealSenseSource`) into ``args.out``: 0, or 1 when the camera was
     lost (the file then holds the frames before, complete)."""
-    from services.plumbing import lifecycle
+    from gngdt.services.plumbing import lifecycle
 
     if args.seconds is not None and args.seconds <= 0:
         raise ValueError(f"--seconds must be positive, got {args.seconds}")
@@ -319,7 +319,7 @@ def record_realsense(source: Any, args: argparse.Namespace) -> int:
 
 
 def _realsense_source(args: argparse.Namespace) -> Any:
-    from gngdt_io.sources.realsense import RealSenseSource, live_spec
+    from gngdt.io.sources.realsense import RealSenseSource, live_spec
 
     if args.from_recording is not None:
         if args.serial is not None:
@@ -335,8 +335,8 @@ def main(args: argparse.Namespace) -> int:
         if args.record_kind == "synth":
             frames = _synth_frames(args)
             return write_recording(frames, args, _synth_metadata(args))
-        from gngdt_core.pose_checks import PoseLimits
-        from gngdt_io.import_checks import ImportChecks, pose_limit_values
+        from gngdt.core.odometry.pose_checks import PoseLimits
+        from gngdt.io.import_checks import ImportChecks, pose_limit_values
 
         checks = ImportChecks(PoseLimits(**pose_limit_values(args)))
         return write_recording(_image_frames(args), args, checks=checks)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import logging
 
-from services.plumbing import lifecycle
-from services.plumbing.session import (
+from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.session import (
     DEFAULT_ENDPOINT,
     ZenohSetupError,
     open_config,

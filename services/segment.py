@@ -3,8 +3,8 @@
 SOURCE is a recording (gngdt's MCAP, a ROS 2 bag, a RealSense .db3/.bag) or a folder of frames
 in a layout ``gngdt record images`` reads (redwood, tum, pcl-tiff; detected, or ``--format``).
 Each frame is deprojected to an organized point array and segmented by GNG-DT
-(`gngdt_core.frame_segmenter.FrameSegmenter`): by default online, one network carried from frame
-to frame; with ``--independent`` every frame is learned from scratch (unrelated snapshots).
+(`gngdt.core.learner.frame_segmenter.FrameSegmenter`): by default online, one network carried from
+frame to frame; with ``--independent`` every frame is learned from scratch (unrelated snapshots).
 
 Outputs in ``--out DIR``: ``<name>.png`` per frame, a uint16 label image of the frame's size
 (0 = no segment: no depth there; k >= 1 = segment k, by decreasing size), ``<name>`` being the
@@ -28,9 +28,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from gngdt_io.frame import Frame
-    from gngdt_io.profiles import Profile
-    from gngdt_io.sources import FrameSource
+    from gngdt.io.frame import Frame
+    from gngdt.io.profiles import Profile
+    from gngdt.io.sources import FrameSource
 
 log = logging.getLogger(__name__)
 
@@ -63,8 +63,8 @@ def write_label_image(path: Path, labels: np.ndarray) -> None:
 def compile_kernels(profile: Profile, seed: int) -> float:
     """Compile (or load from numba's cache) the segmenter's kernels on a small frame, logging
     each step, so that the first real frame's time is its own; the seconds it took."""
-    from gngdt_core.warm_up import logged_progress, warm_up_segmenter
-    from gngdt_io.segment_frames import make_segmenter
+    from gngdt.core.learner.warm_up import logged_progress, warm_up_segmenter
+    from gngdt.io.segment_frames import make_segmenter
 
     started = time.perf_counter()
     log.info("preparing the kernels (the first run on a machine compiles them: 15-40 s)")
@@ -79,10 +79,10 @@ def segment_source(source: FrameSource, profile: Profile, out: Path, *,
                    ) -> dict[str, Any]:
     """Segment every frame of ``source`` into ``out`` (label PNGs + summary.json, written as a
     whole or not at all); returns the summary."""
-    from gngdt_eval.report import to_jsonable
-    from gngdt_io.errors import RecordingError
-    from gngdt_io.segment_frames import make_segmenter, segment_frames, timing_summary
-    from gngdt_io.staged_directory import StagedDirectory
+    from gngdt.eval.report import to_jsonable
+    from gngdt.io.errors import RecordingError
+    from gngdt.io.segment_frames import make_segmenter, segment_frames, timing_summary
+    from gngdt.io.staged_directory import StagedDirectory
 
     staged = StagedDirectory(out, overwrite=overwrite)  # refuses a non-empty DIR before work
     log.info("checking %s (%s) ...", source.path, source.format)
@@ -126,8 +126,8 @@ def segment_source(source: FrameSource, profile: Profile, out: Path, *,
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gngdt_io.sources import SOURCE_FORMATS
-    from services.capture import add_camera_arguments
+    from gngdt.io.sources import SOURCE_FORMATS
+    from gngdt.services.capture import add_camera_arguments
 
     parser.add_argument("source", type=Path, metavar="SOURCE",
                         help="a recording (MCAP, ROS 2 bag, RealSense .db3/.bag), or a "
@@ -139,7 +139,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "carried from frame to frame)")
     parser.add_argument("--params", type=Path, metavar="FILE.toml",
                         help="sensor profile (default: config/kinect.toml, installed with gngdt "
-                             "as gngdt_config; `python -m gngdt_config` prints where)")
+                             "as gngdt.config; `python -m gngdt.config` prints where)")
     parser.add_argument("--format", dest="source_format", choices=SOURCE_FORMATS,
                         help="source layout (default: detected; needed when it is ambiguous)")
     add_camera_arguments(parser)
@@ -150,9 +150,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``gngdt segment``; bad input: one error line naming the file, exit code 2."""
-    from gngdt_io.errors import RecordingError
-    from gngdt_io.profiles import default_sensor_profile, load_profile
-    from gngdt_io.sources import SourceOptions, open_source
+    from gngdt.io.errors import RecordingError
+    from gngdt.io.profiles import default_sensor_profile, load_profile
+    from gngdt.io.sources import SourceOptions, open_source
 
     try:
         profile = load_profile(args.params or default_sensor_profile(), base_model={})

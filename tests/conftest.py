@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, settings
 from synthetic_recordings import render_small_recording
 
-from services.plumbing.session import client_config, free_tcp_port, open_config, router_config
+from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config, router_config
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # the benchmarks' own helpers (hostile recordings) are the tests' too: tests may import
@@ -84,7 +84,7 @@ def tabletop_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture
 def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
-    """Start ``python -m services.cli ARGS...`` in its own process group; output to a log file
+    """Start ``python -m gngdt.services.cli ARGS...`` in its own process group; output to a log file
     in tmp_path (``process.log_path``). Every process is killed at teardown, pass or fail."""
     processes: list[subprocess.Popen] = []
 
@@ -92,7 +92,7 @@ def spawn(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
         log_path = tmp_path / f"{arguments[0]}-{len(processes)}.log"
         with open(log_path, "wb") as log_file:
             process = subprocess.Popen(
-                [sys.executable, "-m", "services.cli", *arguments],
+                [sys.executable, "-m", "gngdt.services.cli", *arguments],
                 cwd=REPO_ROOT, stdout=log_file, stderr=subprocess.STDOUT,
                 stdin=subprocess.DEVNULL, start_new_session=True,
             )
@@ -125,8 +125,8 @@ def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureO
     published on the default camera."""
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-    from schemas.clouds import cloud_pose, msg_to_cloud
-    from schemas.status import decode_stream_end
+    from gngdt.schemas.clouds import cloud_pose, msg_to_cloud
+    from gngdt.schemas.status import decode_stream_end
 
     def on_points(output: CaptureOutput, payload: bytes) -> None:
         message = PointCloud.FromString(payload)

@@ -1,6 +1,6 @@
 """RealSense in the tests: pyrealsense2 must be there in CI (on the platforms it has wheels
 for), and elsewhere its absence is a skip naming what is missing. The tests make their own
-recordings with the SDK's recorder (`gngdt_io.synth.realsense`)."""
+recordings with the SDK's recorder (`gngdt.io.synth.realsense`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from gngdt_io.realsense.sdk import availability
+from gngdt.io.realsense.sdk import availability
 
 DATA = Path(__file__).resolve().parent / "data" / "realsense"
 #: pyrealsense2 2.59 publishes wheels for these only

@@ -11,8 +11,8 @@ def render_small_recording(directory: Path, scene: str, frames: int, poses: bool
     learned in its own frame)."""
     from dataclasses import replace
 
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     path = directory / f"{scene}_small.mcap"
     with RecordingWriter(path) as writer:
@@ -25,8 +25,8 @@ def render_walk(directory: Path, frames: int, width: int, height: int,
                 fps: float) -> tuple[Path, list]:
     """``directory/walk.mcap``: ``frames`` frames of the walking camera (``tabletop_walk``) with
     its poses, and the rendered frames."""
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     path = directory / "walk.mcap"
     rendered = list(render_scene("tabletop_walk", frames, width=width, height=height, fps=fps))

@@ -9,5 +9,5 @@
 - `regions`: the kernels of `segment_network` (patches, region joins, support planes);
 - `view`: kernels over a sensor's view (which nodes it could see, what lies between two nodes).
 
-The estimator (`gngdt_core.model`) owns every array; the kernels only read and write them.
+The estimator (`gngdt.core.gas.model`) owns every array; the kernels only read and write them.
 """

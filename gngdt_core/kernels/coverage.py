@@ -1,4 +1,4 @@
-"""Kernels of the surface a sensor has seen (`gngdt_core.coverage`): a hash set of the cubic
+"""Kernels of the surface a sensor has seen (`gngdt.core.gas.coverage`): a hash set of the cubic
 cells, ``cell`` metres wide, that points fell in, as an open-addressing table of int64 keys.
 
 A cell's key packs its three integer coordinates, each offset by ``KEY_OFFSET`` into 21 bits

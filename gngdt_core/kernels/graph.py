@@ -8,8 +8,8 @@ from __future__ import annotations
 
 from numba import njit
 
-from gngdt_core.kernels._numba import inlined
-from gngdt_core.kernels.grid import _grid_rename, grid_remove
+from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels.grid import _grid_rename, grid_remove
 
 
 @inlined

@@ -12,8 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
-from gngdt_core.kernels._numba import inlined
-from gngdt_core.kernels.layout import MODE_GNG
+from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels.layout import MODE_GNG
 
 # Below this many nodes a brute-force winner search is cheaper than the grid.
 GRID_MIN_NODES = 48

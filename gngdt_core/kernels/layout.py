@@ -1,7 +1,8 @@
 """The arrays the kernels share and the constants that index them.
 
 All network state lives in preallocated arrays owned by the Python estimator
-(`gngdt_core.model`); the kernels only read and write them, so a learning step allocates nothing.
+(`gngdt.core.gas.model`); the kernels only read and write them, so a learning step allocates
+nothing.
 
 Layout (``cap`` = node capacity = ``max_nodes``, ``K`` = ``MAX_DEGREE``):
 

@@ -15,8 +15,8 @@ import math
 import numpy as np
 from numba import njit
 
-from gngdt_core.kernels.graph import add_edge, delete_node, find_slot, remove_edge
-from gngdt_core.kernels.grid import (
+from gngdt.core.kernels.graph import add_edge, delete_node, find_slot, remove_edge
+from gngdt.core.kernels.grid import (
     GRID_CELL_SPACINGS,
     GRID_CELL_TOLERANCE,
     GRID_MIN_NODES,
@@ -28,7 +28,7 @@ from gngdt_core.kernels.grid import (
     nearest_two_grid,
     nearest_two_weighted,
 )
-from gngdt_core.kernels.layout import (
+from gngdt.core.kernels.layout import (
     COL_BIT,
     F_CELL,
     F_ERROR_SCALE,
@@ -66,7 +66,7 @@ from gngdt_core.kernels.layout import (
     Q_MODE,
     Q_ORIENT,
 )
-from gngdt_core.kernels.normals import _interpolate_normal, compute_normal, property_bits
+from gngdt.core.kernels.normals import _interpolate_normal, compute_normal, property_bits
 
 # Renormalise stored errors when the global decay factor falls below this.
 ERROR_SCALE_FLOOR = 1e-60

@@ -9,9 +9,9 @@ import math
 
 from numba import njit
 
-from gngdt_core.kernels._numba import inlined
-from gngdt_core.kernels.grid import _node_sq_dist, _sq_dist
-from gngdt_core.kernels.layout import COL_BIT, NOR_BIT, POS_BIT
+from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels.grid import _node_sq_dist, _sq_dist
+from gngdt.core.kernels.layout import COL_BIT, NOR_BIT, POS_BIT
 
 
 @njit(cache=True)

@@ -1,5 +1,5 @@
-"""Kernels of frame-to-map camera tracking (`gngdt_core.odometry`): rigid motions, normals of
-an organized frame, node colour gradients and the Gauss-Newton normal equations of
+"""Kernels of frame-to-map camera tracking (`gngdt.core.odometry.map_odometry`): rigid motions,
+normals of an organized frame, node colour gradients and the Gauss-Newton normal equations of
 point-to-plane ICP. Pure functions over arrays.
 
 Conventions: a pose is a (4, 4) float64 rigid transform; a twist ``xi`` (6,) is (rotation
@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial.transform import Rotation
 
-from gngdt_core.geometry import rigid_inverse
+from gngdt.core.sensor.geometry import rigid_inverse
 
 #: Rec. 601 luma weights: a colour's intensity, 0..1 for 0..255 channels
 LUMA = np.array([0.299, 0.587, 0.114]) / 255.0

@@ -1,6 +1,6 @@
-"""Numba kernels of `segment_network` (`gngdt_core.segmentation`, `gngdt_core.supports`): the
-network's graph as CSR adjacency, edge elevations and long edges, smooth patches, the boundary
-statistics between regions and their joins, support planes.
+"""Numba kernels of `segment_network` (`gngdt.core.segmentation.network`,
+`gngdt.core.segmentation.supports`): the network's graph as CSR adjacency, edge elevations and long
+edges, smooth patches, the boundary statistics between regions and their joins, support planes.
 
 They take plain arrays (positions, normals, edges, labels) and return new ones.
 """
@@ -14,7 +14,7 @@ import numpy as np
 from numba import njit, types
 from numba.typed import Dict
 
-from gngdt_core.kernels._numba import inlined
+from gngdt.core.kernels._numba import inlined
 
 
 @njit(cache=True)

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from gngdt_core.kernels._numba import inlined
-from gngdt_core.kernels.grid import BOUND_SLACK, _axis_gap, _bucket, _sq_dist
-from gngdt_core.kernels.normals import compute_normal, property_bits
+from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels.grid import BOUND_SLACK, _axis_gap, _bucket, _sq_dist
+from gngdt.core.kernels.normals import compute_normal, property_bits
 
 
 @njit(cache=True)

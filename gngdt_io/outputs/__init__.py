@@ -5,10 +5,10 @@ A new output is one module with an `Output` subclass and one line in `OUTPUTS`: 
 its options to ``gngdt log`` and drives every output the options ask for.
 """
 
-from gngdt_io.outputs.base import Output, StreamSample, split_key
-from gngdt_io.outputs.foxglove import FoxgloveOutput
-from gngdt_io.outputs.mcap import McapOutput
-from gngdt_io.outputs.rerun_output import RerunOutput
+from gngdt.io.outputs.base import Output, StreamSample, split_key
+from gngdt.io.outputs.foxglove import FoxgloveOutput
+from gngdt.io.outputs.mcap import McapOutput
+from gngdt.io.outputs.rerun_output import RerunOutput
 
 #: every output the logger knows, in the order their options are shown
 OUTPUTS: tuple[type[Output], ...] = (RerunOutput, McapOutput, FoxgloveOutput)

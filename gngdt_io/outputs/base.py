@@ -21,7 +21,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from schemas.wire import FrameStamp
+from gngdt.schemas.wire import FrameStamp
 
 if TYPE_CHECKING:
     import zenoh

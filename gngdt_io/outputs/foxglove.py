@@ -1,5 +1,5 @@
 """Serve gngdt's streams live to Foxglove: a Foxglove WebSocket server (``foxglove-sdk``) with
-the same channels as ``--mcap`` (`gngdt_io.outputs.mcap`): ``/<cam>/color``, ``/<cam>/depth``,
+the same channels as ``--mcap`` (`gngdt.io.outputs.mcap`): ``/<cam>/color``, ``/<cam>/depth``,
 ``/<cam>/calibration``, ``/<cam>/points``, ``/<cam>/scene``, ``/<cam>/objects``, gngdt's own
 topology, status and end of stream, and the camera poses on ``/tf``.
 
@@ -29,9 +29,9 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from gngdt_io.outputs.base import Output, split_bind
-from gngdt_io.outputs.mcap import PROTOBUF_PREFIX, channel_topic, message_classes
-from schemas.wire import FrameStamp
+from gngdt.io.outputs.base import Output, split_bind
+from gngdt.io.outputs.mcap import PROTOBUF_PREFIX, channel_topic, message_classes
+from gngdt.schemas.wire import FrameStamp
 
 if TYPE_CHECKING:
     import zenoh

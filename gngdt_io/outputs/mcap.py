@@ -32,9 +32,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gngdt_io.mcap_writer import TF_TOPIC
-from gngdt_io.outputs.base import Output
-from schemas.wire import CAPTURE_STREAMS, LEARNER_STREAMS, FrameStamp
+from gngdt.io.mcap.writer import TF_TOPIC
+from gngdt.io.outputs.base import Output
+from gngdt.schemas.wire import CAPTURE_STREAMS, LEARNER_STREAMS, FrameStamp
 
 if TYPE_CHECKING:
     import zenoh
@@ -63,7 +63,7 @@ def message_classes() -> dict[str, Any]:
     from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
-    from schemas import gngdt_pb2
+    from gngdt.schemas import gngdt_pb2
 
     classes = (CameraCalibration, CompressedImage, FrameTransform, PointCloud, RawImage,
                SceneUpdate,
@@ -376,7 +376,7 @@ class McapOutput(Output):
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> McapOutput | None:
-        from gngdt_io.outputs.rerun_output import unused_rrd_path
+        from gngdt.io.outputs.rerun_output import unused_rrd_path
 
         if not args.mcap:
             return None

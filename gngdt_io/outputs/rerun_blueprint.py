@@ -6,7 +6,7 @@ Entities (DESIGN.md "Rerun") for the default camera ``camera``: ``world/camera``
 colours beside them as ``gngdt.clusters.<clustering>:colors``), ``world/gng/edges/<clustering>``,
 ``world/objects`` and ``metrics/<name>``. Any other camera ``<cam>`` gets the same tree under
 ``world/<cam>/`` and ``metrics/<cam>/``. The blueprint: the images, a 3D view per clustering
-(`gngdt_core.clustering.CLUSTERINGS`) plus one of the cloud and the learned colours, all starting
+(`gngdt.core.clustering.CLUSTERINGS`) plus one of the cloud and the learned colours, all starting
 from the camera's viewpoint, and one plot per metric.
 """
 
@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core.clustering import CLUSTERINGS
-from schemas.wire import DEFAULT_CAMERA
+from gngdt.core.clustering import CLUSTERINGS
+from gngdt.schemas.wire import DEFAULT_CAMERA
 
 #: clusterings with a 3D view, in view order
 CLUSTERING_VIEWS = tuple(CLUSTERINGS)
@@ -100,7 +100,7 @@ class Framing:
     depth: float = 1.5
     #: camera-to-frame pose (4, 4), row-major, as a tuple (identity: the camera's own frame)
     pose: tuple[float, ...] = tuple(np.eye(4).ravel())
-    #: the world's up in the frame (`gngdt_core.up_axis`); None: the camera's up
+    #: the world's up in the frame (`gngdt.io.outputs.up_axis`); None: the camera's up
     world_up: tuple[float, float, float] | None = None
 
     def _place(self, x: float, y: float, z: float) -> tuple[float, float, float]:

@@ -1,6 +1,6 @@
 """Decoded gngdt messages logged into a rerun recording stream, thinned by `DisplayRates`.
 
-The world's up axis follows the data (`gngdt_core.up_axis`): with camera poses, the cameras'
+The world's up axis follows the data (`gngdt.io.outputs.up_axis`): with camera poses, the cameras'
 mean up; for a static camera (the world is its frame), the largest plane that could be the
 floor or a table, else the camera's own up (-y). It is logged as the ``world`` entity's
 ``ViewCoordinates`` (the frame axis nearest that up) and stated beside it (``up_axis``,
@@ -15,22 +15,22 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gngdt_core.up_axis import CAMERA_UP, PoseUp, axis_name, nearest_axis, up_from_planes
-from gngdt_io.outputs.rerun_blueprint import (
+from gngdt.io.outputs.rerun_blueprint import (
     CLUSTERING_VIEWS,
     EntityPaths,
     Framing,
     cluster_archetype,
 )
-from schemas.wire import FrameStamp
+from gngdt.io.outputs.up_axis import CAMERA_UP, PoseUp, axis_name, nearest_axis, up_from_planes
+from gngdt.schemas.wire import FrameStamp
 
 if TYPE_CHECKING:
     import rerun as rr
 
-    from gngdt_core.geometry import CameraIntrinsics
-    from schemas.scene import ObjectBoxes
-    from schemas.status import LearnerStatusInfo
-    from schemas.topology import TopologySnapshot
+    from gngdt.core.sensor.geometry import CameraIntrinsics
+    from gngdt.schemas.scene import ObjectBoxes
+    from gngdt.schemas.status import LearnerStatusInfo
+    from gngdt.schemas.topology import TopologySnapshot
 
 log = logging.getLogger(__name__)
 
@@ -90,7 +90,7 @@ def edge_lines(positions: np.ndarray, pairs: np.ndarray, ids: np.ndarray) -> Any
     import pyarrow as pa
     import rerun as rr
 
-    from schemas.cluster_colors import edge_classes, edge_strips, id_colors
+    from gngdt.schemas.cluster_colors import edge_classes, edge_strips, id_colors
 
     nodes, starts, classes = edge_strips(pairs, edge_classes(pairs, ids))
     strip_type = rr.components.LineStrip3DBatch._ARROW_DATATYPE
@@ -244,7 +244,7 @@ class RerunLog:
         them for its view to pick), and each clustering's edges as polylines by cluster."""
         import rerun as rr
 
-        from schemas.cluster_colors import (
+        from gngdt.schemas.cluster_colors import (
             UNCLUSTERED_RGB,
             clustering_edges,
             id_colors,

@@ -25,20 +25,20 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gngdt_io.outputs.base import Output, StreamSample, split_bind
-from gngdt_io.outputs.rerun_blueprint import EntityPaths, blueprint
-from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
-from gngdt_io.outputs.rerun_sinks import (
+from gngdt.io.outputs.base import Output, StreamSample, split_bind
+from gngdt.io.outputs.rerun_blueprint import EntityPaths, blueprint
+from gngdt.io.outputs.rerun_log import DisplayRates, RerunLog
+from gngdt.io.outputs.rerun_sinks import (
     DEFAULT_BIND,
     DEFAULT_GRPC_PORT,
     DEFAULT_MAX_RRD_MB,
     DEFAULT_MIN_FREE_MB,
     DEFAULT_WEB_PORT,
 )
-from schemas.wire import DEFAULT_CAMERA
+from gngdt.schemas.wire import DEFAULT_CAMERA
 
 if TYPE_CHECKING:
-    from gngdt_io.outputs.rerun_sinks import RrdFile, ViewerServer
+    from gngdt.io.outputs.rerun_sinks import RrdFile, ViewerServer
 
 log = logging.getLogger(__name__)
 
@@ -183,7 +183,7 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
     and, for a file, its path) and the viewer server ``--serve`` started (or None)."""
     import rerun as rr
 
-    from gngdt_io.outputs.rerun_sinks import ViewerServer
+    from gngdt.io.outputs.rerun_sinks import ViewerServer
 
     to_file = not (args.stdout or args.serve or args.connect)
     rec = rr.RecordingStream("gngdt", batcher_config=file_batcher() if to_file else None)
@@ -258,7 +258,7 @@ class RerunOutput(Output):
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> RerunOutput:
-        from gngdt_io.outputs.rerun_sinks import RrdFile
+        from gngdt.io.outputs.rerun_sinks import RrdFile
 
         for name in ("max_rrd_mb", "min_free_mb"):
             if getattr(args, name) < 0:
@@ -278,10 +278,10 @@ class RerunOutput(Output):
         return "" if self.to_stdout else f"logging to {self.destination}"
 
     def write(self, sample: StreamSample) -> None:
-        from schemas.images import calibration_to_intrinsics, raw_to_image
-        from schemas.scene import decode_object_boxes
-        from schemas.status import decode_status, decode_stream_end
-        from schemas.topology import decode_topology
+        from gngdt.schemas.images import calibration_to_intrinsics, raw_to_image
+        from gngdt.schemas.scene import decode_object_boxes
+        from gngdt.schemas.status import decode_status, decode_stream_end
+        from gngdt.schemas.topology import decode_topology
 
         rerun_log, paths, payload = self.rerun_log, EntityPaths(sample.camera), sample.payload
         stream, stamp = sample.stream, sample.stamp
@@ -313,8 +313,8 @@ class RerunOutput(Output):
     def _points(self, camera: str, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-        from schemas.clouds import cloud_pose, msg_to_cloud
-        from schemas.messages import parse_message
+        from gngdt.schemas.clouds import cloud_pose, msg_to_cloud
+        from gngdt.schemas.messages import parse_message
 
         rerun_log = self.rerun_log
         message = parse_message(PointCloud, payload)
@@ -337,7 +337,7 @@ class RerunOutput(Output):
     def _transform(self, camera: str, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         """The camera's pose (fixed frame -> camera): its frustum and images follow it, and
         its cloud of the same frame, waiting without a pose, is drawn in the world."""
-        from schemas.clouds import transform_to_pose
+        from gngdt.schemas.clouds import transform_to_pose
 
         _, child, matrix = transform_to_pose(payload)
         if child != camera:  # a transform of another frame: not this camera's pose

@@ -22,7 +22,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from gngdt_io.errors import RecordingError
+from gngdt.io.errors import RecordingError
 
 #: the first bytes of a SQLite file (a ``.db3``) and of a ROS 1 bag (a legacy ``.bag``)
 SQLITE_MAGIC = b"SQLite format 3\x00"

@@ -29,9 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core.geometry import CameraIntrinsics
-from gngdt_io.errors import RecordingError
-from gngdt_io.realsense.files import RecordingInfo
+from gngdt.core.sensor.geometry import CameraIntrinsics
+from gngdt.io.errors import RecordingError
+from gngdt.io.realsense.files import RecordingInfo
 
 log = logging.getLogger(__name__)
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_io.ros2.messages import MARKER_ARRAY, header, msg_type, serialize
+from gngdt.io.ros2.messages import MARKER_ARRAY, header, msg_type, serialize
 
 __all__ = ["OBJECTS_NS", "OBJECT_LABELS_NS", "ObjectMarker", "encode_graph_markers",
            "encode_object_markers"]

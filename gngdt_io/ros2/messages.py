@@ -2,7 +2,7 @@
 
 Out: sensor_msgs/PointCloud2 (points; nodes with normals and one uint32 label field per
 clustering), tf2_msgs/TFMessage, diagnostic_msgs/DiagnosticArray (MarkerArray: `markers`).
-In: sensor_msgs/Image (decoded by `schemas.images.decode_pixels`, as bags are), sensor_msgs/
+In: sensor_msgs/Image (decoded by `gngdt.schemas.images.decode_pixels`, as bags are), sensor_msgs/
 CameraInfo (to `CameraIntrinsics`), TFMessage.
 
 Type hashes (RIHS01) are computed by rosbags from the message definitions, never typed in.
@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core.geometry import CameraIntrinsics
+from gngdt.core.sensor.geometry import CameraIntrinsics
 
 __all__ = [
     "CAMERA_INFO",
@@ -266,8 +266,8 @@ def encode_diagnostics(statuses: Iterable[Status], *, stamp_ns: int, frame_id: s
 
 @dataclass
 class ImageMessage:
-    """A decoded sensor_msgs/Image. pixels: see `schemas.images.decode_pixels` ((H, W, 3) uint8
-    RGB for colour, bgr8 reordered; (H, W) uint16 for 16UC1/mono16, millimetres for depth;
+    """A decoded sensor_msgs/Image. pixels: see `gngdt.schemas.images.decode_pixels` ((H, W, 3)
+    uint8 RGB for colour, bgr8 reordered; (H, W) uint16 for 16UC1/mono16, millimetres for depth;
     (H, W) float32 for 32FC1, metres)."""
 
     stamp_ns: int
@@ -279,8 +279,8 @@ class ImageMessage:
 def decode_image(data: bytes, max_pixels: int) -> ImageMessage:
     """A sensor_msgs/Image of at most ``max_pixels`` pixels (checked before decoding), with
     ``step`` (row padding) and ``is_bigendian`` honoured."""
-    from schemas.images import decode_pixels
-    from schemas.messages import MessageError
+    from gngdt.schemas.images import decode_pixels
+    from gngdt.schemas.messages import MessageError
 
     message = deserialize(data, IMAGE)
     if int(message.width) * int(message.height) > max_pixels:
@@ -328,8 +328,8 @@ class CameraInfo:
 
 def decode_camera_info(data: bytes) -> CameraInfo:
     """A sensor_msgs/CameraInfo; refused when K is unset (an uncalibrated camera)."""
-    from schemas.images import intrinsics_from_k
-    from schemas.messages import MessageError
+    from gngdt.schemas.images import intrinsics_from_k
+    from gngdt.schemas.messages import MessageError
 
     message = deserialize(data, CAMERA_INFO)
     distortion = tuple(float(value) for value in message.d)

@@ -2,7 +2,7 @@
 
 The node declares liveliness tokens for itself and for every publisher and subscription, so
 ROS 2's graph (``ros2 node list``, ``ros2 topic list/info``) sees them; publishers attach the
-33-byte rmw_zenoh attachment to every sample. Payloads are CDR bytes (`gngdt_io.ros2.messages`).
+33-byte rmw_zenoh attachment to every sample. Payloads are CDR bytes (`gngdt.io.ros2.messages`).
 
 A TRANSIENT_LOCAL subscription (``/tf_static``) is a zenoh advanced subscriber that asks late
 publishers for their history, as rmw_zenoh's is; publishers are plain zenoh publishers, so a
@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from gngdt_io.ros2.wire import (
+from gngdt.io.ros2.wire import (
     QOS_DEFAULT_10,
     Attachment,
     Durability,

@@ -12,14 +12,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.images import FORMATS, detect_format
-from gngdt_io.mcap_reader import check_recording
-from gngdt_io.sources.base import FrameSource, SourceOptions
-from gngdt_io.sources.folder import ImageFolderSource
-from gngdt_io.sources.realsense import RealSenseSource
-from gngdt_io.sources.recording import McapSource
-from gngdt_io.sources.synthetic import SyntheticSource
+from gngdt.io.errors import RecordingError
+from gngdt.io.images import FORMATS, detect_format
+from gngdt.io.mcap.reader import check_recording
+from gngdt.io.sources.base import FrameSource, SourceOptions
+from gngdt.io.sources.folder import ImageFolderSource
+from gngdt.io.sources.realsense import RealSenseSource
+from gngdt.io.sources.recording import McapSource
+from gngdt.io.sources.synthetic import SyntheticSource
 
 __all__ = ["SOURCE_FORMATS", "SOURCE_TYPES", "FrameSource", "SourceOptions", "open_source"]
 

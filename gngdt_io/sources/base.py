@@ -15,9 +15,9 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.frame import Frame
-from gngdt_io.mcap_limits import ReadLimits
+from gngdt.io.errors import RecordingError
+from gngdt.io.frame import Frame
+from gngdt.io.mcap.limits import ReadLimits
 
 #: colour and depth of one frame may differ by this much in a ROS 2 bag (half a 60 Hz period;
 #: gngdt's own recordings stamp both identically)

@@ -1,5 +1,5 @@
 """Folders of RGB-D images as frame sources, in a layout ``gngdt record images`` reads
-(`gngdt_io.images`: ``tum``, ``pcl-tiff``, ``redwood``; other files and folders in it, such as a
+(`gngdt.io.images`: ``tum``, ``pcl-tiff``, ``redwood``; other files and folders in it, such as a
 labelled set's ``label/``, are ignored). Frame names: the colour image's file stem.
 
 A folder without ``camera.json`` (and no ``--camera-json`` given) is read with its layout's
@@ -14,10 +14,10 @@ from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.frame import Frame
-from gngdt_io.images import DEFAULT_CAMERAS, FORMATS, iter_image_frames, load_camera
-from gngdt_io.sources.base import FrameSource, SourceOptions
+from gngdt.io.errors import RecordingError
+from gngdt.io.frame import Frame
+from gngdt.io.images import DEFAULT_CAMERAS, FORMATS, iter_image_frames, load_camera
+from gngdt.io.sources.base import FrameSource, SourceOptions
 
 log = logging.getLogger(__name__)
 

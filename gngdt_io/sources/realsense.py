@@ -1,6 +1,6 @@
 """Intel RealSense as a frame source: a live device (``realsense:``, ``realsense:SERIAL``,
 ``realsense:SERIAL:848x480@30``) or a recording the SDK wrote (``.db3``, legacy ``.bag``), both
-through one code path (`gngdt_io.realsense.stream.AlignedStream`): depth aligned to colour, the
+through one code path (`gngdt.io.realsense.stream.AlignedStream`): depth aligned to colour, the
 colour stream's own intrinsics, the device's depth units turned into millimetres.
 
 Needs the optional extra ``[realsense]`` (pyrealsense2, and on Linux the system library
@@ -21,18 +21,18 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.frame import Frame
-from gngdt_io.realsense.files import convert_legacy_bag, file_kind, inspect_db3
-from gngdt_io.realsense.sdk import RealSenseUnavailable, pyrealsense
-from gngdt_io.realsense.stream import (
+from gngdt.io.errors import RecordingError
+from gngdt.io.frame import Frame
+from gngdt.io.realsense.files import convert_legacy_bag, file_kind, inspect_db3
+from gngdt.io.realsense.sdk import RealSenseUnavailable, pyrealsense
+from gngdt.io.realsense.stream import (
     UNIX_DOMAINS,
     AlignedFrame,
     AlignedStream,
     StreamMode,
     find_device,
 )
-from gngdt_io.sources.base import FrameSource, SourceOptions
+from gngdt.io.sources.base import FrameSource, SourceOptions
 
 log = logging.getLogger(__name__)
 

@@ -1,14 +1,14 @@
 """Recordings as frame sources: gngdt's MCAP layout and ROS 2 bags in MCAP
-(`gngdt_io.mcap_reader`). Frame names: the 0-based frame index as 6 digits."""
+(`gngdt.io.mcap.reader`). Frame names: the 0-based frame index as 6 digits."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
 
-from gngdt_io.frame import Frame
-from gngdt_io.mcap_reader import MCAP_MAGIC
-from gngdt_io.sources.base import FrameSource, SourceOptions
+from gngdt.io.frame import Frame
+from gngdt.io.mcap.reader import MCAP_MAGIC
+from gngdt.io.sources.base import FrameSource, SourceOptions
 
 #: schemas of the messages that calibrate a recording's camera
 CALIBRATION_SCHEMAS = ("foxglove.CameraCalibration", "sensor_msgs/msg/CameraInfo")
@@ -20,7 +20,7 @@ class McapSource(FrameSource):
     format = "mcap"
 
     def __init__(self, path: Path, options: SourceOptions) -> None:
-        from gngdt_io.images import read_camera_json
+        from gngdt.io.images import read_camera_json
 
         self.camera = None
         note = "recording calibration"
@@ -35,8 +35,8 @@ class McapSource(FrameSource):
     def _check_calibration(self) -> None:
         """A recording without a calibration channel cannot be deprojected: say so now, with
         the fix, rather than after its first frames (a damaged index: the reader will tell)."""
-        from gngdt_io.errors import RecordingError
-        from gngdt_io.mcap_reader import recording_info
+        from gngdt.io.errors import RecordingError
+        from gngdt.io.mcap.reader import recording_info
 
         try:
             channels = recording_info(self.path)["channels"]
@@ -57,7 +57,7 @@ class McapSource(FrameSource):
             return stream.read(len(MCAP_MAGIC)) == MCAP_MAGIC
 
     def frames(self) -> Iterator[tuple[str, Frame]]:
-        from gngdt_io.mcap_reader import read_frames
+        from gngdt.io.mcap.reader import read_frames
 
         options = self.options
         for frame in read_frames(self.path, options.topic_prefix,
@@ -68,7 +68,7 @@ class McapSource(FrameSource):
             yield f"{frame.index:06d}", frame
 
     def describe(self) -> str:
-        from gngdt_io.mcap_reader import RecordingError, recording_info
+        from gngdt.io.mcap.reader import RecordingError, recording_info
 
         try:
             info = recording_info(self.path)

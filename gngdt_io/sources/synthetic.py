@@ -1,12 +1,12 @@
 """Synthetic scenes of the virtual Kinect as a frame source: ``synth:<scene>[:<frames>]``
-(`gngdt_io.synth`), e.g. ``synth:tabletop_walk:240``. Frame names: the index as 6 digits."""
+(`gngdt.io.synth`), e.g. ``synth:tabletop_walk:240``. Frame names: the index as 6 digits."""
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 
-from gngdt_io.frame import Frame
-from gngdt_io.sources.base import FrameSource
+from gngdt.io.frame import Frame
+from gngdt.io.sources.base import FrameSource
 
 #: frames of a synthetic source when the spec does not say
 DEFAULT_FRAMES = 30
@@ -19,7 +19,7 @@ class SyntheticSource(FrameSource):
     scheme = "synth"
 
     def __init__(self, spec: str) -> None:
-        from gngdt_io.synth.render import SCENES
+        from gngdt.io.synth.render import SCENES
 
         _, _, rest = spec.partition(":")
         scene, _, count = rest.partition(":")
@@ -35,7 +35,7 @@ class SyntheticSource(FrameSource):
         super().__init__(spec, "the virtual Kinect's intrinsics")
 
     def frames(self) -> Iterator[tuple[str, Frame]]:
-        from gngdt_io.synth.render import render_scene
+        from gngdt.io.synth.render import render_scene
 
         for frame in render_scene(self.scene, self.frame_count):
             yield f"{frame.index:06d}", frame

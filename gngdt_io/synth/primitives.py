@@ -1,6 +1,6 @@
 """Solid primitives of the synthetic scenes, each answering one question for a batch of rays:
 "where do you first hit each ray, and on which face?" -- all the renderer in
-:mod:`gngdt_io.synth.render` needs.
+:mod:`gngdt.io.synth.render` needs.
 
 World frame: x right, y forward (away from the default camera), z up, metres. Rays are
 ``origin + t * directions`` with ``origin (3,) float64`` and ``directions (N, 3) float64`` (not

@@ -1,5 +1,5 @@
 """Virtual RealSense recordings: a known scene rendered by the virtual Kinect's ray caster
-(`gngdt_io.synth.render.cast_rays`) from a depth camera and a colour camera ``baseline_m`` apart,
+(`gngdt.io.synth.render.cast_rays`) from a depth camera and a colour camera ``baseline_m`` apart,
 each with its own D435-like intrinsics, and written by the SDK's own recorder (a
 ``software_device`` with a z16 depth and an rgb8 colour sensor, recorded by ``rs.recorder``).
 
@@ -25,12 +25,12 @@ from typing import Any
 
 import numpy as np
 
-from gngdt_core.geometry import CameraIntrinsics
-from gngdt_io.realsense.sdk import pyrealsense
-from gngdt_io.synth.motion import Orbit, look_at
-from gngdt_io.synth.primitives import Rectangle, box
-from gngdt_io.synth.render import cast_rays, shade
-from gngdt_io.synth.scenes import Scene
+from gngdt.core.sensor.geometry import CameraIntrinsics
+from gngdt.io.realsense.sdk import pyrealsense
+from gngdt.io.synth.motion import Orbit, look_at
+from gngdt.io.synth.primitives import Rectangle, box
+from gngdt.io.synth.render import cast_rays, shade
+from gngdt.io.synth.scenes import Scene
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """The virtual Kinect: ray-cast RGB-D frames of synthetic scenes, with Kinect-like depth.
 
-Every pixel's ray is cast against every primitive of a scene (:mod:`gngdt_io.synth.scenes`)
+Every pixel's ray is cast against every primitive of a scene (:mod:`gngdt.io.synth.scenes`)
 with numpy, the nearest hit wins. The depth sensor model follows Khoshelham & Elberink (2012):
 Gaussian noise whose sigma grows with the square of the depth (1.5 mm at 1 m, 6 mm at 2 m),
 quantisation to millimetres, and holes where the surface is seen at a grazing angle or next to
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gngdt_core.geometry import apply_pose
-from gngdt_io.frame import CameraIntrinsics, CameraPose, Frame
-from gngdt_io.synth.scenes import SCENE_BUILDERS, Scene, build_scene
+from gngdt.core.sensor.geometry import apply_pose
+from gngdt.io.frame import CameraIntrinsics, CameraPose, Frame
+from gngdt.io.synth.scenes import SCENE_BUILDERS, Scene, build_scene
 
 #: scene name -> one-line description
 SCENES: dict[str, str] = {name: builder().description for name, builder in SCENE_BUILDERS.items()}

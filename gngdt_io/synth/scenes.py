@@ -1,6 +1,6 @@
 """Synthetic scenes for the virtual Kinect: layouts of solid primitives
-(:mod:`gngdt_io.synth.primitives`) with a camera path and object motions
-(:mod:`gngdt_io.synth.motion`), and what a clustering of each should find.
+(:mod:`gngdt.io.synth.primitives`) with a camera path and object motions
+(:mod:`gngdt.io.synth.motion`), and what a clustering of each should find.
 
 World frame: x right, y forward (away from the default camera), z up, metres.
 """
@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from gngdt_io.synth.motion import CameraPath, Motion, Orbit, Walk
-from gngdt_io.synth.primitives import (
+from gngdt.io.synth.motion import CameraPath, Motion, Orbit, Walk
+from gngdt.io.synth.primitives import (
     Cylinder,
     Primitive,
     Rectangle,

@@ -1,19 +1,19 @@
 """Learn GNG-DT topologies from a camera's point clouds and publish them with their clusterings.
 
 Each cloud on ``gngdt/<cam>/points`` is learned by the learner's per-frame policy
-(`gngdt_core.frame_learner.FrameLearner`: one network, in the frame of the first cloud; the
+(`gngdt.core.learner.frame_learner.FrameLearner`: one network, in the frame of the first cloud; the
 learner's profile forgets nodes that stand for nothing any more and rehearses earlier frames of
 a moving camera; a map in a fixed frame grows with the surface seen). Each frame gets the
 learning steps that fit in its share of the time between frames, so the learner keeps up on a
 busy machine. With ``--track``, clouds without a pose are placed by aligning them to the map,
 and the camera's pose is published on ``gngdt/<cam>/tf``. After each learned frame the learner
 publishes the topology (edges per property, every clustering of
-`gngdt_core.clustering.CLUSTERINGS` with persistent cluster ids, and persistent node ids), the
+`gngdt.core.clustering.CLUSTERINGS` with persistent cluster ids, and persistent node ids), the
 objects (one per confirmed cluster of ``objects_from``, as a
 foxglove SceneUpdate) and a status message, and every ``scene_every_frames`` frames the whole
 scene as a foxglove SceneUpdate; a queryable on the topology key answers a late joiner with the
-latest topology (`services.learner.serve`). The model is checkpointed periodically and on
-SIGINT/SIGTERM, and resumed from the checkpoint on start (`services.learner.checkpoints`).
+latest topology (`gngdt.services.learner.serve`). The model is checkpointed periodically and on
+SIGINT/SIGTERM, and resumed from the checkpoint on start (`gngdt.services.learner.checkpoints`).
 """
 
 from __future__ import annotations
@@ -24,13 +24,13 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gngdt_core.clustering import CLUSTERINGS
-from gngdt_io.import_checks import add_pose_limit_arguments, pose_limit_values
-from schemas.wire import DEFAULT_CAMERA, topic
-from services.plumbing.session import ZenohSetupError, add_zenoh_arguments, open_session
+from gngdt.core.clustering import CLUSTERINGS
+from gngdt.io.import_checks import add_pose_limit_arguments, pose_limit_values
+from gngdt.schemas.wire import DEFAULT_CAMERA, topic
+from gngdt.services.plumbing.session import ZenohSetupError, add_zenoh_arguments, open_session
 
 if TYPE_CHECKING:
-    from gngdt_io.profiles import Profile
+    from gngdt.io.profiles import Profile
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +48,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
     parser.add_argument("--params", type=Path, metavar="FILE.toml",
                         help="GNG-DT parameters and learner options; config/learner.toml "
-                        "documents every key (installed with gngdt: `python -m gngdt_config` "
+                        "documents every key (installed with gngdt: `python -m gngdt.config` "
                         "prints where)")
     parser.add_argument("--print-params", action="store_true",
                         help="print every effective parameter and where it came from (a "
@@ -87,7 +87,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def profile_from_args(args: argparse.Namespace) -> Profile:
     """The params file (or the learner's defaults) overridden by explicit command-line options;
     ValueError naming the file or option that is wrong."""
-    from gngdt_io.profiles import load_profile
+    from gngdt.io.profiles import load_profile
 
     flags = {"samples_per_frame": "samples_per_frame", "min_cluster_size": "min_cluster_size",
              "checkpoint_every_frames": "checkpoint_every", "seed": "seed",
@@ -101,11 +101,11 @@ def profile_from_args(args: argparse.Namespace) -> Profile:
 
 
 def main(args: argparse.Namespace) -> int:
-    from gngdt_core.frame_learner import FrameLearner
-    from gngdt_io.checkpoints import CheckpointError, CheckpointLock
-    from gngdt_io.profiles import format_parameters
-    from services.learner import checkpoints
-    from services.learner.serve import serve, warm_up
+    from gngdt.core.learner.frame_learner import FrameLearner
+    from gngdt.io.checkpoints import CheckpointError, CheckpointLock
+    from gngdt.io.profiles import format_parameters
+    from gngdt.services.learner import checkpoints
+    from gngdt.services.learner.serve import serve, warm_up
 
     lock = None
     try:

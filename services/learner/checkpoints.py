@@ -1,6 +1,6 @@
 """The learner's checkpoints: its network, counters and frame (and with ``--track`` its camera
 tracker: pose, motion, plane memory, as ``tracker_*`` arrays) saved to a file and resumed from
-it (`gngdt_io.checkpoints` writes and checks the file)."""
+it (`gngdt.io.checkpoints` writes and checks the file)."""
 
 from __future__ import annotations
 
@@ -11,10 +11,10 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from gngdt_core.frame_learner import Counters, FrameLearner, LearnerConfig
-from gngdt_core.model import GNGDT
-from gngdt_core.pose_checks import points_beyond_workspace
-from gngdt_io.checkpoints import (
+from gngdt.core.gas.model import GNGDT
+from gngdt.core.learner.frame_learner import Counters, FrameLearner, LearnerConfig
+from gngdt.core.odometry.pose_checks import points_beyond_workspace
+from gngdt.io.checkpoints import (
     CheckpointError,
     load_checkpoint,
     remove_stale_temporaries,

@@ -8,17 +8,17 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from gngdt_core.frame_budget import Budget
-from gngdt_core.frame_learner import DEFAULT_MAX_POINTS, FrameLearner, LearnedFrame
-from gngdt_core.objects import ObjectSet
-from gngdt_core.sampling import finite_rows
-from schemas.wire import FrameStamp
+from gngdt.core.gas.sampling import finite_rows
+from gngdt.core.learner.frame_budget import Budget
+from gngdt.core.learner.frame_learner import DEFAULT_MAX_POINTS, FrameLearner, LearnedFrame
+from gngdt.core.objects.object_set import ObjectSet
+from gngdt.schemas.wire import FrameStamp
 
 
 def topology_message(learner: FrameLearner, stamp: FrameStamp,
                      quantization_error: dict[str, float], learned: LearnedFrame) -> Any:
     """The current ``gngdt.Topology``."""
-    from schemas.topology import encode_topology
+    from gngdt.schemas.topology import encode_topology
 
     model = learner.model
     return encode_topology(
@@ -32,9 +32,9 @@ def topology_message(learner: FrameLearner, stamp: FrameStamp,
 
 def objects_message(learner: FrameLearner, stamp: FrameStamp, objects: ObjectSet) -> Any:
     """The objects as a ``foxglove.SceneUpdate``, coloured as the logger colours clusters."""
-    from gngdt_core.supports import ROLE_NAMES
-    from schemas.cluster_colors import id_colors
-    from schemas.scene import objects_to_scene_update
+    from gngdt.core.segmentation.supports import ROLE_NAMES
+    from gngdt.schemas.cluster_colors import id_colors
+    from gngdt.schemas.scene import objects_to_scene_update
 
     return objects_to_scene_update(
         ids=objects.ids, centers=objects.centers, quaternions_xyzw=objects.quaternions_xyzw,
@@ -47,8 +47,8 @@ def objects_message(learner: FrameLearner, stamp: FrameStamp, objects: ObjectSet
 def scene_message(learner: FrameLearner, stamp: FrameStamp, learned: LearnedFrame) -> Any:
     """Nodes in their learned colours and every clustering's edges coloured by cluster, as a
     ``foxglove.SceneUpdate``."""
-    from schemas.cluster_colors import clustering_edges, node_colors
-    from schemas.scene import topology_to_scene_update
+    from gngdt.schemas.cluster_colors import clustering_edges, node_colors
+    from gngdt.schemas.scene import topology_to_scene_update
 
     model = learner.model
     positions = model.positions_
@@ -74,7 +74,7 @@ def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
     after a frame that was not learned, e.g. its pose was rejected); ``latency_percentiles``:
     p50 and p99 of the recent frames (ms); ``settled``: how learning on the stream's last frame
     stopped; ``budget``: the last frame's time budget."""
-    from schemas.status import encode_status
+    from gngdt.schemas.status import encode_status
 
     counters = learner.counters
     seconds = counters.learning_seconds
@@ -155,8 +155,8 @@ def decode_points(payload: bytes, attachment: bytes | None, max_points: int = DE
     """
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-    from schemas.clouds import cloud_pose, msg_to_cloud
-    from schemas.messages import MessageError, parse_message
+    from gngdt.schemas.clouds import cloud_pose, msg_to_cloud
+    from gngdt.schemas.messages import MessageError, parse_message
 
     stamp = FrameStamp.from_attachment(attachment)
     stamp.check_clock(time.time_ns() if now_ns is None else now_ns)

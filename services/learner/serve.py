@@ -5,7 +5,7 @@ Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ri
 size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
 memory stays bounded. With ``frame_time_share`` > 0 (off by default) each frame gets the
 learning steps that fit in that share of the time between frames, and what was learned is
-published less often when publishing would not fit (`gngdt_core.frame_budget`; the status
+published less often when publishing would not fit (`gngdt.core.learner.frame_budget`; the status
 reports the budget). Objects and
 scene are published latest-wins (congestion control DROP): a consumer that cannot keep up misses
 updates, and never slows the learner down. With ``--track`` the learner also reads the camera's
@@ -24,14 +24,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gngdt_core.frame_budget import StepBudget
-from gngdt_core.frame_learner import (
+from gngdt.core.learner.frame_budget import StepBudget
+from gngdt.core.learner.frame_learner import (
     FrameLearner,
     LearnerConfig,
     OtherFrameError,
     PoseRejectedError,
 )
-from schemas.wire import (
+from gngdt.schemas.wire import (
     ENCODING_FRAME_TRANSFORM,
     ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
@@ -39,16 +39,16 @@ from schemas.wire import (
     FrameStamp,
     topic,
 )
-from services.learner import checkpoints
-from services.learner.messages import (
+from gngdt.services.learner import checkpoints
+from gngdt.services.learner.messages import (
     decode_points,
     objects_message,
     scene_message,
     status_message,
     topology_message,
 )
-from services.plumbing import lifecycle
-from services.plumbing.session import declare_publisher, through_shared_memory
+from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.session import declare_publisher, through_shared_memory
 
 if TYPE_CHECKING:
     import zenoh
@@ -162,7 +162,7 @@ class LearnerInstances:
 
 def payload_bytes(sample: zenoh.Sample, limit: int) -> bytes:
     """The sample's payload, refused (``MessageError``) before any copy when over ``limit``."""
-    from schemas.messages import MessageError
+    from gngdt.schemas.messages import MessageError
 
     size = len(sample.payload)
     if size > limit:
@@ -185,8 +185,8 @@ class LatestCalibration:
         self.intrinsics = None
 
     def on_sample(self, sample: zenoh.Sample) -> None:
-        from schemas.images import calibration_to_intrinsics
-        from schemas.messages import MessageError
+        from gngdt.schemas.images import calibration_to_intrinsics
+        from gngdt.schemas.messages import MessageError
 
         try:
             self.intrinsics = calibration_to_intrinsics(
@@ -266,8 +266,8 @@ class LearnerService:
         self.clouds_shared = 0
 
     def _on_eos(self, sample: zenoh.Sample) -> None:
-        from schemas.messages import MessageError
-        from schemas.status import decode_stream_end
+        from gngdt.schemas.messages import MessageError
+        from gngdt.schemas.status import decode_stream_end
 
         try:
             end = decode_stream_end(payload_bytes(sample, MAX_EOS_BYTES))
@@ -365,7 +365,7 @@ class LearnerService:
 
     def _publish_pose(self, stamp: FrameStamp, camera_frame: str) -> None:
         """The tracked camera's pose: ``odom`` -> the cloud's (camera) frame."""
-        from schemas.clouds import pose_to_transform
+        from gngdt.schemas.clouds import pose_to_transform
 
         transform = pose_to_transform(self.learner.last_pose, self.learner.frame_id,
                                       camera_frame, timestamp_ns=stamp.capture_time_ns)
@@ -459,7 +459,7 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner
 def warm_up(config: LearnerConfig) -> None:
     """Compile (or load from numba's cache) every kernel the learner uses and encode each
     message once, before the first frame, logging each step (`gngdt run` shows them)."""
-    from gngdt_core.warm_up import logged_progress, warm_up_learner
+    from gngdt.core.learner.warm_up import logged_progress, warm_up_learner
 
     learner = warm_up_learner(config, logged_progress(log))
     learned = learner.learned_frame()

@@ -2,7 +2,7 @@
 asked, every stream as it is to an MCAP file (--mcap) and to a live Foxglove WebSocket
 (--foxglove).
 
-The outputs are `gngdt_io.outputs`, behind one interface.
+The outputs are `gngdt.io.outputs`, behind one interface.
 
 The logger stops on its own once every camera it knows of (from its first message, or from its
 capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of
@@ -16,15 +16,15 @@ import argparse
 import logging
 from typing import TYPE_CHECKING
 
-from services.logger.cameras import DEFAULT_MAX_CAMERAS
-from services.logger.inbox import DEFAULT_QUEUE_MB
-from services.logger.run import LIVELINESS_KEY
+from gngdt.services.logger.cameras import DEFAULT_MAX_CAMERAS
+from gngdt.services.logger.inbox import DEFAULT_QUEUE_MB
+from gngdt.services.logger.run import LIVELINESS_KEY
 
 __all__ = ["EXAMPLES", "LIVELINESS_KEY", "add_arguments", "main"]
-from services.plumbing.session import add_zenoh_arguments
+from gngdt.services.plumbing.session import add_zenoh_arguments
 
 if TYPE_CHECKING:
-    from gngdt_io.outputs import Output
+    from gngdt.io.outputs import Output
 
 log = logging.getLogger(__name__)
 
@@ -39,7 +39,7 @@ EXAMPLES = """examples:
 """
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from gngdt_io.outputs import OUTPUTS
+    from gngdt.io.outputs import OUTPUTS
 
     for output in OUTPUTS:
         output.add_arguments(parser)
@@ -61,9 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def build_outputs(args: argparse.Namespace) -> list[Output]:
-    """Every registered output (`gngdt_io.outputs.OUTPUTS`) the options ask for; on an error
+    """Every registered output (`gngdt.io.outputs.OUTPUTS`) the options ask for; on an error
     (ValueError, OSError) the ones already made are closed."""
-    from gngdt_io import outputs as registry
+    from gngdt.io import outputs as registry
 
     for kind in registry.OUTPUTS:  # what cannot work is said before any output opens
         kind.check_args(args)
@@ -81,8 +81,8 @@ def build_outputs(args: argparse.Namespace) -> list[Output]:
 
 
 def main(args: argparse.Namespace) -> int:
-    from gngdt_io.outputs.rerun_sinks import exit_now_if_stuck
-    from services.logger.run import run_logger
+    from gngdt.io.outputs.rerun_sinks import exit_now_if_stuck
+    from gngdt.services.logger.run import run_logger
 
     if args.max_queue_mb < 0 or args.max_cameras < 1:
         log.error("--max-queue-mb must be >= 0 and --max-cameras >= 1, got %s and %s",

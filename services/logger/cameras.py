@@ -95,7 +95,7 @@ class Cameras:
     def note(self, camera: str, stream: str, sequence: int, payload: bytes) -> None:
         """Progress from one valid sample: topologies, the learner's settling, the end of
         stream (decoded here: small messages; ValueError when malformed)."""
-        from schemas.status import decode_status, decode_stream_end
+        from gngdt.schemas.status import decode_status, decode_stream_end
 
         progress = self.progress[camera]
         if stream == "topology":

@@ -5,9 +5,9 @@ from __future__ import annotations
 import logging
 import time
 
-from gngdt_io.outputs import Output, StreamSample, split_key
-from schemas.wire import FrameStamp
-from services.logger.cameras import Cameras
+from gngdt.io.outputs import Output, StreamSample, split_key
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.logger.cameras import Cameras
 
 log = logging.getLogger(__name__)
 

@@ -6,7 +6,7 @@ import threading
 from collections import deque
 from typing import TYPE_CHECKING
 
-from services.plumbing.session import MAX_MESSAGE_BYTES
+from gngdt.services.plumbing.session import MAX_MESSAGE_BYTES
 
 if TYPE_CHECKING:
     import zenoh

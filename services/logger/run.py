@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 import logging
 
-from gngdt_io.outputs import Output
-from services.logger.cameras import Cameras, CaptureWatch
-from services.logger.dispatch import Dispatcher
-from services.logger.inbox import Inbox
-from services.plumbing import lifecycle
-from services.plumbing.session import ZenohSetupError, open_session
+from gngdt.io.outputs import Output
+from gngdt.services.logger.cameras import Cameras, CaptureWatch
+from gngdt.services.logger.dispatch import Dispatcher
+from gngdt.services.logger.inbox import Inbox
+from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.session import ZenohSetupError, open_session
 
 log = logging.getLogger(__name__)
 

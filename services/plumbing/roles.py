@@ -26,8 +26,8 @@ import secrets
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from schemas.wire import CAPTURE_STREAMS, LEARNER_STREAMS
-from services.plumbing.session import client_settings, router_config, settings_file_text
+from gngdt.schemas.wire import CAPTURE_STREAMS, LEARNER_STREAMS
+from gngdt.services.plumbing.session import client_settings, router_config, settings_file_text
 
 if TYPE_CHECKING:
     import zenoh

@@ -6,16 +6,16 @@ in ROS 2's graph, without a ROS installation.
 A ROS 2 node ``gngdt_<cam>`` (domain ``--domain``, else ``ROS_DOMAIN_ID``, else 0) on the same
 router as the other services (or on the ROS 2 router ``--ros2-connect`` names):
 
-out (`services.ros2.outbound`): ``/gngdt/<cam>/points`` sensor_msgs/PointCloud2 (x, y, z, rgb),
-``/gngdt/<cam>/nodes`` PointCloud2 (x, y, z, rgb, normal_x/y/z, a uint32 ``label_<clustering>``
-per clustering: the persistent cluster id, 0xFFFFFFFF for none), ``/gngdt/<cam>/graph``
-visualization_msgs/MarkerArray (a LINE_LIST per topology, coloured by cluster; at most
-``--graph-rate`` a second), ``/gngdt/<cam>/objects`` MarkerArray (a CUBE and a TEXT_VIEW_FACING
-label per object, marker id = object id; DELETE for ids gone), ``/tf`` tf2_msgs/TFMessage (fixed
-frame -> camera when the clouds have poses) and ``/gngdt/<cam>/status``
+out (`gngdt.services.ros2.outbound`): ``/gngdt/<cam>/points`` sensor_msgs/PointCloud2 (x, y, z,
+rgb), ``/gngdt/<cam>/nodes`` PointCloud2 (x, y, z, rgb, normal_x/y/z, a uint32
+``label_<clustering>`` per clustering: the persistent cluster id, 0xFFFFFFFF for none),
+``/gngdt/<cam>/graph`` visualization_msgs/MarkerArray (a LINE_LIST per topology, coloured by
+cluster; at most ``--graph-rate`` a second), ``/gngdt/<cam>/objects`` MarkerArray (a CUBE and a
+TEXT_VIEW_FACING label per object, marker id = object id; DELETE for ids gone), ``/tf``
+tf2_msgs/TFMessage (fixed frame -> camera when the clouds have poses) and ``/gngdt/<cam>/status``
 diagnostic_msgs/DiagnosticArray (the bridge's and the learner's status, once a second).
 
-in (`services.ros2.inbound`, unless ``--no-input``): a camera driver's colour and depth
+in (`gngdt.services.ros2.inbound`, unless ``--no-input``): a camera driver's colour and depth
 sensor_msgs/Image and CameraInfo (realsense2_camera's names by default), paired by stamp, as
 gngdt frames on ``gngdt/<cam>/{color,depth,calibration,points}`` (what `gngdt capture`
 publishes), with poses from ``/tf`` when ``--fixed-frame`` names a frame.
@@ -33,16 +33,16 @@ import os
 import time
 from typing import TYPE_CHECKING
 
-from gngdt_io.mcap_limits import ReadLimits
-from gngdt_io.sources.base import DEFAULT_MAX_SKEW_MS
-from schemas.wire import DEFAULT_CAMERA
-from services.capture import add_cloud_arguments
-from services.plumbing.session import add_zenoh_arguments
+from gngdt.io.mcap.limits import ReadLimits
+from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS
+from gngdt.schemas.wire import DEFAULT_CAMERA
+from gngdt.services.capture import add_cloud_arguments
+from gngdt.services.plumbing.session import add_zenoh_arguments
 
 if TYPE_CHECKING:
     import zenoh
 
-    from gngdt_io.deproject import FrameToCloud
+    from gngdt.io.deproject import FrameToCloud
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +63,7 @@ STATUS_PERIOD_S = 1.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from services.ros2.inbound import CameraTopics
+    from gngdt.services.ros2.inbound import CameraTopics
 
     parser.add_argument("--cam", default=DEFAULT_CAMERA,
                         help="camera name in gngdt's topics; the ROS 2 node is gngdt_<cam>, its "
@@ -129,8 +129,8 @@ def domain_id(args: argparse.Namespace) -> int:
 
 def check_names(args: argparse.Namespace) -> None:
     """The camera name and topics must make valid ROS 2 names (``ValueError`` says which)."""
-    from gngdt_io.ros2.wire import validate_node_name, validate_topic_name
-    from schemas.wire import topic
+    from gngdt.io.ros2.wire import validate_node_name, validate_topic_name
+    from gngdt.schemas.wire import topic
 
     topic(args.cam, "points")
     try:
@@ -153,8 +153,8 @@ def check_names(args: argparse.Namespace) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    from services.capture import frame_to_cloud
-    from services.plumbing.session import ZenohSetupError, open_session
+    from gngdt.services.capture import frame_to_cloud
+    from gngdt.services.plumbing.session import ZenohSetupError, open_session
 
     try:
         check_names(args)
@@ -183,7 +183,7 @@ def main(args: argparse.Namespace) -> int:
 
 def open_ros2_session(endpoints: list[str], wait_s: float) -> zenoh.Session:
     """A client session of the ROS 2 router (loopback defaults: listening nowhere, no scouting)."""
-    from services.plumbing.session import client_config, open_config
+    from gngdt.services.plumbing.session import client_config, open_config
 
     return open_config(client_config(endpoints), what="ROS 2 session", wait_s=wait_s)
 
@@ -191,11 +191,11 @@ def open_ros2_session(endpoints: list[str], wait_s: float) -> zenoh.Session:
 def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, domain: int,
            to_cloud: FrameToCloud) -> None:
     """Translate until a stop signal; everything declared is undeclared on the way out."""
-    from gngdt_io.ros2.messages import OK, WARN, Status
-    from gngdt_io.ros2.node import Ros2Node
-    from services.plumbing import lifecycle
-    from services.ros2.inbound import CameraTopics, RosToGngdt
-    from services.ros2.outbound import GngdtToRos
+    from gngdt.io.ros2.messages import OK, WARN, Status
+    from gngdt.io.ros2.node import Ros2Node
+    from gngdt.services.plumbing import lifecycle
+    from gngdt.services.ros2.inbound import CameraTopics, RosToGngdt
+    from gngdt.services.ros2.outbound import GngdtToRos
 
     node = Ros2Node(ros, f"gngdt_{args.cam}", domain_id=domain)
     outbound = GngdtToRos(gngdt, node, args.cam, args.camera_frame or args.cam,

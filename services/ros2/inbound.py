@@ -1,9 +1,9 @@
 """ROS 2 -> gngdt: a camera driver's colour, depth and CameraInfo topics as gngdt frames, published
 on ``gngdt/<cam>/{color,depth,calibration,points}`` exactly as `gngdt capture` publishes a
-recording's (`services.capture.CapturePublisher`, `gngdt_io.deproject.FrameToCloud`), so the
+recording's (`gngdt.services.capture.CapturePublisher`, `gngdt.io.deproject.FrameToCloud`), so the
 learner and the logger work unchanged.
 
-Colour and depth are paired by stamp within ``max_skew_ns`` (`gngdt_io.frame_assembly`); images
+Colour and depth are paired by stamp within ``max_skew_ns`` (`gngdt.io.mcap.frame_assembly`); images
 wait at most ``max_held_bytes`` for a partner. With a fixed frame named, each frame's camera pose
 is looked up in ``/tf`` and ``/tf_static`` at its stamp (as tf2 does, interpolated; up to
 ``LIVE_TF_EXTRAPOLATION_NS`` past the newest transform); a frame without a pose publishes its
@@ -19,9 +19,9 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gngdt_io.frame import CameraPose
-from gngdt_io.frame_assembly import DecodedImage, FrameAssembler
-from gngdt_io.ros2.messages import (
+from gngdt.io.frame import CameraPose
+from gngdt.io.mcap.frame_assembly import DecodedImage, FrameAssembler
+from gngdt.io.ros2.messages import (
     CAMERA_INFO,
     IMAGE,
     TF_MESSAGE,
@@ -30,19 +30,19 @@ from gngdt_io.ros2.messages import (
     decode_tf,
     type_hash,
 )
-from gngdt_io.ros2.wire import QOS_SENSOR_DATA, QOS_TF, Durability, Qos
-from gngdt_io.tf_tree import TransformError, TransformTree
-from schemas.wire import MAX_CLOCK_OFFSET_NS, FrameStamp
-from services.capture import CapturePublisher
-from services.ros2.worker import Worker
+from gngdt.io.ros2.wire import QOS_SENSOR_DATA, QOS_TF, Durability, Qos
+from gngdt.io.tf_tree import TransformError, TransformTree
+from gngdt.schemas.wire import MAX_CLOCK_OFFSET_NS, FrameStamp
+from gngdt.services.capture import CapturePublisher
+from gngdt.services.ros2.worker import Worker
 
 if TYPE_CHECKING:
     import zenoh
 
-    from gngdt_io.deproject import FrameToCloud
-    from gngdt_io.errors import RecordingError
-    from gngdt_io.frame import Frame
-    from gngdt_io.ros2.node import Ros2Node
+    from gngdt.io.deproject import FrameToCloud
+    from gngdt.io.errors import RecordingError
+    from gngdt.io.frame import Frame
+    from gngdt.io.ros2.node import Ros2Node
 
 log = logging.getLogger(__name__)
 
@@ -130,7 +130,7 @@ class RosToGngdt:
             self._on_transforms(payload, static=stream == "tf_static")
 
     def _on_image(self, role: str, payload: bytes) -> None:
-        from gngdt_io.ros2.messages import Ros2MessageError
+        from gngdt.io.ros2.messages import Ros2MessageError
 
         image = decode_image(payload, self.max_pixels)
         accepted = COLOR_ENCODINGS if role == "color" else DEPTH_ENCODINGS

@@ -15,8 +15,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from gngdt_io.ros2.markers import ObjectMarker, encode_graph_markers, encode_object_markers
-from gngdt_io.ros2.messages import (
+from gngdt.io.ros2.markers import ObjectMarker, encode_graph_markers, encode_object_markers
+from gngdt.io.ros2.messages import (
     DIAGNOSTIC_ARRAY,
     MARKER_ARRAY,
     OK,
@@ -30,15 +30,15 @@ from gngdt_io.ros2.messages import (
     encode_tf,
     type_hash,
 )
-from gngdt_io.ros2.wire import QOS_DEFAULT_10, QOS_TF
-from schemas.wire import topic
-from services.ros2.worker import Worker
+from gngdt.io.ros2.wire import QOS_DEFAULT_10, QOS_TF
+from gngdt.schemas.wire import topic
+from gngdt.services.ros2.worker import Worker
 
 if TYPE_CHECKING:
     import zenoh
 
-    from gngdt_io.ros2.node import Ros2Node, Ros2Publisher
-    from schemas.status import LearnerStatusInfo
+    from gngdt.io.ros2.node import Ros2Node, Ros2Publisher
+    from gngdt.schemas.status import LearnerStatusInfo
 
 log = logging.getLogger(__name__)
 
@@ -114,8 +114,8 @@ class GngdtToRos:
     def _on_cloud(self, stream: str, payload: bytes, attachment: bytes | None) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-        from schemas.clouds import MAX_CLOUD_POINTS, cloud_pose, msg_to_cloud
-        from schemas.messages import parse_message, timestamp_to_ns
+        from gngdt.schemas.clouds import MAX_CLOUD_POINTS, cloud_pose, msg_to_cloud
+        from gngdt.schemas.messages import parse_message, timestamp_to_ns
 
         if not (self._wanted("points") or self._wanted("tf")):
             return
@@ -141,15 +141,15 @@ class GngdtToRos:
         elif stream == "objects":
             self._on_objects(payload)
         elif stream == "learner/status":
-            from schemas.status import decode_status
+            from gngdt.schemas.status import decode_status
 
             self._status = (time.monotonic(), decode_status(payload))
         elif stream == "tf":
             self._on_transform(payload)
 
     def _on_topology(self, payload: bytes) -> None:
-        from schemas.cluster_colors import edge_colors, id_colors, node_cluster_ids
-        from schemas.topology import decode_topology
+        from gngdt.schemas.cluster_colors import edge_colors, id_colors, node_cluster_ids
+        from gngdt.schemas.topology import decode_topology
 
         graph_due = (self._wanted("graph")
                      and time.monotonic() - self._last_graph >= self.graph_period_s)
@@ -175,8 +175,8 @@ class GngdtToRos:
     def _on_objects(self, payload: bytes) -> None:
         from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
-        from schemas.messages import parse_message
-        from schemas.scene import decode_object_boxes
+        from gngdt.schemas.messages import parse_message
+        from gngdt.schemas.scene import decode_object_boxes
 
         if not self._wanted("objects"):
             return
@@ -197,8 +197,8 @@ class GngdtToRos:
     def _on_transform(self, payload: bytes) -> None:
         from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 
-        from gngdt_core.geometry import checked_translation, unit_quaternion
-        from schemas.messages import parse_message, timestamp_to_ns
+        from gngdt.core.sensor.geometry import checked_translation, unit_quaternion
+        from gngdt.schemas.messages import parse_message, timestamp_to_ns
 
         message = parse_message(FrameTransform, payload)
         what = f"transform {message.parent_frame_id!r} -> {message.child_frame_id!r}"
@@ -252,7 +252,7 @@ class GngdtToRos:
 def camera_transform(fixed_frame: str, camera_frame: str, pose: np.ndarray,
                      stamp_ns: int) -> Transform:
     """The /tf transform fixed frame -> camera of a (4, 4) camera-to-fixed pose."""
-    from gngdt_core.geometry import matrix_to_pose
+    from gngdt.core.sensor.geometry import matrix_to_pose
 
     translation, quaternion = matrix_to_pose(pose)
     return Transform(fixed_frame, camera_frame, stamp_ns, tuple(translation.tolist()),

@@ -29,25 +29,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING
 
-from gngdt_core.warm_up import PROGRESS_PHRASE
-from gngdt_io.outputs.rerun_output import (
+from gngdt.core.learner.warm_up import PROGRESS_PHRASE
+from gngdt.io.outputs.rerun_output import (
     add_rate_arguments,
     add_serve_arguments,
     rate_arguments,
 )
-from schemas.wire import DEFAULT_CAMERA, topic
-from services.capture import add_camera_arguments, add_source_arguments
-from services.logger import LIVELINESS_KEY
-from services.plumbing import lifecycle
-from services.plumbing.roles import RunAccess
-from services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
-from services.run.plan import RunPlan, drop_unwritten, plan_run
-from services.run.summary import file_size, format_summary, mostly_rejected, recorded_frames
+from gngdt.schemas.wire import DEFAULT_CAMERA, topic
+from gngdt.services.capture import add_camera_arguments, add_source_arguments
+from gngdt.services.logger import LIVELINESS_KEY
+from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.roles import RunAccess
+from gngdt.services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
+from gngdt.services.run.plan import RunPlan, drop_unwritten, plan_run
+from gngdt.services.run.summary import file_size, format_summary, mostly_rejected, recorded_frames
 
 if TYPE_CHECKING:
     import zenoh
 
-    from schemas.status import LearnerStatusInfo, StreamEndInfo
+    from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
 
 log = logging.getLogger(__name__)
 
@@ -176,8 +176,8 @@ class Observed:
                 self.alive.discard(key)
 
     def on_status(self, sample: zenoh.Sample) -> None:
-        from schemas.messages import MessageError
-        from schemas.status import decode_status
+        from gngdt.schemas.messages import MessageError
+        from gngdt.schemas.status import decode_status
 
         try:
             status = decode_status(sample.payload.to_bytes())
@@ -187,8 +187,8 @@ class Observed:
             self.status = status
 
     def on_eos(self, sample: zenoh.Sample) -> None:
-        from schemas.messages import MessageError
-        from schemas.status import decode_stream_end
+        from gngdt.schemas.messages import MessageError
+        from gngdt.schemas.status import decode_stream_end
 
         try:
             end = decode_stream_end(sample.payload.to_bytes())
@@ -217,7 +217,7 @@ class Pipeline:
     def start(self, name: str, arguments: list[str]) -> Child:
         # -P: the user's current folder, which may hold its own services/ or schemas/, is not
         # put first on the children's import path
-        command = [sys.executable, "-P", "-m", "services.cli", name, *arguments,
+        command = [sys.executable, "-P", "-m", "gngdt.services.cli", name, *arguments,
                    "--zenoh-config", str(self.access.client_file(name)),
                    "--log-level", self.log_level]
         stderr_path = self.log_dir / f"{name}.log"
@@ -438,7 +438,7 @@ def report(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome) -> None
 
 
 def main(args: argparse.Namespace) -> int:
-    from gngdt_io.mcap_reader import RecordingError
+    from gngdt.io.mcap.reader import RecordingError
 
     try:
         plan = plan_run(args)

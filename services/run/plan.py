@@ -9,14 +9,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from gngdt_io.outputs.rerun_output import default_rrd_path, rates_from_args, reserve_path
-from gngdt_io.outputs.rerun_sinks import check_ports_free
-from schemas.wire import topic
-from services.capture import source_spec
+from gngdt.io.outputs.rerun_output import default_rrd_path, rates_from_args, reserve_path
+from gngdt.io.outputs.rerun_sinks import check_ports_free
+from gngdt.schemas.wire import topic
+from gngdt.services.capture import source_spec
 
 if TYPE_CHECKING:
-    from gngdt_io.outputs.rerun_log import DisplayRates
-    from gngdt_io.profiles import Profile
+    from gngdt.io.outputs.rerun_log import DisplayRates
+    from gngdt.io.profiles import Profile
 
 
 def run_name(spec: str) -> str:
@@ -51,7 +51,7 @@ class RunPlan:
 def plan_run(args: argparse.Namespace) -> RunPlan:
     """The run's plan, its outputs named and reserved (`plan_outputs`); ValueError or
     RecordingError for anything wrong, before any process starts."""
-    from gngdt_io.sources import SourceOptions, open_source
+    from gngdt.io.sources import SourceOptions, open_source
 
     args.recording = source_spec(args)
     options = SourceOptions(camera_json=args.camera_json, depth_scale=args.depth_scale)
@@ -59,8 +59,8 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     open_source(args.recording, options=options).close()
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
-    from gngdt_io.outputs.foxglove import FoxgloveOutput
-    from services.learner import profile_from_args
+    from gngdt.io.outputs.foxglove import FoxgloveOutput
+    from gngdt.services.learner import profile_from_args
 
     FoxgloveOutput.check_args(args)  # a port in use: said before anything starts
     profile = profile_from_args(args)  # a wrong params file: said before anything starts

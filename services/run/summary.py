@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from schemas.status import LearnerStatusInfo, StreamEndInfo
+    from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
 
 
 def file_size(path: Path | None) -> str:
@@ -91,7 +91,7 @@ def summary_warnings(status: LearnerStatusInfo | None, end: StreamEndInfo | None
 
 def recorded_frames(spec: str) -> int | None:
     """Frames in an MCAP recording by its index (None without one, or for another source)."""
-    from gngdt_io.mcap_reader import RecordingError, recording_info
+    from gngdt.io.mcap.reader import RecordingError, recording_info
 
     try:
         return int(recording_info(Path(spec))["frames"])

@@ -18,7 +18,7 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 #: a client of the router subscribed to everything, whose callback never returns
 NEVER_READS = """
 import sys, time
-from services.plumbing.session import client_config, open_config
+from gngdt.services.plumbing.session import client_config, open_config
 session = open_config(client_config([sys.argv[1]]), wait_s=30)
 session.declare_subscriber("gngdt/**", lambda sample: time.sleep(3600))
 print("subscribed", flush=True)
@@ -30,11 +30,11 @@ time.sleep(3600)
 def test_a_subscriber_that_never_reads_stalls_neither_capture_nor_other_subscribers(
     router_endpoint: str, tabletop_recording: Path
 ) -> None:
-    from gngdt_io.mcap_reader import read_frames
-    from schemas.status import decode_stream_end
-    from schemas.wire import FrameStamp
-    from services.capture import CapturePublisher, CloudOptions, FrameToCloud
-    from services.plumbing.session import client_config, open_config
+    from gngdt.io.mcap.reader import read_frames
+    from gngdt.schemas.status import decode_stream_end
+    from gngdt.schemas.wire import FrameStamp
+    from gngdt.services.capture import CapturePublisher, CloudOptions, FrameToCloud
+    from gngdt.services.plumbing.session import client_config, open_config
 
     frames = list(read_frames(tabletop_recording))
     to_cloud = FrameToCloud(CloudOptions())

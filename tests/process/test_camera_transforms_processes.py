@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_io.synth.render import render_scene
+from gngdt.io.synth.render import render_scene
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 FRAMES = 12
@@ -23,7 +23,7 @@ def test_the_rrd_holds_the_walking_camera_in_the_world(tmp_path: Path) -> None:
 
     rrd = tmp_path / "walk.rrd"
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", f"synth:tabletop_walk:{FRAMES}",
+        [sys.executable, "-m", "gngdt.services.cli", "run", f"synth:tabletop_walk:{FRAMES}",
          "--save", str(rrd), "--rate", "0.5"],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=240)
     assert completed.returncode == 0, completed.stdout + completed.stderr

@@ -17,7 +17,7 @@ def _log(process) -> str:
 
 
 def _frames(count: int, width: int = 64, height: int = 48):
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.synth.render import render_scene
 
     return list(render_scene("data2", count, width=width, height=height))
 
@@ -26,7 +26,7 @@ def _frames(count: int, width: int = 64, height: int = 48):
 def test_a_jump_in_the_stamps_is_shortened_and_said(
     router_endpoint: str, spawn: Callable, tmp_path: Path
 ) -> None:
-    from gngdt_io.mcap_writer import RecordingWriter
+    from gngdt.io.mcap.writer import RecordingWriter
 
     path = tmp_path / "jump.mcap"
     first, second = _frames(2)
@@ -51,7 +51,7 @@ def _capture(router_endpoint: str, path: Path, *options: str) -> tuple[int, str,
     from processes import peak_rss_mb, with_peak_rss
 
     completed = subprocess.run(
-        with_peak_rss([sys.executable, "-m", "services.cli", "capture", str(path), "--fast",
+        with_peak_rss([sys.executable, "-m", "gngdt.services.cli", "capture", str(path), "--fast",
                        "--wait-subscribers", "0", "--zenoh-connect", router_endpoint, *options]),
         cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
     output = completed.stdout + completed.stderr
@@ -64,8 +64,8 @@ def _write_images(path: Path, images: list[tuple[str, object]], calibrated: bool
     holds every frame before it."""
     from mcap_protobuf.writer import Writer
 
-    from gngdt_io.frame import CameraIntrinsics
-    from schemas.images import image_to_raw, intrinsics_to_calibration
+    from gngdt.io.frame import CameraIntrinsics
+    from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
 
     with open(path, "wb") as file, Writer(file) as writer:
         for index, (role, image) in enumerate(images):

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from test_recording_io import make_frames, write_ros_bag
 
-from services.capture import CloudOptions
+from gngdt.services.capture import CloudOptions
 
 FRAMES = 6
 DEPTH_SKEW_NS = 3_000_000  # aligned depth stamped 3 ms after colour, as real drivers do

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from test_pipeline import DESIGN_ENTITIES, log_text, rrd_entities_and_scalars, wait_exit
 
-from schemas.topology import TopologySnapshot, decode_topology
-from services.plumbing.session import client_config, open_config
+from gngdt.schemas.topology import TopologySnapshot, decode_topology
+from gngdt.services.plumbing.session import client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 CLIENT_CONFIG = REPO_ROOT / "config" / "zenoh-client.json5"

@@ -16,8 +16,8 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 
 @pytest.mark.timeout(240)
 def test_a_run_that_learns_nothing_says_why_and_fails(tmp_path: Path) -> None:
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     path = tmp_path / "metres.mcap"
     with RecordingWriter(path) as writer:  # depth in whole metres where millimetres belong
@@ -25,7 +25,7 @@ def test_a_run_that_learns_nothing_says_why_and_fails(tmp_path: Path) -> None:
             writer.write_frame(replace(frame, depth=np.rint(frame.depth / 1000.0)
                                        .astype(np.uint16)))
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(path), "--fast", "--save",
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(path), "--fast", "--save",
          str(tmp_path / "run.rrd")], cwd=REPO_ROOT, capture_output=True, text=True, timeout=200)
     assert completed.returncode == 1, completed.stdout + completed.stderr
     assert "learner:            no status received" in completed.stdout

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from processes import wait_for
 
-from gngdt_io.deproject import CloudOptions, FrameToCloud
-from gngdt_io.mcap_reader import read_frames
-from schemas.topology import decode_topology
-from schemas.wire import FrameStamp
-from services.plumbing.session import client_config, open_config
+from gngdt.io.deproject import CloudOptions, FrameToCloud
+from gngdt.io.mcap.reader import read_frames
+from gngdt.schemas.topology import decode_topology
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.plumbing.session import client_config, open_config
 
 FRAMES = 4
 
@@ -25,8 +25,8 @@ FRAMES = 4
 def test_eval_recording_and_the_learner_agree_node_for_node(
     router_endpoint: str, spawn: Callable, tabletop_recording: Path
 ) -> None:
-    from gngdt_eval.recording_eval import RecordingSettings, replay
-    from services.capture import CapturePublisher
+    from gngdt.eval.recording_eval import RecordingSettings, replay
+    from gngdt.services.capture import CapturePublisher
 
     learner = spawn("learn", "--zenoh-connect", router_endpoint)
     session = open_config(client_config([router_endpoint]))

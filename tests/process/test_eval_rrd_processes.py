@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from gngdt_eval.rrd import read_metrics
-from services.cli import main as gngdt_main
+from gngdt.eval.rrd import read_metrics
+from gngdt.services.cli import main as gngdt_main
 
 
 @pytest.mark.timeout(240)
@@ -17,8 +17,8 @@ def test_eval_rrd_on_a_real_logged_run(tmp_path) -> None:
     import subprocess
     import sys
 
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     recording = tmp_path / "tiny.mcap"
     with RecordingWriter(recording) as writer:
@@ -26,7 +26,8 @@ def test_eval_rrd_on_a_real_logged_run(tmp_path) -> None:
             writer.write_frame(frame)
     rrd = tmp_path / "run.rrd"
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(recording), "--save", str(rrd), "--fast"],
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(recording), "--save", str(rrd),
+         "--fast"],
         capture_output=True,
         text=True,
         timeout=200,

@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from processes import log_text, wait_for
 
-from gngdt_io.outputs.rerun_output import RRD_FLUSH_SECONDS
-from schemas.topology import decode_topology
-from services.plumbing.session import ZenohSetupError, client_config, open_config
+from gngdt.io.outputs.rerun_output import RRD_FLUSH_SECONDS
+from gngdt.schemas.topology import decode_topology
+from gngdt.services.plumbing.session import ZenohSetupError, client_config, open_config
 
 
 def _rrd_entities(path: Path) -> dict[str, int]:
@@ -46,8 +46,8 @@ def _rgb_on_disk(path: Path) -> bool:
 
 # ------------------------------------------------------------------------------ checkpoints
 def _trained_checkpoint(path: Path) -> None:
-    from gngdt_core import GNGDT
-    from gngdt_io.checkpoints import save_checkpoint
+    from gngdt.core import GNGDT
+    from gngdt.io.checkpoints import save_checkpoint
 
     rng = np.random.default_rng(0)
     model = GNGDT(random_state=0).partial_fit(

@@ -21,10 +21,10 @@ from processes import (
     with_default_sighup,
 )
 
-from services.plumbing.session import ZenohSetupError, client_config, open_config
+from gngdt.services.plumbing.session import ZenohSetupError, client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
-GNGDT = [sys.executable, "-m", "services.cli"]
+GNGDT = [sys.executable, "-m", "gngdt.services.cli"]
 
 
 # ------------------------------------------------------------------------ services by hand
@@ -32,7 +32,7 @@ GNGDT = [sys.executable, "-m", "services.cli"]
 def test_services_started_before_their_router_wait_for_it(
     free_port: int, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    from schemas.status import decode_status
+    from gngdt.schemas.status import decode_status
 
     endpoint = f"tcp/127.0.0.1:{free_port}"
     connect = ("--zenoh-connect", endpoint)
@@ -60,7 +60,7 @@ def test_services_started_before_their_router_wait_for_it(
     logged = log_text(learner)
     assert "connected to the zenoh router after" in logged
     assert "preparing the learning kernels" in logged and "kernels ready in" in logged
-    assert "INFO services.learner: checkpoint" not in logged  # one per frame here: DEBUG only
+    assert "INFO gngdt.services.learner: checkpoint" not in logged  # one per frame here: DEBUG only
     assert checkpoint.exists()
 
 

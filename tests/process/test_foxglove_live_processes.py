@@ -18,7 +18,7 @@ import pytest
 from foxglove_client import FoxgloveClient, decode
 from processes import log_text
 
-from schemas.clouds import msg_to_cloud, transform_to_pose
+from gngdt.schemas.clouds import msg_to_cloud, transform_to_pose
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: what --mcap records of a run of a moving synthetic camera (the end of stream comes last)
@@ -98,7 +98,7 @@ def test_a_port_in_use_is_an_error_before_anything_starts(tmp_path: Path) -> Non
                         ["log", "--save", str(tmp_path / "y.rrd")]):
             started = time.monotonic()
             completed = subprocess.run(
-                [sys.executable, "-m", "services.cli", *command, "--foxglove", "--bind",
+                [sys.executable, "-m", "gngdt.services.cli", *command, "--foxglove", "--bind",
                  f"127.0.0.1:{port}"], cwd=REPO_ROOT, capture_output=True, text=True,
                 timeout=60, stdin=subprocess.DEVNULL)
             assert completed.returncode == 2, completed.stderr
@@ -109,7 +109,7 @@ def test_a_port_in_use_is_an_error_before_anything_starts(tmp_path: Path) -> Non
 
 
 def test_a_client_that_stops_reading_costs_a_bounded_backlog() -> None:
-    from gngdt_io.outputs.foxglove import FoxgloveServer
+    from gngdt.io.outputs.foxglove import FoxgloveServer
 
     server = FoxgloveServer("127.0.0.1", 0, backlog=8)
     try:

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from processes import log_text, wait_for
 
-from schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
+from gngdt.schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: the rerun CLI installed beside this Python (the venv's, even when the venv is not activated)
@@ -44,7 +44,7 @@ def recorded_run(tmp_path_factory, tabletop_recording: Path) -> dict[str, Path]:
     out = tmp_path_factory.mktemp("recorded-run")
     paths = {"rrd": out / "run.rrd", "mcap": out / "run.mcap"}
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(tabletop_recording),
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(tabletop_recording),
          "--save", str(paths["rrd"]), "--mcap", str(paths["mcap"]),
          "--samples-per-frame", "10000", "--rate", "0.25"],  # every frame learned
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=150)
@@ -133,7 +133,7 @@ def test_mcap_holds_every_stream_with_foxglove_schemas(recorded_run) -> None:
 
 @pytest.mark.timeout(200)
 def test_topologies_carry_persistent_node_and_cluster_ids(recorded_run) -> None:
-    from schemas.topology import decode_topology
+    from gngdt.schemas.topology import decode_topology
 
     # the MCAP's own schema decodes them; our decoder then validates the same bytes
     messages = _decoded(recorded_run["mcap"])
@@ -210,7 +210,7 @@ def test_the_rrd_draws_the_final_settled_network(recorded_run) -> None:
 
 def _objects_flood(count: int, rng: np.random.Generator) -> bytes:
     """An objects update with ``count`` fresh random ids."""
-    from schemas.scene import objects_to_scene_update
+    from gngdt.schemas.scene import objects_to_scene_update
 
     ones = np.ones((count, 3))
     return objects_to_scene_update(
@@ -238,8 +238,8 @@ def test_logger_survives_an_objects_topic_flooded_with_ids(
     import zenoh
     from rerun.chunk import RrdReader
 
-    from schemas.scene import MAX_OBJECTS
-    from services.plumbing.session import client_config, open_config
+    from gngdt.schemas.scene import MAX_OBJECTS
+    from gngdt.services.plumbing.session import client_config, open_config
 
     rrd_path = tmp_path / "flood.rrd"
     queue_mb = 64
@@ -299,7 +299,7 @@ def test_logger_survives_an_objects_topic_flooded_with_ids(
 _STUCK_CONSUMER = """
 import sys, time
 import zenoh
-from services.plumbing.session import client_config, open_config
+from gngdt.services.plumbing.session import client_config, open_config
 session = open_config(client_config([sys.argv[1]]))
 # a consumer that never reads: once its one-slot FIFO is full, zenoh's receiving thread for this
 # session blocks (FifoChannel semantics), so the router cannot hand it anything more
@@ -318,8 +318,8 @@ WATCH_SECONDS = 12.0
 def test_a_scene_consumer_that_never_reads_stalls_nothing(
     free_port: int, spawn: Callable, tabletop_recording: Path, tmp_path: Path
 ) -> None:
-    from schemas.status import decode_status
-    from services.plumbing.session import client_config, open_config
+    from gngdt.schemas.status import decode_status
+    from gngdt.services.plumbing.session import client_config, open_config
 
     endpoint = f"tcp/127.0.0.1:{free_port}"
     connect = ("--zenoh-connect", endpoint)

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 from processes import wait_for
 
-from schemas.clouds import cloud_to_msg
-from schemas.status import encode_stream_end
-from schemas.wire import FrameStamp
+from gngdt.schemas.clouds import cloud_to_msg
+from gngdt.schemas.status import encode_stream_end
+from gngdt.schemas.wire import FrameStamp
 
 #: every stream the logger subscribes to (``gngdt/<cam>/<stream>``)
 STREAMS = ("color", "depth", "calibration", "points", "topology", "objects", "learner/status",
@@ -36,8 +36,8 @@ def test_flooded_learner_and_logger_count_garbage_and_keep_working(
     import zenoh
     from rerun.chunk import RrdReader
 
-    from schemas.status import decode_status
-    from services.plumbing.session import client_config, open_config
+    from gngdt.schemas.status import decode_status
+    from gngdt.services.plumbing.session import client_config, open_config
 
     rrd_path = tmp_path / "flood.rrd"
     connect = ("--zenoh-connect", router_endpoint)
@@ -99,7 +99,7 @@ def test_flooded_learner_and_logger_count_garbage_and_keep_working(
     malformed = int(re.search(r"logger done: (\d+) malformed", logged).group(1))
     # every garbage message on a queued stream is counted; on a latest-only stream (images,
     # clouds, objects) a newer one may supersede it before it is decoded, but not all are
-    from services.logger.inbox import LATEST_ONLY_STREAMS
+    from gngdt.services.logger.inbox import LATEST_ONLY_STREAMS
 
     queued = sum(1 for index in range(60)
                  if STREAMS[index % len(STREAMS)] not in LATEST_ONLY_STREAMS)

@@ -16,9 +16,9 @@ import pytest
 from processes import log_text, wait_for
 from test_hostile_learner import _checkpoint
 
-from schemas.clouds import cloud_to_msg
-from schemas.status import decode_status
-from services.plumbing.session import client_config, open_config
+from gngdt.schemas.clouds import cloud_to_msg
+from gngdt.schemas.status import decode_status
+from gngdt.services.plumbing.session import client_config, open_config
 
 
 class Statuses:

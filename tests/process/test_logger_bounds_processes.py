@@ -8,8 +8,8 @@ import time
 import pytest
 from processes import wait_for
 
-from schemas.status import encode_stream_end
-from schemas.wire import ENCODING_RAW_IMAGE, FrameStamp
+from gngdt.schemas.status import encode_stream_end
+from gngdt.schemas.wire import ENCODING_RAW_IMAGE, FrameStamp
 
 
 # ---------------------------------------------------------------------------- the inbox
@@ -17,8 +17,8 @@ from schemas.wire import ENCODING_RAW_IMAGE, FrameStamp
 def test_the_inbox_of_a_busy_logger_is_bounded_in_bytes(router_endpoint: str) -> None:
     import zenoh
 
-    from services.logger.inbox import Inbox
-    from services.plumbing.session import client_config, open_config
+    from gngdt.services.logger.inbox import Inbox
+    from gngdt.services.plumbing.session import client_config, open_config
 
     inbox = Inbox(max_bytes=5_000_000)  # nothing takes from it: a logger busy elsewhere
     session = open_config(client_config([router_endpoint]))
@@ -48,7 +48,7 @@ class ImageFlood:
     """A camera publishing 320x240 colour images at ~20 Hz, then an end of stream."""
 
     def __init__(self, endpoint: str) -> None:
-        from services.plumbing.session import client_config, open_config
+        from gngdt.services.plumbing.session import client_config, open_config
 
         self.session = open_config(client_config([endpoint]))
         self.sent = 0
@@ -57,7 +57,7 @@ class ImageFlood:
         import numpy as np
         import zenoh
 
-        from schemas.images import image_to_raw
+        from gngdt.schemas.images import image_to_raw
 
         rng = np.random.default_rng(0)
         deadline = time.monotonic() + seconds
@@ -120,7 +120,7 @@ FILE_SIZE_LIMITED = (
     "import os, resource, signal, sys\n"
     "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG instead of a kill\n"
     "resource.setrlimit(resource.RLIMIT_FSIZE, (3_000_000, 3_000_000))\n"
-    "os.execv(sys.executable, [sys.executable, '-m', 'services.cli', *sys.argv[1:]])\n"
+    "os.execv(sys.executable, [sys.executable, '-m', 'gngdt.services.cli', *sys.argv[1:]])\n"
 )
 
 

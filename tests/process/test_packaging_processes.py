@@ -32,14 +32,44 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> zipfile.ZipFile:
         yield archive
 
 
+#: repository folder -> where its modules land in the wheel (pyproject.toml's package-dir)
+WHEEL_FOLDERS = {"gngdt": "gngdt", "gngdt_core": "gngdt/core", "schemas": "gngdt/schemas",
+                 "gngdt_io": "gngdt/io", "gngdt_eval": "gngdt/eval", "services": "gngdt/services",
+                 "config": "gngdt/config"}
+
+
 def test_the_wheel_ships_config_and_every_module(wheel: zipfile.ZipFile) -> None:
     names = set(wheel.namelist())
     for path in (REPO / "config").rglob("*"):
         if path.is_file() and path.suffix in (".toml", ".json5"):
-            assert f"gngdt_config/{path.relative_to(REPO / 'config')}" in names, path
-    for package in ("gngdt_core", "schemas", "services"):
-        for path in (REPO / package).rglob("*.py"):
-            assert str(path.relative_to(REPO)) in names, f"{path} is not in the wheel"
+            assert f"gngdt/config/{path.relative_to(REPO / 'config')}" in names, path
+    for folder, inside in WHEEL_FOLDERS.items():
+        for path in (REPO / folder).rglob("*.py"):
+            shipped = f"{inside}/{path.relative_to(REPO / folder)}"
+            assert shipped in names, f"{path} is not in the wheel"
+
+
+def test_the_wheel_installs_one_top_level_name(wheel: zipfile.ZipFile,
+                                               tmp_path: Path) -> None:
+    """Installed into a fresh venv, the wheel adds `gngdt` (and its metadata) to site-packages and
+    nothing generic such as `services` or `schemas`; the namespace imports from there."""
+    venv = tmp_path / "venv"
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True,
+                   timeout=120)
+    python = venv / "bin" / "python"
+    purelib = "import sysconfig; print(sysconfig.get_paths()['purelib'])"
+    site = Path(subprocess.run([str(python), "-c", purelib], check=True, capture_output=True,
+                               text=True).stdout.strip())
+    with zipfile.ZipFile(wheel.filename) as archive:  # unpacked as pip installs a pure wheel
+        archive.extractall(site)
+    top = sorted({name.split("/")[0] for name in wheel.namelist()})
+    assert [name for name in top if not name.endswith(".dist-info")] == ["gngdt"]
+    assert sorted(path.name for path in site.iterdir() if not path.name.startswith("_")) == top
+    # (no dependencies in this venv: the config package imports none)
+    shown = subprocess.run([str(python), "-I", "-c", "import gngdt.config; "
+                            "print(*gngdt.config.__path__)"], check=True, capture_output=True,
+                           text=True, timeout=60, cwd=tmp_path).stdout
+    assert shown.startswith(str(site / "gngdt" / "config")), shown
 
 
 def test_the_licence_is_an_spdx_expression(wheel: zipfile.ZipFile) -> None:

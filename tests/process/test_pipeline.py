@@ -14,11 +14,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from schemas.clouds import cloud_to_msg
-from schemas.status import decode_status
-from schemas.topology import decode_topology
-from schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
-from services.plumbing.session import client_config, open_config
+from gngdt.schemas.clouds import cloud_to_msg
+from gngdt.schemas.status import decode_status
+from gngdt.schemas.topology import decode_topology
+from gngdt.schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
+from gngdt.services.plumbing.session import client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -121,11 +121,11 @@ def wait_exit(process: subprocess.Popen, timeout_s: float) -> int:
 
 @pytest.mark.timeout(240)
 def test_run_learns_the_scene_and_writes_the_rrd(data2_recording: Path, tmp_path: Path) -> None:
-    from gngdt_io.synth.render import SCENE_GROUND_TRUTH
+    from gngdt.io.synth.render import SCENE_GROUND_TRUTH
 
     rrd_path = tmp_path / "run.rrd"
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(data2_recording), "--save",
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(data2_recording), "--save",
          str(rrd_path), "--rate", "0.2", "--samples-per-frame", "40000"],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=200,
     )
@@ -152,7 +152,7 @@ def test_run_learns_the_scene_and_writes_the_rrd(data2_recording: Path, tmp_path
 def test_a_one_frame_recording_settles_for_one_frame_and_says_why_it_stayed_small(
         one_frame_recording: Path, tmp_path: Path) -> None:
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(one_frame_recording), "--save",
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(one_frame_recording), "--save",
          str(tmp_path / "one.rrd"), "--max-nodes", "200"],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=150,
     )
@@ -205,7 +205,7 @@ def test_late_joiner_gets_the_current_topology(
 def test_killed_learner_resumes_from_its_checkpoint(
     router_endpoint: str, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    from gngdt_io.checkpoints import load_checkpoint
+    from gngdt.io.checkpoints import load_checkpoint
 
     checkpoint = tmp_path / "learner.npz"
     connect = ["--zenoh-connect", router_endpoint]
@@ -297,7 +297,7 @@ def test_learner_refuses_a_corrupt_checkpoint(spawn: Callable, tmp_path: Path) -
 @pytest.mark.timeout(60)
 def test_run_fails_clearly_on_a_missing_recording(tmp_path: Path) -> None:
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(tmp_path / "absent.mcap")],
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(tmp_path / "absent.mcap")],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=50,
     )
     assert completed.returncode != 0
@@ -311,7 +311,7 @@ def test_run_reports_a_failed_service_with_its_error(
     checkpoint = tmp_path / "broken.npz"
     checkpoint.write_bytes(b"not a checkpoint")  # only the learner, once started, reads it
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(tabletop_recording), "--save",
          str(tmp_path / "x.rrd"), "--checkpoint", str(checkpoint)],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=100,
     )
@@ -330,7 +330,7 @@ def test_run_refuses_a_wrong_params_file_before_starting(
     params = tmp_path / "bad.toml"
     params.write_text(content)
     completed = subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(tabletop_recording), "--save",
          str(tmp_path / "x.rrd"), "--params", str(params)],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=100,
     )
@@ -343,7 +343,7 @@ def _blueprint_only_rrd_bytes(path: Path) -> int:
     """Size of an .rrd holding only the logger's blueprint (what it writes before any frame)."""
     import rerun as rr
 
-    from gngdt_io.outputs.rerun_blueprint import blueprint
+    from gngdt.io.outputs.rerun_blueprint import blueprint
 
     recording = rr.RecordingStream("gngdt")
     recording.save(str(path), default_blueprint=blueprint(["camera"]))
@@ -359,7 +359,7 @@ def test_interrupted_run_stops_cleanly_and_leaves_a_readable_rrd(
     rrd_path = tmp_path / "interrupted.rrd"
     flowing_bytes = _blueprint_only_rrd_bytes(tmp_path / "blueprint.rrd") + 100_000
     process = subprocess.Popen(
-        [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--save",
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(tabletop_recording), "--save",
          str(rrd_path), "--rate", "0.05", "--samples-per-frame", "2000"],
         cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True,
@@ -388,9 +388,9 @@ def test_logger_skips_malformed_messages_and_stops_after_eos(
 ) -> None:
     import zenoh
 
-    from gngdt_io.frame import CameraIntrinsics
-    from schemas.images import intrinsics_to_calibration
-    from schemas.status import encode_stream_end
+    from gngdt.io.frame import CameraIntrinsics
+    from gngdt.schemas.images import intrinsics_to_calibration
+    from gngdt.schemas.status import encode_stream_end
 
     rrd_path = tmp_path / "logger.rrd"
     logger = spawn("log", "--save", str(rrd_path), "--eos-drain", "1",
@@ -427,7 +427,7 @@ def test_logger_skips_malformed_messages_and_stops_after_eos(
 def test_capture_sends_the_good_frames_of_a_damaged_recording(
     router_endpoint: str, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    from schemas.status import decode_stream_end
+    from gngdt.schemas.status import decode_stream_end
 
     damaged = tmp_path / "damaged.mcap"
     data = tabletop_recording.read_bytes()

@@ -10,16 +10,16 @@ from pathlib import Path
 
 import pytest
 
-from gngdt_core.geometry import matrix_to_pose, pose_to_matrix
-from gngdt_io.frame import CameraPose
+from gngdt.core.sensor.geometry import matrix_to_pose, pose_to_matrix
+from gngdt.io.frame import CameraPose
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 def walk_recording(path: Path, misread=None) -> Path:
     """30 frames of the virtual walk (160x120) with their poses, or ``misread`` ones."""
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     with RecordingWriter(path) as writer:
         for frame in render_scene("tabletop_walk", 30, width=160, height=120):
@@ -36,7 +36,7 @@ def written_w_first(pose):
 
 def run(recording: Path, tmp_path: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "services.cli", "run", str(recording), "--rate", "2",
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(recording), "--rate", "2",
          "--samples-per-frame", "2000", "--save", str(tmp_path / "run.rrd")],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=240)
 

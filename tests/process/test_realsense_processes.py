@@ -20,10 +20,10 @@ require_pyrealsense()
 
 import pyrealsense2 as rs  # noqa: E402
 
-from gngdt_io.errors import RecordingError  # noqa: E402
-from gngdt_io.realsense.stream import DeviceLostError, list_devices  # noqa: E402
-from gngdt_io.sources.realsense import RealSenseSource  # noqa: E402
-from gngdt_io.synth.realsense import (  # noqa: E402
+from gngdt.io.errors import RecordingError  # noqa: E402
+from gngdt.io.realsense.stream import DeviceLostError, list_devices  # noqa: E402
+from gngdt.io.sources.realsense import RealSenseSource  # noqa: E402
+from gngdt.io.synth.realsense import (  # noqa: E402
     BOX_FRONT_Y,
     BOX_SIZE,
     WALL_Y,
@@ -36,7 +36,7 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 def gngdt(*arguments: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "services.cli", *arguments], cwd=REPO_ROOT,
+    return subprocess.run([sys.executable, "-m", "gngdt.services.cli", *arguments], cwd=REPO_ROOT,
                           capture_output=True, text=True, timeout=timeout,
                           stdin=subprocess.DEVNULL)
 
@@ -68,7 +68,7 @@ def test_run_on_a_realsense_recording_learns_the_known_surfaces(known: VirtualRe
                                                                 tmp_path: Path) -> None:
     from mcap.reader import make_reader
 
-    from schemas.topology import decode_topology
+    from gngdt.schemas.topology import decode_topology
 
     mcap = tmp_path / "run.mcap"
     completed = gngdt("run", str(known.path), "--save", str(tmp_path / "run.rrd"),
@@ -175,9 +175,9 @@ def unplug_after(source: RealSenseSource, context, path: Path, frames: int) -> N
 
 
 def test_record_keeps_what_a_lost_camera_gave(camera, tmp_path: Path) -> None:
-    from gngdt_io.mcap_reader import read_frames
-    from services.cli import build_parser
-    from services.record import record_realsense
+    from gngdt.io.mcap.reader import read_frames
+    from gngdt.services.cli import build_parser
+    from gngdt.services.record import record_realsense
 
     context, path = camera
     source = RealSenseSource("realsense:SIM-0001:320x240@30", context=context)
@@ -192,11 +192,11 @@ def test_record_keeps_what_a_lost_camera_gave(camera, tmp_path: Path) -> None:
 
 @pytest.mark.timeout(120)
 def test_capture_ends_the_stream_when_its_camera_is_lost(camera, router_endpoint: str) -> None:
-    from gngdt_io.deproject import CloudOptions, FrameToCloud
-    from schemas.status import decode_stream_end
-    from services.capture import ReplayClock, capture
-    from services.cli import build_parser
-    from services.plumbing.session import client_config, open_config, open_session
+    from gngdt.io.deproject import CloudOptions, FrameToCloud
+    from gngdt.schemas.status import decode_stream_end
+    from gngdt.services.capture import ReplayClock, capture
+    from gngdt.services.cli import build_parser
+    from gngdt.services.plumbing.session import client_config, open_config, open_session
 
     context, path = camera
     ends: list = []
@@ -223,7 +223,7 @@ def test_capture_ends_the_stream_when_its_camera_is_lost(camera, router_endpoint
 
 
 def test_record_converts_a_realsense_recording(known: VirtualRecording, tmp_path: Path) -> None:
-    from gngdt_io.mcap_reader import read_frames
+    from gngdt.io.mcap.reader import read_frames
 
     out = tmp_path / "known.mcap"
     completed = gngdt("record", "realsense", "--from", str(known.path), "--out", str(out))

@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_io.frame import CameraIntrinsics, Frame
-from gngdt_io.mcap_writer import RecordingWriter
+from gngdt.io.frame import CameraIntrinsics, Frame
+from gngdt.io.mcap.writer import RecordingWriter
 
 
 def _rerun_executable() -> str:

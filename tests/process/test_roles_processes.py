@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 from processes import children, wait_for
 
-from schemas.status import encode_stream_end
-from schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
-from services.plumbing.session import ZenohSetupError, client_config, open_config
+from gngdt.schemas.status import encode_stream_end
+from gngdt.schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
+from gngdt.services.plumbing.session import ZenohSetupError, client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -36,7 +36,7 @@ def test_forgeries_with_another_roles_credentials_are_not_recorded_and_do_not_st
     log_path = tmp_path / "run.log"
     with open(log_path, "wb") as output:
         run = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--rate",
+            [sys.executable, "-m", "gngdt.services.cli", "run", str(tabletop_recording), "--rate",
              "0.04", "--save", str(tmp_path / "run.rrd"), "--mcap", str(mcap_path)],
             cwd=REPO_ROOT, stdout=output, stderr=output, start_new_session=True)
     try:

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from ros2_sdk import message_class, sdk_session
 
-from services.plumbing.session import client_config, open_config
+from gngdt.services.plumbing.session import client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 #: three consecutive real Kinect frames (PCL's ImageGrabber test data), outside the repository
@@ -250,7 +250,7 @@ def gngdt_clouds(endpoint: str) -> tuple[object, list]:
     """A gngdt-side client keeping every ``gngdt/camera/points`` cloud's frame_id and pose."""
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
-    from schemas.clouds import cloud_pose
+    from gngdt.schemas.clouds import cloud_pose
 
     session = open_config(client_config([endpoint]))
     clouds: list = []
@@ -390,7 +390,7 @@ def test_run_with_ros2_publishes_the_results_into_ros(
     /tf (one of the recording's poses), and run ends as usual."""
     from synthetic_recordings import render_small_recording
 
-    from gngdt_io.mcap_reader import read_frames
+    from gngdt.io.mcap.reader import read_frames
 
     recording = render_small_recording(tmp_path, "tabletop_walk", 6)
     poses = [frame.pose.matrix for frame in read_frames(recording)]
@@ -424,8 +424,8 @@ def test_run_with_ros2_publishes_the_results_into_ros(
 def test_objects_gone_are_deleted(router_endpoint: str, spawn: Callable, tmp_path: Path) -> None:
     """Two objects updates as the learner publishes them (ids 1, 2; then 2 alone): the second
     MarkerArray deletes object 1's cube and label."""
-    from schemas.scene import objects_to_scene_update
-    from schemas.wire import ENCODING_SCENE_UPDATE
+    from gngdt.schemas.scene import objects_to_scene_update
+    from gngdt.schemas.wire import ENCODING_SCENE_UPDATE
 
     def update(ids: list[int]) -> bytes:
         count = len(ids)
@@ -475,7 +475,7 @@ def test_ros2_side_on_its_own_router_and_nothing_listening(
     bridge is a client of both and listens nowhere (no port, no scouting socket)."""
     from processes import bound_sockets
 
-    from services.plumbing.session import free_tcp_port, router_config
+    from gngdt.services.plumbing.session import free_tcp_port, router_config
 
     ros_endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     ros_router = open_config(router_config([ros_endpoint]), what="router")

@@ -15,10 +15,10 @@ import pytest
 import zenoh
 from ros2_sdk import message_class, sdk_session
 
-from gngdt_io.ros2 import messages as m
-from gngdt_io.ros2 import wire as w
-from gngdt_io.ros2.node import Ros2Node
-from services.plumbing.session import client_config, open_config
+from gngdt.io.ros2 import messages as m
+from gngdt.io.ros2 import wire as w
+from gngdt.io.ros2.node import Ros2Node
+from gngdt.services.plumbing.session import client_config, open_config
 
 
 def wait_for(condition: Callable[[], object], timeout_s: float = 10.0) -> None:

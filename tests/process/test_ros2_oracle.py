@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core.geometry import CameraIntrinsics
-from gngdt_io.ros2 import markers as mk
-from gngdt_io.ros2 import messages as m
+from gngdt.core.sensor.geometry import CameraIntrinsics
+from gngdt.io.ros2 import markers as mk
+from gngdt.io.ros2 import messages as m
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ORACLE_PYTHON = REPO_ROOT / ".venv-ros2-oracle" / "bin" / "python"

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import pytest
 
-from services.plumbing.session import free_tcp_port
+from gngdt.services.plumbing.session import free_tcp_port
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 def gngdt_run(*arguments: str, cwd: Path = REPO_ROOT) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "services.cli", "run", *arguments],
+    return subprocess.Popen([sys.executable, "-m", "gngdt.services.cli", "run", *arguments],
                             cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, "PYTHONPATH": str(REPO_ROOT)})
 

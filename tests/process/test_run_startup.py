@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from services.run import Child, Observed, Pipeline, wait_for_startup
+from gngdt.services.run import Child, Observed, Pipeline, wait_for_startup
 
 #: a child that keeps busy and says where it is, as the learner does while compiling
 BUSY = """
@@ -56,7 +56,7 @@ def test_a_child_making_progress_is_waited_for_and_its_steps_shown(
     pipeline.children.append(busy)
     stop = threading.Event()
     threading.Timer(4.0, stop.set).start()  # ends the wait: the busy child never comes up
-    with caplog.at_level(logging.INFO, logger="services.run"):
+    with caplog.at_level(logging.INFO, logger="gngdt.services.run"):
         assert wait_for_startup({busy: "gngdt/camera/learner/alive"}, Observed(), 1.0, stop,
                                 pipeline) is None
     assert stop.is_set()  # still waiting after 4 s, with a 1 s silence limit

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from processes import bound_sockets, children, wait_for
 
-from services.plumbing.session import (
+from gngdt.services.plumbing.session import (
     ZenohSetupError,
     client_config,
     free_tcp_port,
@@ -71,7 +71,7 @@ def test_every_listener_of_run_serve_and_its_services_is_on_loopback(
     log_path = tmp_path / "run.log"
     with open(log_path, "wb") as output:
         run = subprocess.Popen(
-            [sys.executable, "-m", "services.cli", "run", str(tabletop_recording), "--serve",
+            [sys.executable, "-m", "gngdt.services.cli", "run", str(tabletop_recording), "--serve",
              "--rate", "0.01", "--grpc-port", str(grpc_port), "--web-port", str(web_port)],
             cwd=REPO_ROOT, stdout=output, stderr=output, start_new_session=True)
     try:

@@ -1,5 +1,5 @@
 """Large payloads through zenoh shared memory on one host, the network otherwise: real sessions
-on a loopback router (``services.plumbing.session.SharedMemoryPublisher``)."""
+on a loopback router (``gngdt.services.plumbing.session.SharedMemoryPublisher``)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from services.plumbing.session import (
+from gngdt.services.plumbing.session import (
     SHARED_MEMORY_MIN_BYTES,
     SHARED_MEMORY_POOL_ENV,
     client_config,
@@ -160,7 +160,7 @@ def test_pool_size_zero_leaves_payloads_to_zenoh(router_endpoint: str, subscribe
 _PUBLISHER_SCRIPT = """
 import logging, sys, time
 logging.basicConfig(level=logging.INFO, format="%(levelname)s %(message)s")
-from services.plumbing.session import (client_config, declare_publisher, open_config,
+from gngdt.services.plumbing.session import (client_config, declare_publisher, open_config,
                                        wait_for_subscribers)
 session = open_config(client_config([sys.argv[1]]))
 publisher = declare_publisher(session, sys.argv[2], "application/octet-stream", True)

@@ -15,13 +15,13 @@ import pytest
 from synthetic_recordings import render_walk
 from test_pipeline import Watcher, log_text, wait_exit
 
-from gngdt_core.geometry import rigid_inverse
-from gngdt_core.kernels.odometry import motion_size
-from schemas.clouds import transform_to_pose
-from schemas.topology import decode_topology
-from schemas.wire import FrameStamp
-from services.logger import LIVELINESS_KEY
-from services.plumbing.session import client_config, open_config
+from gngdt.core.kernels.odometry import motion_size
+from gngdt.core.sensor.geometry import rigid_inverse
+from gngdt.schemas.clouds import transform_to_pose
+from gngdt.schemas.topology import decode_topology
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.logger import LIVELINESS_KEY
+from gngdt.services.plumbing.session import client_config, open_config
 
 FRAMES = 20
 
@@ -127,8 +127,8 @@ def test_without_calibration_a_tracking_learner_reports_and_learns_nothing(
     after the capture sent it): the first starts the map, the others are reported lost."""
     from test_pipeline import points_publisher
 
-    from gngdt_io.deproject import Deprojector
-    from schemas.clouds import cloud_to_msg
+    from gngdt.io.deproject import Deprojector
+    from gngdt.schemas.clouds import cloud_to_msg
 
     _, frames = walk
     learner = spawn("learn", "--track", "--zenoh-connect", router_endpoint)

@@ -14,8 +14,8 @@ from synthetic_recordings import render_walk
 from test_pipeline import Watcher, log_text, points_publisher, wait_exit
 from test_world_frame import attachment, pose_at, posed_cloud
 
-from schemas.topology import decode_topology
-from services.plumbing.session import client_config, open_config
+from gngdt.schemas.topology import decode_topology
+from gngdt.services.plumbing.session import client_config, open_config
 
 FRAMES = 4
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from services.plumbing.session import (
+from gngdt.services.plumbing.session import (
     ZenohSetupError,
     client_config,
     free_tcp_port,
@@ -49,7 +49,7 @@ def test_clients_meet_through_the_router(router_endpoint: str) -> None:
 def test_gngdt_router_process_serves_clients(free_port: int) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port}"
     process = subprocess.Popen(
-        [sys.executable, "-m", "services.cli", "router", "--listen", endpoint],
+        [sys.executable, "-m", "gngdt.services.cli", "router", "--listen", endpoint],
         cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
     )
     try:

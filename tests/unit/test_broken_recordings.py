@@ -13,10 +13,10 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from mcap.writer import Writer as McapWriter
 from mcap_protobuf.writer import register_schema
 
-from gngdt_io.frame import CameraIntrinsics
-from gngdt_io.mcap_reader import RecordingError, read_frames
-from schemas.images import image_to_raw, intrinsics_to_calibration
-from services.capture import CloudOptions, FrameToCloud
+from gngdt.io.frame import CameraIntrinsics
+from gngdt.io.mcap.reader import RecordingError, read_frames
+from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
+from gngdt.services.capture import CloudOptions, FrameToCloud
 
 WIDTH, HEIGHT = 40, 30
 INTRINSICS = CameraIntrinsics(WIDTH, HEIGHT, 40.0, 40.0, 19.5, 14.5)

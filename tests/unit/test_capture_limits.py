@@ -9,7 +9,7 @@ import time
 def test_the_replay_clock_keeps_the_recorded_spacing_below_the_cap() -> None:
     import threading
 
-    from services.capture import ReplayClock
+    from gngdt.services.capture import ReplayClock
 
     clock = ReplayClock(rate=2.0, max_gap_s=0.3)
     stop = threading.Event()
@@ -23,10 +23,10 @@ def test_the_replay_clock_keeps_the_recorded_spacing_below_the_cap() -> None:
 def test_a_cloud_never_exceeds_what_a_learner_accepts_and_a_message_holds() -> None:
     import numpy as np
 
-    from gngdt_io.frame import CameraIntrinsics, Frame
-    from schemas.clouds import CLOUD_POINT_STRIDE, MAX_CLOUD_POINTS
-    from services.capture import CloudOptions, FrameToCloud
-    from services.plumbing.session import MAX_MESSAGE_BYTES
+    from gngdt.io.frame import CameraIntrinsics, Frame
+    from gngdt.schemas.clouds import CLOUD_POINT_STRIDE, MAX_CLOUD_POINTS
+    from gngdt.services.capture import CloudOptions, FrameToCloud
+    from gngdt.services.plumbing.session import MAX_MESSAGE_BYTES
 
     assert MAX_CLOUD_POINTS * CLOUD_POINT_STRIDE < MAX_MESSAGE_BYTES
     height, width = 1500, 2000  # 3 million valid pixels

@@ -10,11 +10,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core import GNGDT
-from gngdt_core.frame_learner import LearnerConfig
-from gngdt_core.memory import MAX_OFFERED, SampleMemory
-from gngdt_io.checkpoints import CheckpointError, CheckpointLock, save_checkpoint
-from services.learner import checkpoints
+from gngdt.core import GNGDT
+from gngdt.core.gas.rehearsal import MAX_OFFERED, SampleMemory
+from gngdt.core.learner.frame_learner import LearnerConfig
+from gngdt.io.checkpoints import CheckpointError, CheckpointLock, save_checkpoint
+from gngdt.services.learner import checkpoints
 
 #: a folder no process may create files in: sysfs refuses regular files, even to root
 READ_ONLY = Path("/sys/fs")
@@ -91,7 +91,7 @@ def test_the_memory_counter_saturates() -> None:
 
 
 def test_a_checkpoint_in_a_read_only_folder_is_a_clear_error(caplog) -> None:
-    from services.learner import add_arguments, main
+    from gngdt.services.learner import add_arguments, main
 
     with pytest.raises(CheckpointError, match=r"cannot be written.*writable folder"):
         CheckpointLock(READ_ONLY / "gngdt" / "learner.npz").acquire()

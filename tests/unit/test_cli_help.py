@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from services.cli import build_parser, leaf_parsers
+from gngdt.services.cli import build_parser, leaf_parsers
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -52,7 +52,7 @@ def test_help_has_a_description_examples_and_explains_every_option(
 
 
 def test_record_synth_help_lists_the_scenes() -> None:
-    from gngdt_io.synth.render import SCENES
+    from gngdt.io.synth.render import SCENES
 
     text = dict(COMMANDS)["gngdt record synth"].format_help()
     for scene in SCENES:

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from services.cli import build_parser
+from gngdt.services.cli import build_parser
 
 REPO = Path(__file__).resolve().parents[2]
 COMPOSE = yaml.safe_load((REPO / "docker-compose.yml").read_text())

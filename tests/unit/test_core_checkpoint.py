@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_core import GNG, GNGDT, GNGW, make_data1, make_data2
+from gngdt.core import GNG, GNGDT, GNGW
+from gngdt.eval.synthetic import make_data1, make_data2
 
 
 def _roundtrip(state: dict[str, np.ndarray], path) -> dict[str, np.ndarray]:

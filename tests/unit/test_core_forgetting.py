@@ -7,23 +7,24 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from gngdt_core import GNGDT, make_data2
-from gngdt_core.metrics import ghost_nodes
-from gngdt_core.view import seen_nodes
-from gngdt_io.deproject import Deprojector
-from gngdt_io.synth.render import render_scene
+from gngdt.core import GNGDT
+from gngdt.core.metrics import ghost_nodes
+from gngdt.core.sensor.view import seen_nodes
+from gngdt.eval.synthetic import make_data2
+from gngdt.io.deproject import Deprojector
+from gngdt.io.synth.render import render_scene
 
 #: small but realistic: 160x120 frames, a 300-node budget reached after 15 frames
 WIDTH, HEIGHT = 160, 120
 STEPS = 10_000
 PARAMS = {"max_nodes": 300, "lambda_": 500, "random_state": 0}
-#: the learner's forgetting profile (services.learner.LEARNER_MODEL_DEFAULTS)
+#: the learner's forgetting profile (gngdt.services.learner.LEARNER_MODEL_DEFAULTS)
 FORGETTING = {"utility_k": 1000.0}
 
 
 def frames_of(scene: str, count: int, fps: float):
     """(camera-frame points, colours, pose, labels per point, segment names) per frame."""
-    from gngdt_eval.recording_eval import deproject_labels
+    from gngdt.eval.recording_eval import deproject_labels
 
     deproject = Deprojector()
     for frame in render_scene(scene, count, width=WIDTH, height=HEIGHT, fps=fps):
@@ -115,7 +116,7 @@ def test_a_vanished_object_is_forgotten_within_30_frames_and_only_with_forgettin
         if old_place is not None:
             frame_tree = cKDTree(world)
         if index == 59:
-            from gngdt_eval.recording_eval import deproject_labels
+            from gngdt.eval.recording_eval import deproject_labels
 
             labels = deproject_labels(deproject, frame.depth, frame.labels, frame.intrinsics)
             old_place = world[np.isin(labels, ids_of(frame.extras["segments"], "red_box"))]

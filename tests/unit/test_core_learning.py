@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_core import GNG, GNGDT, GNGW, make_data1, make_data2
-from gngdt_core.kernels import layout as K
-from gngdt_core.reference import ReferenceGNGDT
+from gngdt.core import GNG, GNGDT, GNGW
+from gngdt.core.kernels import layout as K
+from gngdt.eval.reference import ReferenceGNGDT
+from gngdt.eval.synthetic import make_data1, make_data2
 
 # Table 1's rates and ages with a small budget: 60 nodes, more than the grid search's threshold
 SMALL = {"max_nodes": 60, "lambda_": 100, "age_max": 30, "random_state": 3}

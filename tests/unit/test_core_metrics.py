@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_core import (
+from gngdt.core import (
     GNGDT,
     adjusted_rand_index,
     cluster_centre_errors,
     connected_component_labels,
-    make_data1,
 )
+from gngdt.eval.synthetic import make_data1
 
 
 def test_components_sorted_by_size_with_min_size():

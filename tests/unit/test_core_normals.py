@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from gngdt_core import GNGDT
+from gngdt.core import GNGDT
 
 
 def curved_surface(rng: np.random.Generator, count: int = 20_000) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Persistent cluster ids (ClusterTracker) and objects (describe_objects, ObjectTracker)."""
+"""Persistent cluster ids (ClusterIds) and objects (describe_objects, ObjectFinder)."""
 
 from __future__ import annotations
 
@@ -6,99 +6,100 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from gngdt_core import GNGDT, make_data2
-from gngdt_core.cluster_tracking import ClusterTracker
-from gngdt_core.objects import ObjectTracker, describe_objects, drop_small, object_labels
+from gngdt.core import GNGDT
+from gngdt.core.objects.ids import ClusterIds
+from gngdt.core.objects.object_set import ObjectFinder, describe_objects, drop_small, object_labels
+from gngdt.eval.synthetic import make_data2
 
 
-def _ids_of(tracker: ClusterTracker, node_ids, labels) -> dict[int, int]:
+def _ids_of(cluster_ids: ClusterIds, node_ids, labels) -> dict[int, int]:
     """{first node id of each cluster: its persistent id}."""
-    ids = tracker.update(np.asarray(node_ids), np.asarray(labels))
+    ids = cluster_ids.update(np.asarray(node_ids), np.asarray(labels))
     labels = np.asarray(labels)
     return {int(np.asarray(node_ids)[labels == k][0]): int(ids[k]) for k in range(len(ids))}
 
 
 def test_relabelled_clusters_keep_their_ids():
-    tracker = ClusterTracker()
+    cluster_ids = ClusterIds()
     nodes = np.arange(100, 130)
-    first = _ids_of(tracker, nodes, np.repeat([0, 1, 2], 10))
+    first = _ids_of(cluster_ids, nodes, np.repeat([0, 1, 2], 10))
     # the same clusters numbered the other way round, nodes listed in another order, new nodes
     nodes2 = np.concatenate([nodes[::-1], [500, 501]])
     labels2 = np.concatenate([np.repeat([0, 1, 2], 10), [0, 1]])
-    ids2 = tracker.update(nodes2, labels2)
+    ids2 = cluster_ids.update(nodes2, labels2)
     assert {int(ids2[0]), int(ids2[1]), int(ids2[2])} == set(first.values())
     assert int(ids2[0]) == first[120] and int(ids2[2]) == first[100]
 
 
 def test_split_merge_and_return_within_memory():
-    tracker = ClusterTracker(memory_frames=3)
+    cluster_ids = ClusterIds(memory_frames=3)
     nodes = np.arange(40)
-    ids = tracker.update(nodes, np.repeat([0, 1], [30, 10]))
+    ids = cluster_ids.update(nodes, np.repeat([0, 1], [30, 10]))
     big, small = int(ids[0]), int(ids[1])
     # split of the big cluster: the part with most of its nodes keeps the id, the other is new
-    ids = tracker.update(nodes, np.repeat([0, 1, 2], [20, 10, 10]))
+    ids = cluster_ids.update(nodes, np.repeat([0, 1, 2], [20, 10, 10]))
     assert int(ids[0]) == big and int(ids[2]) == small and int(ids[1]) not in (big, small)
     split_off = int(ids[1])
     # merge back: the merged cluster keeps the larger contributor's id
-    ids = tracker.update(nodes, np.repeat([0, 1], [30, 10]))
+    ids = cluster_ids.update(nodes, np.repeat([0, 1], [30, 10]))
     assert int(ids[0]) == big and int(ids[1]) == small
     # the small cluster vanishes (below min size: -1) for two labellings, then comes back
     for _ in range(2):
-        tracker.update(nodes, np.repeat([0, -1], [30, 10]))
-    assert int(tracker.update(nodes, np.repeat([0, 1], [30, 10]))[1]) == small
+        cluster_ids.update(nodes, np.repeat([0, -1], [30, 10]))
+    assert int(cluster_ids.update(nodes, np.repeat([0, 1], [30, 10]))[1]) == small
     # after more than memory_frames labellings a vanished cluster is forgotten
     for _ in range(3):
-        tracker.update(nodes, np.repeat([0, -1], [30, 10]))
-    new = int(tracker.update(nodes, np.repeat([0, 1], [30, 10]))[1])
+        cluster_ids.update(nodes, np.repeat([0, -1], [30, 10]))
+    new = int(cluster_ids.update(nodes, np.repeat([0, 1], [30, 10]))[1])
     assert new not in (big, small, split_off)
 
 
 def test_a_cluster_made_mostly_of_a_taken_cluster_gets_a_new_id():
-    tracker = ClusterTracker(min_overlap=0.5)
-    a, b = tracker.update(np.arange(30), np.repeat([0, 1], [20, 10])).tolist()
+    cluster_ids = ClusterIds(min_overlap=0.5)
+    a, b = cluster_ids.update(np.arange(30), np.repeat([0, 1], [20, 10])).tolist()
     # A (nodes 0-19) splits 12/8; the 8 join 3 nodes of B; B's other 7 nodes stay together
     labels = np.repeat([0, 1, 2], [12, 11, 7])
-    ids = tracker.update(np.arange(30), labels).tolist()
+    ids = cluster_ids.update(np.arange(30), labels).tolist()
     assert ids[0] == a  # most of A
     assert ids[1] not in (a, b)  # A is taken and B holds only 3 of its 11 nodes (< 0.5)
     assert ids[2] == b  # the rest of B, 7 of 7
 
 
 def test_a_cluster_is_confirmed_after_confirm_frames_in_a_row_and_stays_confirmed():
-    tracker = ClusterTracker(confirm_frames=3, memory_frames=10)
+    cluster_ids = ClusterIds(confirm_frames=3, memory_frames=10)
     nodes = np.arange(40)
     both, big_only = np.repeat([0, 1], [30, 10]), np.repeat([0, -1], [30, 10])
     seen = []
     # the small cluster flickers (seen, gone, seen, seen, seen); the big one is always there
     for labels in (both, big_only, both, both, both):
-        tracker.update(nodes, labels)
-        seen.append(tracker.confirmed_.tolist())
+        cluster_ids.update(nodes, labels)
+        seen.append(cluster_ids.confirmed_.tolist())
     assert [frame[0] for frame in seen] == [False, False, True, True, True]
     assert [frame[1] for frame in seen[2:]] == [False, False, True]  # the streak starts again
     # confirmed for good while remembered: gone for a while, back at once as confirmed
     for _ in range(4):
-        tracker.update(nodes, big_only)
-    tracker.update(nodes, both)
-    assert tracker.confirmed_.tolist() == [True, True]
-    assert ClusterTracker().update(nodes, both).tolist() == [0, 1]  # default: confirmed at once
+        cluster_ids.update(nodes, big_only)
+    cluster_ids.update(nodes, both)
+    assert cluster_ids.confirmed_.tolist() == [True, True]
+    assert ClusterIds().update(nodes, both).tolist() == [0, 1]  # default: confirmed at once
     with pytest.raises(ValueError, match="confirm_frames"):
-        ClusterTracker(confirm_frames=0)
+        ClusterIds(confirm_frames=0)
 
 
 def test_a_confirmed_cluster_keeps_its_id_when_a_larger_fresh_fragment_merges_back():
-    tracker = ClusterTracker(confirm_frames=3)
+    cluster_ids = ClusterIds(confirm_frames=3)
     for _ in range(3):
-        (object_id,) = tracker.update(np.arange(20), np.zeros(20, dtype=int)).tolist()
-    assert tracker.confirmed_.tolist() == [True]
+        (object_id,) = cluster_ids.update(np.arange(20), np.zeros(20, dtype=int)).tolist()
+    assert cluster_ids.confirmed_.tolist() == [True]
     # the network grows: 8 of its nodes and 10 new ones split off (a new, unconfirmed id) ...
     nodes = np.arange(30) + np.repeat([0, 80], [20, 10])
-    ids = tracker.update(nodes, np.repeat([0, 1], [12, 18])).tolist()
+    ids = cluster_ids.update(nodes, np.repeat([0, 1], [12, 18])).tolist()
     assert ids[0] == object_id and ids[1] != object_id
-    assert tracker.confirmed_.tolist() == [True, False]
+    assert cluster_ids.confirmed_.tolist() == [True, False]
     # ... and merge back: the fragment brought more nodes, the object keeps its id and status
-    ids = tracker.update(nodes, np.zeros(30, dtype=int)).tolist()
+    ids = cluster_ids.update(nodes, np.zeros(30, dtype=int)).tolist()
     assert ids == [object_id]
-    assert tracker.confirmed_.tolist() == [True]
+    assert cluster_ids.confirmed_.tolist() == [True]
 
 
 def test_object_labels_keep_confirmed_clusters_of_min_size_only():
@@ -111,22 +112,22 @@ def test_object_labels_keep_confirmed_clusters_of_min_size_only():
 
 
 def test_many_clusters_stay_within_max_tracks():
-    tracker = ClusterTracker(max_tracks=50, memory_frames=1000)
+    cluster_ids = ClusterIds(max_tracks=50, memory_frames=1000)
     rng = np.random.default_rng(0)
     for frame in range(20):  # 200 fresh clusters a frame, nothing ever persists
         node_ids = np.arange(frame * 2000, frame * 2000 + 2000)
-        tracker.update(node_ids, rng.integers(0, 200, node_ids.size))
-        assert tracker.n_tracks_ <= 50
+        cluster_ids.update(node_ids, rng.integers(0, 200, node_ids.size))
+        assert cluster_ids.n_tracks_ <= 50
 
 
 def test_tracker_validates_its_inputs():
     with pytest.raises(ValueError, match="min_overlap"):
-        ClusterTracker(min_overlap=0)
+        ClusterIds(min_overlap=0)
     with pytest.raises(ValueError, match="memory_frames"):
-        ClusterTracker(memory_frames=0)
+        ClusterIds(memory_frames=0)
     with pytest.raises(ValueError, match="equal-length"):
-        ClusterTracker().update(np.arange(3), np.zeros(4, int))
-    assert ClusterTracker().update(np.zeros(0, np.int64), np.zeros(0, int)).shape == (0,)
+        ClusterIds().update(np.arange(3), np.zeros(4, int))
+    assert ClusterIds().update(np.zeros(0, np.int64), np.zeros(0, int)).shape == (0,)
 
 
 def test_describe_objects_recovers_an_oriented_box_colour_and_normal():
@@ -176,17 +177,17 @@ def test_describe_objects_skips_empty_labels_and_validates():
 def test_objects_of_a_static_scene_keep_their_ids_frame_to_frame():
     positions, colors, _ = make_data2(n_points=20_000, random_state=0)
     model = GNGDT(max_nodes=300, random_state=0)
-    tracker = ObjectTracker("col+nor", min_size=5, confirm_frames=3)
+    finder = ObjectFinder("col+nor", min_size=5, confirm_frames=3)
     model.partial_fit(positions, colors, n_steps=200_000)  # grown: the frames refine it
-    assert len(tracker.update(model)) == 0  # no cluster is confirmed yet
-    tracker.update(model)
-    previous = set(tracker.update(model).ids.tolist())  # seen 3 times in a row: objects
+    assert len(finder.update(model)) == 0  # no cluster is confirmed yet
+    finder.update(model)
+    previous = set(finder.update(model).ids.tolist())  # seen 3 times in a row: objects
     kept = total = 0
     rng = np.random.default_rng(0)
     for _ in range(20):  # a static scene seen frame after frame: new samples of the same points
         frame = rng.choice(len(positions), 5_000, replace=False)
         model.partial_fit(positions[frame], colors[frame], n_steps=5_000)
-        objects = tracker.update(model)
+        objects = finder.update(model)
         current = set(objects.ids[objects.node_counts >= 10].tolist())
         kept += len(previous & set(objects.ids.tolist()))
         total += len(previous)

@@ -1,5 +1,5 @@
-"""Frame-to-map tracking (`gngdt_core.odometry`) on constructed scenes: a known rigid motion is
-recovered, frames that cannot be aligned are reported lost and never move the pose."""
+"""Frame-to-map tracking (`gngdt.core.odometry.map_odometry`) on constructed scenes: a known rigid
+motion is recovered, frames that cannot be aligned are reported lost and never move the pose."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import math
 import numpy as np
 import pytest
 
-from gngdt_core import GNGDT
-from gngdt_core.depth import organize
-from gngdt_core.geometry import rigid_inverse
-from gngdt_core.kernels import odometry as OK
-from gngdt_core.map_surface import MapSurface
-from gngdt_core.odometry import MapOdometry, TrackerParams
+from gngdt.core import GNGDT
+from gngdt.core.kernels import odometry as OK
+from gngdt.core.odometry.map_odometry import MapOdometry, TrackerParams
+from gngdt.core.odometry.map_surface import MapSurface
+from gngdt.core.sensor.depth import organize
+from gngdt.core.sensor.geometry import rigid_inverse
 
 WIDTH, HEIGHT, FOCAL = 160, 120, 130.0
 

@@ -5,20 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_core import (
+from gngdt.core import GNG, GNGDT, GNGW, cluster_centre_errors
+from gngdt.eval.synthetic import (
     DATA1_CENTRES,
-    GNG,
-    GNGDT,
-    GNGW,
-    cluster_centre_errors,
-    make_data1,
-    make_data2,
-)
-from gngdt_core.synthetic import (
     DATA2_CYLINDER,
     DATA2_FLOOR,
     DATA2_PRISM_BROWN_FACE,
     DATA2_PRISM_RED_FACE,
+    make_data1,
+    make_data2,
 )
 
 SCALES = (10.0, 1.0, 0.1, 0.01)
@@ -124,7 +119,7 @@ def test_colour_noise_is_the_stated_model_and_zero_is_flat(make_data):
 
 
 def test_colour_noise_default_and_validation():
-    from gngdt_core.synthetic import COLOR_NOISE
+    from gngdt.eval.synthetic import COLOR_NOISE
 
     _, default, _ = make_data1(n_points=1_000, random_state=0)
     _, explicit, _ = make_data1(n_points=1_000, random_state=0, color_noise=COLOR_NOISE)

@@ -8,11 +8,11 @@ import pytest
 from scipy.spatial import cKDTree
 from test_core_forgetting import FORGETTING, PARAMS, STEPS, frames_of, to_world
 
-from gngdt_core import GNGDT
-from gngdt_core.memory import SampleMemory
-from gngdt_core.view import SensorView
+from gngdt.core import GNGDT
+from gngdt.core.gas.rehearsal import SampleMemory
+from gngdt.core.sensor.view import SensorView
 
-#: the learner's rehearsal (services.learner.LEARNER_MODEL_DEFAULTS)
+#: the learner's rehearsal (gngdt.services.learner.LEARNER_MODEL_DEFAULTS)
 REHEARSAL = {"replay_share": 0.3}
 
 

@@ -1,4 +1,4 @@
-"""A map that grows with the world (`GNGDT`'s ``resolution_m``, `gngdt_core.coverage`): the node
+"""A map that grows with the world (`GNGDT`'s ``resolution_m``, `gngdt.core.gas.coverage`): the node
 budget follows the surface seen, new surface gets nodes as soon as it is seen, ``max_nodes``
 stays the cap, and without ``resolution_m`` nothing changes."""
 
@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_core import GNGDT
-from gngdt_core.coverage import SurfaceCoverage
+from gngdt.core import GNGDT
+from gngdt.core.gas.coverage import SurfaceCoverage
 
 
 def wall(rng: np.random.Generator, width: float, height: float, count: int = 20_000,

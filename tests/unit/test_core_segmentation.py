@@ -1,4 +1,5 @@
-"""Segmentation by local convexity (gngdt_core.segmentation) and the helpers it relies on."""
+"""Segmentation by local convexity (gngdt.core.segmentation.network) and the helpers it relies
+on."""
 
 from __future__ import annotations
 
@@ -6,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from gngdt_core import GNGDT
-from gngdt_core.segmentation import SegmentationParams, edge_elevations, segment_network
-from gngdt_core.view import SensorView
+from gngdt.core import GNGDT
+from gngdt.core.segmentation.network import SegmentationParams, edge_elevations, segment_network
+from gngdt.core.sensor.view import SensorView
 
 
 def box_faces(rng: np.random.Generator, x: tuple[float, float], y: tuple[float, float],
@@ -412,7 +413,7 @@ def test_pairs_fanning_out_of_one_node_do_not_join_across_a_gap() -> None:
 def test_outside_convex_hull_agrees_with_qhull() -> None:
     from scipy.spatial import ConvexHull, Delaunay
 
-    from gngdt_core.kernels.regions import outside_convex_hull
+    from gngdt.core.kernels.regions import outside_convex_hull
 
     rng = np.random.default_rng(3)
     compared = 0

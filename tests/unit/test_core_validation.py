@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_core import GNG, GNGDT, GNGW
+from gngdt.core import GNG, GNGDT, GNGW
 
 
 @pytest.mark.parametrize(
@@ -85,7 +85,7 @@ def test_queries_are_checked():
 
 
 def test_finite_rows_screen_is_exact_including_overflowing_sums():
-    from gngdt_core.sampling import finite_rows
+    from gngdt.core.gas.sampling import finite_rows
 
     rows = np.ones((6, 3), dtype=np.float32)
     assert finite_rows(rows) is None

@@ -10,7 +10,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from schemas.cluster_colors import edge_classes, edge_strips, id_colors, node_cluster_ids
+from gngdt.schemas.cluster_colors import edge_classes, edge_strips, id_colors, node_cluster_ids
 
 
 def _segments(polylines: list, classes: list) -> list[tuple]:
@@ -65,11 +65,11 @@ def test_the_rrd_holds_nodes_once_with_each_clusterings_colours_and_views_pick_t
     import rerun as rr
     from rerun.chunk import RrdReader
 
-    from gngdt_io.outputs.rerun_blueprint import CLUSTERING_VIEWS, EntityPaths, blueprint
-    from gngdt_io.outputs.rerun_log import RerunLog
-    from schemas.cluster_colors import UNCLUSTERED_RGB, clustering_edges
-    from schemas.topology import TopologySnapshot
-    from schemas.wire import FrameStamp
+    from gngdt.io.outputs.rerun_blueprint import CLUSTERING_VIEWS, EntityPaths, blueprint
+    from gngdt.io.outputs.rerun_log import RerunLog
+    from gngdt.schemas.cluster_colors import UNCLUSTERED_RGB, clustering_edges
+    from gngdt.schemas.topology import TopologySnapshot
+    from gngdt.schemas.wire import FrameStamp
 
     rng = np.random.default_rng(1)
     positions = rng.random((60, 3)).astype(np.float32)

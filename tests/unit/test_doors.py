@@ -10,12 +10,12 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from gngdt_io import outputs, sources
-from gngdt_io.frame import CameraIntrinsics, Frame
-from gngdt_io.outputs import Output, StreamSample
-from gngdt_io.sources import FrameSource, open_source
-from schemas.status import encode_stream_end
-from schemas.wire import FrameStamp
+from gngdt.io import outputs, sources
+from gngdt.io.frame import CameraIntrinsics, Frame
+from gngdt.io.outputs import Output, StreamSample
+from gngdt.io.sources import FrameSource, open_source
+from gngdt.schemas.status import encode_stream_end
+from gngdt.schemas.wire import FrameStamp
 
 
 class ToySource(FrameSource):
@@ -62,8 +62,8 @@ class ToyOutput(Output):
 
 
 def test_a_new_source_is_one_class_and_one_registration_line(monkeypatch) -> None:
-    from gngdt_io.deproject import CloudOptions, FrameToCloud
-    from gngdt_io.segment_frames import organized_frames
+    from gngdt.io.deproject import CloudOptions, FrameToCloud
+    from gngdt.io.segment_frames import organized_frames
 
     monkeypatch.setattr(sources, "SOURCE_TYPES", (ToySource, *sources.SOURCE_TYPES))
     source = open_source("toy:3")
@@ -76,9 +76,9 @@ def test_a_new_source_is_one_class_and_one_registration_line(monkeypatch) -> Non
 
 
 def test_a_new_output_is_one_class_and_one_registration_line(monkeypatch, tmp_path) -> None:
-    from services.logger import add_arguments, build_outputs
-    from services.logger.cameras import Cameras
-    from services.logger.dispatch import Dispatcher
+    from gngdt.services.logger import add_arguments, build_outputs
+    from gngdt.services.logger.cameras import Cameras
+    from gngdt.services.logger.dispatch import Dispatcher
 
     monkeypatch.setattr(outputs, "OUTPUTS", (*outputs.OUTPUTS, ToyOutput))
     parser = argparse.ArgumentParser()
@@ -98,7 +98,7 @@ def test_a_new_output_is_one_class_and_one_registration_line(monkeypatch, tmp_pa
 
 
 def test_an_unregistered_scheme_is_not_guessed() -> None:
-    from gngdt_io.errors import RecordingError
+    from gngdt.io.errors import RecordingError
 
     with pytest.raises(RecordingError, match="toy:2: no such file or folder"):
         open_source("toy:2")

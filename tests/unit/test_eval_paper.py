@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core import GNGDT, make_data1
-from gngdt_eval.paper import separates_regions
-from gngdt_eval.paper_common import (
+from gngdt.core import GNGDT
+from gngdt.eval.paper import separates_regions
+from gngdt.eval.paper_common import (
     PAPER_TABLE2,
     PAPER_TABLE3,
     PAPER_TABLE5,
@@ -19,9 +19,10 @@ from gngdt_eval.paper_common import (
     PAPER_WINNERS,
     PaperSettings,
 )
-from gngdt_eval.paper_methods import learn
-from gngdt_eval.paper_summary import colour_fit
-from services.cli import main as gngdt_main
+from gngdt.eval.paper_methods import learn
+from gngdt.eval.paper_summary import colour_fit
+from gngdt.eval.synthetic import make_data1
+from gngdt.services.cli import main as gngdt_main
 
 PAPER_TEXT = Path(__file__).resolve().parents[3] / "shared" / "paper" / "gng-dt-paper.md"
 SCALES = ("1.0", "10.0", "0.1", "0.01")

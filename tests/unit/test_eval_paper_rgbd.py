@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from services.cli import main as gngdt_main
+from gngdt.services.cli import main as gngdt_main
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"
 FOLDERS = (DATA / "rgbd" / "pcl_milk_cartoon_organized_kinect", DATA / "labelled" / "ycbv_0000")

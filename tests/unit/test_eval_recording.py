@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core.frame_learner import LearnerOptions
-from gngdt_eval.recording_eval import RecordingSettings, deproject_labels, frame_points
-from gngdt_io.deproject import Deprojector
-from gngdt_io.frame import CameraIntrinsics
-from gngdt_io.mcap_reader import read_frames
-from services.cli import main as gngdt_main
+from gngdt.core.learner.frame_learner import LearnerOptions
+from gngdt.eval.recording_eval import RecordingSettings, deproject_labels, frame_points
+from gngdt.io.deproject import Deprojector
+from gngdt.io.frame import CameraIntrinsics
+from gngdt.io.mcap.reader import read_frames
+from gngdt.services.cli import main as gngdt_main
 
 FRAMES = 3
 
@@ -21,8 +21,8 @@ FRAMES = 3
 @pytest.fixture(scope="module")
 def tiny_recording(tmp_path_factory) -> Path:
     """3 frames of the tabletop scene at 160x120 with ground-truth labels."""
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     path = tmp_path_factory.mktemp("recordings") / "tabletop_tiny.mcap"
     with RecordingWriter(path) as writer:
@@ -131,8 +131,8 @@ def test_eval_recording_without_labels(tmp_path) -> None:
     """Real-frame recordings have no ground truth: no ARI, everything else reported."""
     from dataclasses import replace
 
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import render_scene
 
     path = tmp_path / "unlabelled.mcap"
     with RecordingWriter(path) as writer:
@@ -169,9 +169,9 @@ def test_eval_recording_without_labels(tmp_path) -> None:
 @pytest.mark.timeout(300)
 def test_eval_recording_reports_metrics_over_time_for_a_changing_scene(tmp_path) -> None:
     """tabletop_vanish at 10 fps: the red box vanishes at frame 20; world frame from the poses."""
-    from gngdt_io.mcap_writer import RecordingWriter
-    from gngdt_io.synth.render import SCENE_METADATA, render_scene, scene_metadata
-    from gngdt_io.synth.scenes import build_scene
+    from gngdt.io.mcap.writer import RecordingWriter
+    from gngdt.io.synth.render import SCENE_METADATA, render_scene, scene_metadata
+    from gngdt.io.synth.scenes import build_scene
 
     path = tmp_path / "vanish.mcap"
     with RecordingWriter(path) as writer:
@@ -212,7 +212,7 @@ def test_eval_recording_reports_metrics_over_time_for_a_changing_scene(tmp_path)
 
 
 def test_identity_score_counts_switches_and_kept_tracks() -> None:
-    from gngdt_eval.identity import MIN_SEGMENT_POINTS, IdentityScore
+    from gngdt.eval.identity import MIN_SEGMENT_POINTS, IdentityScore
 
     score = IdentityScore(min_size=1, confirm_frames=1)
     node_ids = np.arange(4)
@@ -232,7 +232,7 @@ def test_identity_score_counts_switches_and_kept_tracks() -> None:
 
 
 def test_identity_scores_only_the_objects_the_learner_would_publish() -> None:
-    from gngdt_eval.identity import MIN_SEGMENT_POINTS, IdentityScore
+    from gngdt.eval.identity import MIN_SEGMENT_POINTS, IdentityScore
 
     node_ids = np.arange(5)
     truth = np.repeat([7, 8], MIN_SEGMENT_POINTS)  # segment 7 on node 0, segment 8 on node 4

@@ -8,13 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from gngdt_eval.baselines import (
+from gngdt.eval.baselines import (
     dbscan_labels,
     kmeans_reference,
     quantization_error,
     voxel_grid_reference,
 )
-from gngdt_eval.report import format_mean_std, markdown_table, mean_std, write_report
+from gngdt.eval.report import format_mean_std, markdown_table, mean_std, write_report
 
 
 def _grid_points(cells_per_axis: int, points_per_cell: int, seed: int = 0) -> np.ndarray:
@@ -99,7 +99,7 @@ def test_write_report_is_strict_json_and_markdown(tmp_path) -> None:
 
 
 def test_topology_drawing_copes_with_no_edges(tmp_path) -> None:
-    from gngdt_eval.plots import TopologyPanel, plot_topology_grid
+    from gngdt.eval.plots import TopologyPanel, plot_topology_grid
 
     panels = [
         [

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_eval.rrd import RrdError, read_metrics
-from services.cli import main as gngdt_main
+from gngdt.eval.rrd import RrdError, read_metrics
+from gngdt.services.cli import main as gngdt_main
 
 
 def _write_run(path: Path, frames: int) -> dict[str, np.ndarray]:

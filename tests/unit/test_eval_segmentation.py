@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 import pytest
 
-from gngdt_eval.segment_scores import score_frame, summarize_scores
-from gngdt_io.mcap_reader import read_frames
-from services.cli import main as gngdt
+from gngdt.eval.segment_scores import score_frame, summarize_scores
+from gngdt.io.mcap.reader import read_frames
+from gngdt.services.cli import main as gngdt
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SMALL_RECORDING = REPO_ROOT / "recordings" / "tabletop_small.mcap"
@@ -198,9 +198,9 @@ def test_report_on_a_labelled_recording_with_both_modes(
 def test_the_peer_segments_a_plane_and_clusters(synthetic_set: Path, tmp_path: Path) -> None:
     import open3d
 
-    from gngdt_eval.open3d_peer import Open3DPeer, PeerParams
-    from gngdt_io.segment_frames import organized_frames
-    from gngdt_io.sources import open_source
+    from gngdt.eval.open3d_peer import Open3DPeer, PeerParams
+    from gngdt.io.segment_frames import organized_frames
+    from gngdt.io.sources import open_source
 
     _, frame, points, _ = next(organized_frames(open_source(synthetic_set)))
     labels, milliseconds = Open3DPeer(open3d, PeerParams(voxel_m=0.01, dbscan_eps_m=0.03)

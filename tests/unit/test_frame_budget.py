@@ -1,5 +1,5 @@
-"""Learning steps budgeted by time (`gngdt_core.frame_budget`): a frame gets the steps that fit in
-its share of the frame interval, fewer on a busy machine, never fewer than the minimum;
+"""Learning steps budgeted by time (`gngdt.core.learner.frame_budget`): a frame gets the steps that
+fit in its share of the frame interval, fewer on a busy machine, never fewer than the minimum;
 publishing takes at most its share of the time; a learner that waits for its frames is not
 starved by their pace; and the learner takes the steps it is given."""
 
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gngdt_core.frame_budget import MIN_INTERVAL_S, StepBudget
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
+from gngdt.core.learner.frame_budget import MIN_INTERVAL_S, StepBudget
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
 
 MS = 1_000_000  # ns
 

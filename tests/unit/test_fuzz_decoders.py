@@ -19,13 +19,13 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from schemas import gngdt_pb2
-from schemas.clouds import cloud_to_msg
-from schemas.images import MAX_IMAGE_PIXELS, calibration_to_intrinsics, raw_to_image
-from schemas.messages import MessageError
-from schemas.topology import decode_topology, encode_topology
-from schemas.wire import FrameStamp
-from services.learner.messages import decode_points
+from gngdt.schemas import gngdt_pb2
+from gngdt.schemas.clouds import cloud_to_msg
+from gngdt.schemas.images import MAX_IMAGE_PIXELS, calibration_to_intrinsics, raw_to_image
+from gngdt.schemas.messages import MessageError
+from gngdt.schemas.topology import decode_topology, encode_topology
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.learner.messages import decode_points
 
 FUZZ = settings(max_examples=200)  # on top of tests/conftest.py's profile
 
@@ -151,7 +151,7 @@ def test_a_colourless_cloud_is_refused_before_it_can_shape_the_model() -> None:
 
 
 def test_overflowing_coordinates_are_not_learned() -> None:
-    from gngdt_core import GNGDT
+    from gngdt.core import GNGDT
 
     model = GNGDT(max_nodes=20, random_state=0).partial_fit(np.ones((50, 3)) * [[1, 2, 3]])
     before = model.get_state()
@@ -241,10 +241,10 @@ def dispatcher():
     """The logger's real per-sample path (decode + rerun logging) into an in-memory recording."""
     import rerun as rr
 
-    from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
-    from gngdt_io.outputs.rerun_output import RerunOutput
-    from services.logger.cameras import Cameras
-    from services.logger.dispatch import Dispatcher
+    from gngdt.io.outputs.rerun_log import DisplayRates, RerunLog
+    from gngdt.io.outputs.rerun_output import RerunOutput
+    from gngdt.services.logger.cameras import Cameras
+    from gngdt.services.logger.dispatch import Dispatcher
 
     recording = rr.RecordingStream("gngdt-fuzz")
     recording.memory_recording()
@@ -300,8 +300,8 @@ def test_a_capture_time_a_day_away_from_this_clock_is_refused_by_the_learner() -
 
 
 def test_learner_counters_saturate_and_always_encode() -> None:
-    from gngdt_core.frame_learner import MAX_COUNTER, Counters
-    from schemas.status import encode_status
+    from gngdt.core.learner.frame_learner import MAX_COUNTER, Counters
+    from gngdt.schemas.status import encode_status
 
     counters = Counters()
     for sequence in (0, 2**63 - 1, 0, 2**63 - 1, 5, 2**40, 2**40 + 3):

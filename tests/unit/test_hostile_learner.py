@@ -10,8 +10,8 @@ import pytest
 
 
 def _checkpoint(path: Path, camera: str = "camera") -> None:
-    from gngdt_core import GNGDT
-    from gngdt_io.checkpoints import save_checkpoint
+    from gngdt.core import GNGDT
+    from gngdt.io.checkpoints import save_checkpoint
 
     rng = np.random.default_rng(0)
     model = GNGDT(random_state=0).partial_fit(
@@ -21,7 +21,7 @@ def _checkpoint(path: Path, camera: str = "camera") -> None:
 
 
 def test_stale_temporaries_of_one_checkpoint_only_are_removed(tmp_path: Path) -> None:
-    from gngdt_io.checkpoints import remove_stale_temporaries
+    from gngdt.io.checkpoints import remove_stale_temporaries
 
     (tmp_path / ".a.npz.123.tmp").touch()
     (tmp_path / ".b.npz.123.tmp").touch()
@@ -32,9 +32,9 @@ def test_stale_temporaries_of_one_checkpoint_only_are_removed(tmp_path: Path) ->
 
 
 def test_a_camera_mismatch_is_a_checkpoint_error(tmp_path: Path) -> None:
-    from gngdt_core.frame_learner import LearnerConfig
-    from gngdt_io.checkpoints import CheckpointError
-    from services.learner import checkpoints
+    from gngdt.core.learner.frame_learner import LearnerConfig
+    from gngdt.io.checkpoints import CheckpointError
+    from gngdt.services.learner import checkpoints
 
     path = tmp_path / "left.npz"
     _checkpoint(path, camera="left")
@@ -44,10 +44,10 @@ def test_a_camera_mismatch_is_a_checkpoint_error(tmp_path: Path) -> None:
 
 
 def test_counters_beyond_64_bits_in_a_checkpoint_are_refused(tmp_path: Path) -> None:
-    from gngdt_core import GNGDT
-    from gngdt_core.frame_learner import LearnerConfig
-    from gngdt_io.checkpoints import CheckpointError, save_checkpoint
-    from services.learner import checkpoints
+    from gngdt.core import GNGDT
+    from gngdt.core.learner.frame_learner import LearnerConfig
+    from gngdt.io.checkpoints import CheckpointError, save_checkpoint
+    from gngdt.services.learner import checkpoints
 
     path = tmp_path / "overflowed.npz"
     model = GNGDT(random_state=0)

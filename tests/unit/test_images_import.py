@@ -12,10 +12,10 @@ import cv2
 import numpy as np
 import pytest
 
-from gngdt_io.errors import RecordingError
-from gngdt_io.images import iter_image_frames
-from gngdt_io.mcap_reader import read_frames
-from services import record as cli
+from gngdt.io.errors import RecordingError
+from gngdt.io.images import iter_image_frames
+from gngdt.io.mcap.reader import read_frames
+from gngdt.services import record as cli
 
 RGBD = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd"
 TUM = RGBD / "tum_fr1_xyz_dvo_examples"
@@ -186,7 +186,7 @@ def test_tum_pairs_follow_associate_py_closest_pairs_first() -> None:
     """Colour c1 is nearest to depth d0, which colour c0 also wants: taking each colour's nearest
     depth in turn loses c1's frame; TUM's associate.py takes the closest pair (c1, d0) first and
     still pairs c0 with d1 (19 ms apart, within 20 ms)."""
-    from gngdt_io.images import associate
+    from gngdt.io.images import associate
 
     ms = 1_000_000
     colors, depths = [0, 10 * ms], [6 * ms, 19 * ms]

@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from test_images_import import run_cli
 
-from gngdt_core.geometry import matrix_to_pose
-from gngdt_io import pose_files
-from gngdt_io.errors import RecordingError
-from gngdt_io.images import iter_image_frames, load_camera
-from gngdt_io.mcap_reader import read_frames
+from gngdt.core.sensor.geometry import matrix_to_pose
+from gngdt.io import pose_files
+from gngdt.io.errors import RecordingError
+from gngdt.io.images import iter_image_frames, load_camera
+from gngdt.io.mcap.reader import read_frames
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +27,7 @@ def walk_folder(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """24 frames of the virtual walk (160x120) as a redwood folder, with camera.json and the
     true camera-to-world poses in ``poses.txt`` (tx ty tz qx qy qz qw per line) and the same
     poses written w x y z in ``poses_wxyz.txt``."""
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.synth.render import render_scene
 
     folder = tmp_path_factory.mktemp("walk")
     (folder / "color").mkdir()

@@ -11,23 +11,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core import GNGDT
-from gngdt_core.frame_learner import (
+from gngdt.core import GNGDT
+from gngdt.core.kernels.odometry import motion_size
+from gngdt.core.learner.frame_learner import (
     LEARNER_MODEL_DEFAULTS,
     FrameLearner,
     LearnerConfig,
     LearnerOptions,
 )
-from gngdt_core.geometry import rigid_inverse
-from gngdt_core.kernels.odometry import motion_size
-from gngdt_core.odometry import TrackerParams
-from gngdt_core.schedule import FrameSchedule
-from gngdt_io.deproject import Deprojector
-from gngdt_io.synth.render import render_scene
-from schemas.status import decode_status
-from schemas.wire import FrameStamp
-from services.learner import checkpoints
-from services.learner.messages import status_message
+from gngdt.core.learner.stream_learner import FrameSchedule
+from gngdt.core.odometry.map_odometry import TrackerParams
+from gngdt.core.sensor.geometry import rigid_inverse
+from gngdt.io.deproject import Deprojector
+from gngdt.io.synth.render import render_scene
+from gngdt.schemas.status import decode_status
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.learner import checkpoints
+from gngdt.services.learner.messages import status_message
 
 FRAMES = 10
 

@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from schemas.status import encode_stream_end
-from schemas.wire import FrameStamp
+from gngdt.schemas.status import encode_stream_end
+from gngdt.schemas.wire import FrameStamp
 
 
 @pytest.fixture
@@ -16,10 +16,10 @@ def dispatcher():
     """The logger's real per-sample path into an in-memory recording."""
     import rerun as rr
 
-    from gngdt_io.outputs.rerun_log import DisplayRates, RerunLog
-    from gngdt_io.outputs.rerun_output import RerunOutput
-    from services.logger.cameras import Cameras
-    from services.logger.dispatch import Dispatcher
+    from gngdt.io.outputs.rerun_log import DisplayRates, RerunLog
+    from gngdt.io.outputs.rerun_output import RerunOutput
+    from gngdt.services.logger.cameras import Cameras
+    from gngdt.services.logger.dispatch import Dispatcher
 
     recording = rr.RecordingStream("gngdt-test")
     recording.memory_recording()
@@ -58,11 +58,11 @@ def test_a_capture_that_leaves_without_an_end_of_stream_ends_its_camera(dispatch
 def test_garbage_on_new_camera_names_makes_no_camera_and_cameras_are_bounded() -> None:
     import rerun as rr
 
-    from gngdt_io.outputs.rerun_log import RerunLog
-    from gngdt_io.outputs.rerun_output import RerunOutput
-    from schemas.status import encode_status
-    from services.logger.cameras import Cameras
-    from services.logger.dispatch import Dispatcher
+    from gngdt.io.outputs.rerun_log import RerunLog
+    from gngdt.io.outputs.rerun_output import RerunOutput
+    from gngdt.schemas.status import encode_status
+    from gngdt.services.logger.cameras import Cameras
+    from gngdt.services.logger.dispatch import Dispatcher
 
     class CamerasSeen(RerunOutput):
         """The real rerun output, noting every time the logger tells it of its cameras."""
@@ -92,7 +92,7 @@ def test_garbage_on_new_camera_names_makes_no_camera_and_cameras_are_bounded() -
 def _topology(nodes: int, edges_per_node: int = 2, clusterings: int = 2, name: str = "pos"):
     import numpy as np
 
-    from schemas.topology import encode_topology
+    from gngdt.schemas.topology import encode_topology
 
     rng = np.random.default_rng(0)
     pairs = rng.integers(0, nodes, (nodes * edges_per_node, 2))
@@ -109,16 +109,16 @@ def _topology(nodes: int, edges_per_node: int = 2, clusterings: int = 2, name: s
     (_topology(10, name="x" * 65), "longer than 64"),
 ])
 def test_topologies_beyond_what_a_learner_sends_are_refused(payload: bytes, match: str) -> None:
-    from schemas.messages import MessageError
-    from schemas.topology import decode_topology
+    from gngdt.schemas.messages import MessageError
+    from gngdt.schemas.topology import decode_topology
 
     with pytest.raises(MessageError, match=match):
         decode_topology(payload)
 
 
 def test_the_edge_limit_is_what_the_kernel_can_hold() -> None:
-    from gngdt_core.kernels import layout
-    from schemas.topology import MAX_EDGES_PER_NODE, decode_topology
+    from gngdt.core.kernels import layout
+    from gngdt.schemas.topology import MAX_EDGES_PER_NODE, decode_topology
 
     assert MAX_EDGES_PER_NODE == layout.MAX_DEGREE // 2
     assert decode_topology(_topology(100, edges_per_node=8)).node_count == 100
@@ -131,11 +131,11 @@ def _metric_chunks_at_30_fps(tmp_path, extra: list[str], seconds: float) -> list
 
     from rerun.chunk import RrdReader
 
-    from gngdt_io.outputs.rerun_blueprint import EntityPaths
-    from gngdt_io.outputs.rerun_log import RerunLog
-    from gngdt_io.outputs.rerun_output import RRD_FLUSH_SECONDS, open_recording
-    from gngdt_io.outputs.rerun_sinks import RrdFile
-    from services.logger import add_arguments
+    from gngdt.io.outputs.rerun_blueprint import EntityPaths
+    from gngdt.io.outputs.rerun_log import RerunLog
+    from gngdt.io.outputs.rerun_output import RRD_FLUSH_SECONDS, open_recording
+    from gngdt.io.outputs.rerun_sinks import RrdFile
+    from gngdt.services.logger import add_arguments
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)

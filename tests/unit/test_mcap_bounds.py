@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 from mcap.reader import make_reader
 
-from gngdt_io.outputs.mcap import McapRecorder, footer_without_summary
-from schemas.images import image_to_raw
-from schemas.wire import ENCODING_RAW_IMAGE, ENCODING_SCENE_UPDATE, FrameStamp
+from gngdt.io.outputs.mcap import McapRecorder, footer_without_summary
+from gngdt.schemas.images import image_to_raw
+from gngdt.schemas.wire import ENCODING_RAW_IMAGE, ENCODING_SCENE_UPDATE, FrameStamp
 
 
 def image(seed: int) -> bytes:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig
-from gngdt_io.deproject import Deprojector
-from gngdt_io.mcap_reader import read_frames
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
+from gngdt.io.deproject import Deprojector
+from gngdt.io.mcap.reader import read_frames
 
 STATIC_RECORDING = Path(__file__).resolve().parents[2] / "recordings" / "tabletop.mcap"
 

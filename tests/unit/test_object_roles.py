@@ -14,10 +14,10 @@ from test_segmentation_rules import (
     table_wall_and_box,
 )
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
-from gngdt_core.objects import describe_objects
-from gngdt_core.supports import OBJECT, ROLE_NAMES, SUPPORT
-from schemas.scene import decode_object_boxes, objects_to_scene_update
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
+from gngdt.core.objects.object_set import describe_objects
+from gngdt.core.segmentation.supports import OBJECT, ROLE_NAMES, SUPPORT
+from gngdt.schemas.scene import decode_object_boxes, objects_to_scene_update
 
 
 def scene_update_of(objects) -> bytes:

@@ -9,15 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core.frame_learner import LEARNER_MODEL_DEFAULTS
-from gngdt_io.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
-from gngdt_io.profiles import load_profile
+from gngdt.core.learner.frame_learner import LEARNER_MODEL_DEFAULTS
+from gngdt.io.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
+from gngdt.io.profiles import load_profile
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_example_params_file_builds_a_model() -> None:
-    from gngdt_core import GNGDT
+    from gngdt.core import GNGDT
 
     config = load_profile(REPO_ROOT / "config" / "learner.toml").config
     assert config == load_profile(None).config  # the example only documents: it sets nothing
@@ -34,7 +34,7 @@ def test_params_accept_flat_keys_and_learner_options(tmp_path: Path) -> None:
 
 
 def test_the_learner_forgets_unless_told_not_to(tmp_path: Path) -> None:
-    from gngdt_core import GNGDT
+    from gngdt.core import GNGDT
 
     assert load_profile(None).config.model["utility_k"] == LEARNER_MODEL_DEFAULTS["utility_k"] > 0
     path = tmp_path / "paper.toml"
@@ -58,7 +58,7 @@ def test_invalid_toml_names_the_file(tmp_path: Path) -> None:
 
 
 def test_checkpoint_round_trip_and_model_resume(tmp_path: Path) -> None:
-    from gngdt_core import GNGDT
+    from gngdt.core import GNGDT
 
     rng = np.random.default_rng(3)
     positions = rng.random((3000, 3), dtype=np.float32)
@@ -107,7 +107,7 @@ def test_logger_viewer_options_are_reruns_own() -> None:
 
     import rerun as rr
 
-    from gngdt_io.outputs.rerun_output import add_viewer_arguments
+    from gngdt.io.outputs.rerun_output import add_viewer_arguments
 
     ours, theirs = argparse.ArgumentParser(), argparse.ArgumentParser()
     add_viewer_arguments(ours)
@@ -130,7 +130,7 @@ def test_the_example_params_file_documents_every_key_with_its_default() -> None:
     import re
     import tomllib
 
-    from gngdt_io.profiles import load_profile, model_parameter_names
+    from gngdt.io.profiles import load_profile, model_parameter_names
 
     text = (REPO_ROOT / "config" / "learner.toml").read_text()
     documented = {}
@@ -142,7 +142,7 @@ def test_the_example_params_file_documents_every_key_with_its_default() -> None:
                 **vars(config.options)}
     import inspect
 
-    from gngdt_core import GNGDT
+    from gngdt.core import GNGDT
 
     for name, parameter in inspect.signature(GNGDT.__init__).parameters.items():
         if name in model_parameter_names():
@@ -155,7 +155,7 @@ def test_the_example_params_file_documents_every_key_with_its_default() -> None:
 
 
 def test_print_params_names_where_every_value_comes_from(tmp_path: Path, capsys) -> None:
-    from services.cli import main as gngdt_main
+    from gngdt.services.cli import main as gngdt_main
 
     params = tmp_path / "p.toml"
     params.write_text("[gngdt]\nmax_nodes = 300\n[learner]\nseed = 4\n")

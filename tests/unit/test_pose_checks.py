@@ -10,9 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
-from gngdt_core.geometry import matrix_to_pose, pose_to_matrix, rigid_inverse
-from gngdt_core.pose_checks import (
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig, LearnerOptions
+from gngdt.core.odometry.pose_checks import (
     POSE_MISREADINGS,
     PoseAudit,
     PoseChecker,
@@ -20,6 +19,7 @@ from gngdt_core.pose_checks import (
     bounds_problem,
     motion_problem,
 )
+from gngdt.core.sensor.geometry import matrix_to_pose, pose_to_matrix, rigid_inverse
 
 RGBD = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd"
 TUM = RGBD / "tum_fr1_xyz_dvo_examples"
@@ -28,8 +28,8 @@ TUM = RGBD / "tum_fr1_xyz_dvo_examples"
 @pytest.fixture(scope="module")
 def walk() -> list[tuple[int, np.ndarray, np.ndarray]]:
     """40 frames of the virtual walk at 160x120: (stamp ns, camera-frame points, true pose)."""
-    from gngdt_io.deproject import Deprojector
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.deproject import Deprojector
+    from gngdt.io.synth.render import render_scene
 
     deproject = Deprojector()
     return [(frame.timestamp_ns, deproject(frame.depth, None, frame.intrinsics)[0],
@@ -112,8 +112,8 @@ def test_a_wild_pose_after_good_frames_is_counted_not_learned(walk) -> None:
             learner.learn(points, np.zeros((len(points), 3), np.uint8), "world", wild, stamp)
     np.testing.assert_array_equal(learner.model.positions_, before)  # nothing learned
     assert learner.counters.frames_pose_rejected == 2 and learner.counters.frames_used == 5
-    from schemas.wire import FrameStamp
-    from services.learner.messages import status_message
+    from gngdt.schemas.wire import FrameStamp
+    from gngdt.services.learner.messages import status_message
 
     status = status_message(learner, FrameStamp(6, 1), 0.0, (0.0, 0.0), None)
     assert status.frames_pose_rejected == 2 and "workspace" in status.pose_problem
@@ -135,9 +135,9 @@ def test_real_tum_frames_pass_with_their_poses_and_fail_with_w_first() -> None:
     named."""
     if not TUM.is_dir():
         pytest.skip(f"real TUM samples not found at {TUM} (the repository's sibling ../shared)")
-    from gngdt_io.deproject import Deprojector
-    from gngdt_io.images import iter_image_frames
-    from gngdt_io.pose_files import load_poses
+    from gngdt.io.deproject import Deprojector
+    from gngdt.io.images import iter_image_frames
+    from gngdt.io.pose_files import load_poses
 
     poses = load_poses(TUM / "poses").matrices
     deproject = Deprojector()
@@ -164,7 +164,7 @@ def test_checking_a_frame_costs_milliseconds(walk) -> None:
 def test_a_wild_transform_sample_does_not_move_its_neighbours() -> None:
     """A /tf sample of 1e18 m between good ones: the frames at the good samples' stamps get
     exactly those poses (interpolating across the wild one cancelled them to 0 before)."""
-    from gngdt_io.tf_tree import TransformTree
+    from gngdt.io.tf_tree import TransformTree
 
     tree = TransformTree()
     for stamp, x in ((0, 1.5), (100, 1e18), (200, 1.6), (300, 1.7)):

@@ -13,10 +13,10 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 from test_images_import import TUM, _build_tum_folder, run_cli
 
-from gngdt_io.deproject import Deprojector
-from gngdt_io.errors import RecordingError
-from gngdt_io.mcap_reader import read_frames
-from gngdt_io.pose_files import attach_poses, load_poses
+from gngdt.io.deproject import Deprojector
+from gngdt.io.errors import RecordingError
+from gngdt.io.mcap.reader import read_frames
+from gngdt.io.pose_files import attach_poses, load_poses
 
 
 @pytest.fixture
@@ -87,7 +87,7 @@ def test_a_trajectory_that_misses_a_frame_is_an_error_naming_it(rgbd: Path, tmp_
 
 
 def iter_frames(directory: Path, fmt: str):
-    from gngdt_io.images import iter_image_frames
+    from gngdt.io.images import iter_image_frames
 
     return iter_image_frames(directory, fmt)
 

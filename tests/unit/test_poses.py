@@ -22,9 +22,9 @@ from test_recording_io import (
     make_frames,
 )
 
-from gngdt_io.mcap_reader import read_frames
-from gngdt_io.mcap_writer import RecordingWriter
-from gngdt_io.tf_tree import (
+from gngdt.io.mcap.reader import read_frames
+from gngdt.io.mcap.writer import RecordingWriter
+from gngdt.io.tf_tree import (
     TransformError,
     TransformTree,
     matrix_to_pose,
@@ -151,8 +151,8 @@ def test_a_bad_transform_is_skipped_with_a_warning_and_the_rest_is_used(tmp_path
     from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
     from mcap_protobuf.writer import Writer
 
-    from schemas.clouds import pose_to_transform
-    from schemas.images import image_to_raw, intrinsics_to_calibration
+    from gngdt.schemas.clouds import pose_to_transform
+    from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
 
     frames = make_frames(2)
     path = tmp_path / "bad_quaternion.mcap"

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_io.mcap_reader import ReadLimits, read_frames
-from gngdt_io.mcap_writer import RecordingWriter
-from gngdt_io.tf_tree import TransformError, TransformTree
+from gngdt.io.mcap.reader import ReadLimits, read_frames
+from gngdt.io.mcap.writer import RecordingWriter
+from gngdt.io.tf_tree import TransformError, TransformTree
 
 MS = 1_000_000
 
@@ -29,7 +29,7 @@ def _moving_camera(stamp_ns: int) -> np.ndarray:
 def test_transforms_beyond_the_limit_are_not_read_and_later_frames_say_so(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    from gngdt_io.synth.render import render_scene
+    from gngdt.io.synth.render import render_scene
 
     path = tmp_path / "long-tf.mcap"
     frames = [dataclasses.replace(frame, timestamp_ns=(index + 1) * 100 * MS)
@@ -89,7 +89,7 @@ def test_a_transform_stamped_beyond_64_bits_in_a_recording_is_skipped_with_a_war
     from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
     from mcap_protobuf.writer import Writer
 
-    from gngdt_io.mcap_reader import read_transforms
+    from gngdt.io.mcap.reader import read_transforms
 
     path = tmp_path / "far-future.mcap"
     with open(path, "wb") as file, Writer(file) as writer:

@@ -20,9 +20,9 @@ require_pyrealsense()
 
 import pyrealsense2 as rs  # noqa: E402
 
-from gngdt_io.errors import RecordingError  # noqa: E402
-from gngdt_io.realsense.sdk import unavailable_reason  # noqa: E402
-from gngdt_io.realsense.stream import (  # noqa: E402
+from gngdt.io.errors import RecordingError  # noqa: E402
+from gngdt.io.realsense.sdk import unavailable_reason  # noqa: E402
+from gngdt.io.realsense.stream import (  # noqa: E402
     DeviceLostError,
     DeviceNotFoundError,
     NoDeviceError,
@@ -31,9 +31,9 @@ from gngdt_io.realsense.stream import (  # noqa: E402
     depth_to_mm,
     list_devices,
 )
-from gngdt_io.sources import open_source  # noqa: E402
-from gngdt_io.sources.realsense import RealSenseSource, parse_spec  # noqa: E402
-from gngdt_io.synth.realsense import (  # noqa: E402
+from gngdt.io.sources import open_source  # noqa: E402
+from gngdt.io.sources.realsense import RealSenseSource, parse_spec  # noqa: E402
+from gngdt.io.synth.realsense import (  # noqa: E402
     BOX_FRONT_Y,
     BOX_RGB,
     VirtualRecording,

@@ -10,10 +10,10 @@ from foxglove_schemas_protobuf.Log_pb2 import Log
 from mcap_protobuf.writer import Writer as ProtobufWriter
 from mcap_ros2.writer import Writer as Ros2Writer
 
-from gngdt_io.frame import CameraIntrinsics, Frame
-from gngdt_io.mcap_reader import RecordingError, read_frames, recording_info
-from gngdt_io.mcap_writer import RecordingWriter
-from schemas.images import image_to_raw, intrinsics_to_calibration
+from gngdt.io.frame import CameraIntrinsics, Frame
+from gngdt.io.mcap.reader import RecordingError, read_frames, recording_info
+from gngdt.io.mcap.writer import RecordingWriter
+from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
 
 WIDTH, HEIGHT = 64, 48
 START_NS = 1_700_000_000_000_000_000
@@ -381,7 +381,7 @@ def test_a_bag_without_camera_info_needs_camera_json_and_says_so_before_reading(
     --camera-json its frames carry those intrinsics, and --depth-scale says its depth units."""
     import json
 
-    from gngdt_io.sources import SourceOptions, open_source
+    from gngdt.io.sources import SourceOptions, open_source
 
     frames = make_frames(2)
     bag = tmp_path / "no_info.mcap"

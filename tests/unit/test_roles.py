@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from services.plumbing.roles import ROLE_STREAMS, ROLES, RunAccess, access_control
-from services.plumbing.session import ZenohSetupError, router_config
+from gngdt.services.plumbing.roles import ROLE_STREAMS, ROLES, RunAccess, access_control
+from gngdt.services.plumbing.session import ZenohSetupError, router_config
 
 SECURE = Path(__file__).resolve().parents[2] / "config" / "secure"
 

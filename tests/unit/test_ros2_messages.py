@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
-from gngdt_core.geometry import CameraIntrinsics
-from gngdt_io.ros2 import markers as mk
-from gngdt_io.ros2 import messages as m
+from gngdt.core.sensor.geometry import CameraIntrinsics
+from gngdt.io.ros2 import markers as mk
+from gngdt.io.ros2 import messages as m
 
-STORE = get_typestore(Stores.ROS2_JAZZY)  # the independent codec (not gngdt_io.ros2)
+STORE = get_typestore(Stores.ROS2_JAZZY)  # the independent codec (not gngdt.io.ros2)
 
 #: RIHS01 hashes measured and noted in ECOSYSTEM-NOTES ("ROS 2 over zenoh"); the rest are
 #: compared with the ROS packages' own share/*/msg/*.json by the oracle test

@@ -10,10 +10,10 @@ import time
 import numpy as np
 import pytest
 
-from gngdt_io.tf_tree import TransformTree
-from services.cli import build_parser
-from services.ros2 import check_names, domain_id
-from services.ros2.worker import Worker
+from gngdt.io.tf_tree import TransformTree
+from gngdt.services.cli import build_parser
+from gngdt.services.ros2 import check_names, domain_id
+from gngdt.services.ros2.worker import Worker
 
 
 def parse(*arguments: str) -> argparse.Namespace:

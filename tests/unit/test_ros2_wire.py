@@ -5,7 +5,7 @@ Every expected key expression and token string below is quoted verbatim from ros
 Service name mapping to Zenoh key expressions", "Graph Cache" and "Publishers": the 33-byte
 attachment), the format after rmw_zenoh's PR #648 (not the 2024 one). What the document leaves
 to the code is quoted from rmw_zenoh_cpp/src/detail/ at the commits named in
-`gngdt_io.ros2.wire` (liveliness_utils.cpp @ 3411fdec149fe0c932f24d4d79ef908eb81d7482: the
+`gngdt.io.ros2.wire` (liveliness_utils.cpp @ 3411fdec149fe0c932f24d4d79ef908eb81d7482: the
 GID is XXH3-128 of the token string, low 64 bits then high 64 bits; qos.cpp: the defaults a
 QoS string leaves empty).
 """
@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import pytest
 
-from gngdt_io.ros2 import wire as w
+from gngdt.io.ros2 import wire as w
 
 STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
 ADD_TWO_INTS_HASH = "RIHS01_e118de6bf5eeb66a2491b5bda11202e7b68f198d6f67922cf30364858239c81a"

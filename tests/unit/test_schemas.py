@@ -18,8 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from gngdt_io.frame import CameraIntrinsics
-from schemas import (
+from gngdt.io.frame import CameraIntrinsics
+from gngdt.schemas import (
     MessageError,
     calibration_to_intrinsics,
     cloud_to_msg,
@@ -37,8 +37,8 @@ from schemas import (
     raw_to_image,
     unpack_array,
 )
-from schemas.clouds import cloud_to_wire
-from schemas.generate import SCHEMA_DIR, generate
+from gngdt.schemas.clouds import cloud_to_wire
+from gngdt.schemas.generate import SCHEMA_DIR, generate
 
 STAMP_NS = 1_700_000_000_123_456_789
 
@@ -62,7 +62,8 @@ def test_checked_in_bindings_match_the_proto(tmp_path: Path) -> None:
     checked_in = descriptor_pb2.FileDescriptorProto.FromString(
         _serialized_descriptor(SCHEMA_DIR / "gngdt_pb2.py")
     )
-    assert fresh == checked_in, "schemas/gngdt_pb2.py is stale: run `python -m schemas.generate`"
+    assert fresh == checked_in, \
+        "schemas/gngdt_pb2.py is stale: run `python -m gngdt.schemas.generate`"
     loaded = descriptor_pb2.FileDescriptorProto()
     gngdt_pb2.DESCRIPTOR.CopyToProto(loaded)
     assert loaded == checked_in
@@ -440,7 +441,7 @@ def test_negative_timestamp_round_trips() -> None:
 def test_frame_attachment_refuses_sequences_beyond_signed_64_bits() -> None:
     import struct
 
-    from schemas.wire import FrameStamp
+    from gngdt.schemas.wire import FrameStamp
 
     largest = FrameStamp(2**63 - 1, 5).to_attachment()
     assert FrameStamp.from_attachment(largest).sequence == 2**63 - 1

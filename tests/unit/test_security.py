@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_io.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
-from services.plumbing.session import (
+from gngdt.io.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
+from gngdt.services.plumbing.session import (
     DEFAULT_ENDPOINT,
     client_config,
     router_config,
@@ -80,7 +80,7 @@ def test_checkpoint_metadata_is_covered_by_the_digest(tmp_path: Path) -> None:
 def test_checkpoint_zip_bomb_is_refused_before_reading(tmp_path: Path, monkeypatch) -> None:
     import zipfile
 
-    from gngdt_io import checkpoints as checkpoint
+    from gngdt.io import checkpoints as checkpoint
 
     path = tmp_path / "bomb.npz"
     with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
@@ -92,7 +92,7 @@ def test_checkpoint_zip_bomb_is_refused_before_reading(tmp_path: Path, monkeypat
 
 
 def test_params_values_are_type_checked_never_evaluated(tmp_path: Path) -> None:
-    from gngdt_io.profiles import load_profile
+    from gngdt.io.profiles import load_profile
 
     marker = tmp_path / "evaluated"
     params = tmp_path / "evil.toml"

@@ -12,9 +12,9 @@ import cv2
 import numpy as np
 import pytest
 
-from gngdt_io.mcap_reader import read_frames
-from gngdt_io.staged_directory import StagedDirectory
-from services.cli import main as gngdt
+from gngdt.io.mcap.reader import read_frames
+from gngdt.io.staged_directory import StagedDirectory
+from gngdt.services.cli import main as gngdt
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 SMALL_RECORDING = REPO_ROOT / "recordings" / "tabletop_small.mcap"

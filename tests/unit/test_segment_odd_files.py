@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pytest
 
-from services.cli import main as gngdt
+from gngdt.services.cli import main as gngdt
 
 
 def tiny_folder(folder: Path, frames: int = 2, size: tuple[int, int] = (8, 8)) -> Path:

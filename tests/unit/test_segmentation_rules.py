@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from gngdt_core.segmentation import SegmentationParams, segment_network
-from gngdt_core.supports import CLUTTER, OBJECT, SUPPORT, fit_planes
+from gngdt.core.segmentation.network import SegmentationParams, segment_network
+from gngdt.core.segmentation.supports import CLUTTER, OBJECT, SUPPORT, fit_planes
 
 SPACING = 0.01  # metres between neighbouring nodes
 TABLE_Y = 0.25  # the table's top (camera frame: y down, looking along +z)
@@ -218,7 +218,7 @@ def test_the_crease_check_keeps_a_chain_of_small_patches_from_joining_two_object
 
 
 def test_clutter_is_what_reaches_the_view_edge_is_too_long_or_too_small() -> None:
-    from gngdt_core.supports import segment_roles
+    from gngdt.core.segmentation.supports import segment_roles
 
     rng = np.random.default_rng(6)
     small = rectangle((0, 0, 1), (0.01, 0, 0), (0, 0.01, 0), rng, spacing=0.004)[0]

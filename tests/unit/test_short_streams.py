@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from gngdt_core.frame_learner import FrameLearner, LearnerConfig
-from gngdt_io.deproject import Deprojector
-from gngdt_io.mcap_reader import read_frames
-from schemas.status import LearnerStatusInfo, StreamEndInfo
-from services.run.summary import format_summary
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
+from gngdt.io.deproject import Deprojector
+from gngdt.io.mcap.reader import read_frames
+from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
+from gngdt.services.run.summary import format_summary
 
 SMALL_RECORDING = Path(__file__).resolve().parents[2] / "recordings" / "tabletop_small.mcap"
 

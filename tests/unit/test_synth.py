@@ -10,10 +10,10 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from gngdt_io.frame import Frame
-from gngdt_io.synth.motion import Orbit
-from gngdt_io.synth.primitives import Cylinder, Rectangle, Sphere, box, triangular_prism
-from gngdt_io.synth.render import (
+from gngdt.io.frame import Frame
+from gngdt.io.synth.motion import Orbit
+from gngdt.io.synth.primitives import Cylinder, Rectangle, Sphere, box, triangular_prism
+from gngdt.io.synth.render import (
     SCENE_GROUND_TRUTH,
     SCENES,
     RayHits,
@@ -23,7 +23,7 @@ from gngdt_io.synth.render import (
     render_frame,
     render_scene,
 )
-from gngdt_io.synth.scenes import Scene, build_scene
+from gngdt.io.synth.scenes import Scene, build_scene
 
 WIDTH, HEIGHT = 160, 120
 
@@ -385,7 +385,7 @@ RECORDINGS = Path(__file__).resolve().parents[2] / "recordings"
 
 def test_bundled_small_recording_is_what_the_renderer_makes_today():
     """recordings/README.md's command remakes tabletop_small.mcap; if not, regenerate them."""
-    from gngdt_io.mcap_reader import read_frames
+    from gngdt.io.mcap.reader import read_frames
 
     path = RECORDINGS / "tabletop_small.mcap"
     recorded = list(read_frames(path))

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from test_synth import segment_mask, world_points
 
-from gngdt_io.mcap_reader import read_frames, recording_metadata
-from gngdt_io.mcap_writer import RecordingWriter
-from gngdt_io.synth.render import SCENE_METADATA, SCENES, render_scene, scene_metadata
-from gngdt_io.synth.scenes import build_scene
+from gngdt.io.mcap.reader import read_frames, recording_metadata
+from gngdt.io.mcap.writer import RecordingWriter
+from gngdt.io.synth.render import SCENE_METADATA, SCENES, render_scene, scene_metadata
+from gngdt.io.synth.scenes import build_scene
 
 WIDTH, HEIGHT = 160, 120
 

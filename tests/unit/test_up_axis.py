@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core.geometry import quaternion_to_rotation
-from gngdt_core.up_axis import axis_name, nearest_axis, up_from_planes, up_from_rotations
-from gngdt_io.synth.motion import look_at
-from gngdt_io.synth.render import render_scene
+from gngdt.core.sensor.geometry import quaternion_to_rotation
+from gngdt.io.outputs.up_axis import axis_name, nearest_axis, up_from_planes, up_from_rotations
+from gngdt.io.synth.motion import look_at
+from gngdt.io.synth.render import render_scene
 
 
 def walk_rotations(frames: int = 60) -> np.ndarray:
@@ -84,8 +84,8 @@ def test_the_rerun_log_states_the_up_it_found_and_never_forces_z(tmp_path: Path)
     import rerun as rr
     from rerun.chunk import RrdReader
 
-    from gngdt_io.outputs.rerun_blueprint import EntityPaths
-    from gngdt_io.outputs.rerun_log import RerunLog
+    from gngdt.io.outputs.rerun_blueprint import EntityPaths
+    from gngdt.io.outputs.rerun_log import RerunLog
 
     path = tmp_path / "up.rrd"
     rec = rr.RecordingStream("gngdt-test")
@@ -115,9 +115,9 @@ def test_the_rerun_log_states_the_up_it_found_and_never_forces_z(tmp_path: Path)
 def test_a_static_cameras_rerun_log_takes_up_from_its_table(tmp_path: Path) -> None:
     import rerun as rr
 
-    from gngdt_io.outputs.rerun_blueprint import EntityPaths
-    from gngdt_io.outputs.rerun_log import RerunLog
-    from schemas.topology import TopologySnapshot
+    from gngdt.io.outputs.rerun_blueprint import EntityPaths
+    from gngdt.io.outputs.rerun_log import RerunLog
+    from gngdt.schemas.topology import TopologySnapshot
 
     rng = np.random.default_rng(2)
     pitch = np.radians(55)  # looking down at the table steeply: its up is nearest the camera's -z

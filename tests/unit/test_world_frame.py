@@ -10,12 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt_core.frame_learner import FrameLearner, Ghosts, LearnerConfig, OtherFrameError
-from schemas.clouds import cloud_to_msg
-from schemas.messages import MessageError
-from schemas.wire import FrameStamp
-from services.learner import checkpoints
-from services.learner.messages import decode_points, status_message, topology_message
+from gngdt.core.learner.frame_learner import FrameLearner, Ghosts, LearnerConfig, OtherFrameError
+from gngdt.schemas.clouds import cloud_to_msg
+from gngdt.schemas.messages import MessageError
+from gngdt.schemas.wire import FrameStamp
+from gngdt.services.learner import checkpoints
+from gngdt.services.learner.messages import decode_points, status_message, topology_message
 
 
 def posed_cloud(pose: np.ndarray | None, frame_id: str, seed: int = 0) -> bytes:
@@ -94,8 +94,8 @@ def test_the_logger_puts_a_posed_cloud_and_the_camera_in_the_world(tmp_path: Pat
     import rerun as rr
     from rerun.chunk import RrdReader
 
-    from gngdt_io.outputs.rerun_blueprint import EntityPaths
-    from gngdt_io.outputs.rerun_log import RerunLog
+    from gngdt.io.outputs.rerun_blueprint import EntityPaths
+    from gngdt.io.outputs.rerun_log import RerunLog
 
     path = tmp_path / "posed.rrd"
     recording = rr.RecordingStream("gngdt-test")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from services.plumbing.session import (
+from gngdt.services.plumbing.session import (
     DEFAULT_ENDPOINT,
     SHARED_MEMORY_POOL_ENV,
     ZenohSetupError,
@@ -106,7 +106,7 @@ def test_every_shipped_config_keeps_gngdt_bounds(path: Path) -> None:
 
     import zenoh
 
-    from services.plumbing.session import BLOCKED_CLIENT_CUTOFF_US, MAX_MESSAGE_BYTES
+    from gngdt.services.plumbing.session import BLOCKED_CLIENT_CUTOFF_US, MAX_MESSAGE_BYTES
 
     config = zenoh.Config.from_file(str(path))
     rx = json.loads(config.get_json("transport/link/rx"))

@@ -1,0 +1,121 @@
+"""Read-only queries of a learned network: nearest nodes of points, pixel labels, edge lists.
+
+Pure functions over the estimator's arrays (layout in `kernels.layout`); the estimator's methods
+(`GNGDT.predict`, `label_pixels`, `edges`, `clusters`) validate their arguments and call them.
+Large batches are split over the CPUs (the nearest-node kernels release the GIL).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from gngdt.core.kernels import segmentation as SK
+
+#: a nearest-node batch is split over the CPUs when each part gets at least this many points
+#: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
+PARALLEL_MIN_POINTS = 15_000
+#: `label_pixels` searches the nearest node at every LABEL_ANCHOR_STRIDE-th pixel of every
+#: LABEL_ANCHOR_STRIDE-th row, and fills the pixels between anchors that agree
+LABEL_ANCHOR_STRIDE = 4
+
+#: What the nearest-node kernels read of a network: node positions (cap, D) float64, the node
+#: count n, the spatial grid's ``ghead`` (T,) and ``gnext`` (cap,) int32, whether the grid is
+#: active, and its cell size (position units).
+NodeGrid = tuple[np.ndarray, int, np.ndarray, np.ndarray, bool, float]
+
+
+def split_range(n: int, min_part: int) -> list[int]:
+    """Bounds of up to one part per usable CPU over ``range(n)``, each part >= ``min_part``."""
+    parts = max(1, min(len(os.sched_getaffinity(0)), n // max(min_part, 1)))
+    return [n * k // parts for k in range(parts + 1)]
+
+
+def in_parallel(n_items: int, min_part: int, work: Callable[[int, int], object]) -> None:
+    """``work(start, stop)`` over ``range(n_items)``, split over the CPUs when large (the
+    kernels release the GIL)."""
+    bounds = split_range(n_items, min_part)
+    if len(bounds) == 2:
+        work(0, n_items)
+        return
+    with ThreadPoolExecutor(len(bounds) - 1) as pool:
+        list(pool.map(work, bounds[:-1], bounds[1:]))
+
+
+def checked_query(positions: object, dim: int) -> np.ndarray:
+    """``positions`` as an (N, dim) float32/float64 array; ValueError unless finite."""
+    query = np.asarray(positions)
+    if query.ndim != 2 or query.shape[1] != dim:
+        raise ValueError(f"positions must have shape (N, {dim}), got {query.shape}")
+    if query.dtype not in (np.float32, np.float64):
+        query = query.astype(np.float64)
+    if not np.isfinite(query).all():
+        raise ValueError("positions contain NaN or inf")
+    return query
+
+
+def nearest_nodes(points: np.ndarray, grid: NodeGrid) -> tuple[np.ndarray, np.ndarray]:
+    """Winners (N,) int32 and squared distances (N,) of (N, 3) contiguous points, through the
+    grid; large batches are split over the CPUs."""
+    winners = np.empty(points.shape[0], dtype=np.int32)
+    sq_distances = np.empty(points.shape[0])
+    arrays = (*grid, winners, sq_distances)
+    in_parallel(points.shape[0], PARALLEL_MIN_POINTS,
+                lambda start, stop: SK.nearest_nodes(points, start, stop, *arrays))
+    return winners, sq_distances
+
+
+def nearest_winners(query: np.ndarray, grid: NodeGrid, use_grid: bool
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """Winner (N,) int64 and distance (N,) float64 (position units) of each (N, D) query row:
+    through the learner's grid when ``use_grid`` (3-D GNG-DT), else a k-d tree over the nodes."""
+    if not use_grid:
+        distances, winners = cKDTree(grid[0][: grid[1]]).query(query, k=1)
+    else:
+        winners, sq_distances = nearest_nodes(np.ascontiguousarray(query), grid)
+        distances = np.sqrt(sq_distances)
+    return np.asarray(winners, dtype=np.int64), np.asarray(distances, dtype=np.float64)
+
+
+def label_pixels(points: np.ndarray, node_labels: np.ndarray, grid: NodeGrid) -> np.ndarray:
+    """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1, 0 where the pixel
+    has no point or its node has label -1 (see `GNGDT.label_pixels`).
+
+    points: (H, W, 3) metres, an organized cloud in the network's frame; node_labels:
+    (n_nodes,) int. ValueError on other shapes.
+    """
+    n_nodes = grid[1]
+    if points.ndim != 3 or points.shape[2] != 3:
+        raise ValueError(f"points must have shape (H, W, 3), got {points.shape}")
+    node_labels = np.asarray(node_labels, dtype=np.int32)
+    if node_labels.shape != (n_nodes,):
+        raise ValueError(f"node_labels must have shape ({n_nodes},), got {node_labels.shape}")
+    if points.dtype not in (np.float32, np.float64):
+        points = points.astype(np.float64)
+    points = np.ascontiguousarray(points)
+    valid = np.isfinite(points[..., 2])
+    out = np.empty(valid.shape, dtype=np.int32)
+    # the work is mostly the searches, about one pixel in stride^2 (the anchors): a
+    # 640x480 frame is one thread's work, which two threads did no faster on 2 cores
+    min_rows = PARALLEL_MIN_POINTS * LABEL_ANCHOR_STRIDE**2 // max(points.shape[1], 1)
+    for anchors in (True, False):  # every anchor first: the second pass reads them
+        in_parallel(points.shape[0], min_rows,
+                    lambda start, stop, anchors=anchors: SK.label_pixels(
+                        points, valid, node_labels, LABEL_ANCHOR_STRIDE, anchors,
+                        start, stop, *grid, out))
+    return out
+
+
+def edge_pairs(nbr: np.ndarray, emask: np.ndarray, deg: np.ndarray, n: int,
+               mask: int) -> np.ndarray:
+    """(E, 2) int64 node-index pairs ``i < j`` of the edges of nodes ``0..n-1`` that have every
+    property bit of ``mask``; nbr, emask: (cap, MAX_DEGREE), deg: (cap,) (see `kernels.layout`)."""
+    nbr = nbr[:n]
+    used = np.arange(nbr.shape[1]) < deg[:n, None]
+    rows = np.broadcast_to(np.arange(n)[:, None], nbr.shape)
+    keep = used & ((emask[:n] & mask) == mask) & (nbr > rows)
+    return np.stack([rows[keep], nbr[keep]], axis=1).astype(np.int64)
