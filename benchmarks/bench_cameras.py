@@ -23,12 +23,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from pipeline_runs import TRANSPORTS, BenchPipeline, CpuWindow, load_average, percentiles
 
-from gngdt.services.logger import LIVELINESS_KEY
+from gngdt.schemas.wire import CAPTURE, LEARNER, LOGGER_ALIVE, alive_key
 
 SCENES = ("tabletop", "tabletop_walk", "tabletop_move", "data2")
 
@@ -54,10 +51,10 @@ def run_cameras(count: int, recordings: list[Path], args: argparse.Namespace,
         for camera in cameras:
             bench.start("learn", ["--cam", camera, "--exit-on-eos", "--samples-per-frame",
                                   str(args.samples_per_frame)], f"learner-{camera}")
-        expected = [f"gngdt/{camera}/learner/alive" for camera in cameras]
+        expected = [alive_key(camera, LEARNER) for camera in cameras]
         if not args.no_logger:
             bench.start("log", ["--save", str(workdir / "cameras.rrd")], "logger")
-            expected.append(LIVELINESS_KEY)
+            expected.append(LOGGER_ALIVE)
         bench.wait(lambda: bench.observer.has_alive(*expected), 300, "learners and logger")
         captures = [bench.start("capture", [str(recordings[index % len(recordings)]), "--cam",
                                             camera, "--max-points", str(args.max_points)],
@@ -65,7 +62,7 @@ def run_cameras(count: int, recordings: list[Path], args: argparse.Namespace,
                     for index, camera in enumerate(cameras)]
         window = CpuWindow(bench.pids())
         bench.wait(lambda: bench.observer.has_alive(
-            *(f"gngdt/{camera}/capture/alive" for camera in cameras)), 120, "captures")
+            *(alive_key(camera, CAPTURE) for camera in cameras)), 120, "captures")
         window.start()
         while any(capture.process.poll() is None for capture in captures):
             window.sample()

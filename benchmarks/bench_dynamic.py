@@ -45,14 +45,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from gngdt.core.learner.frame_learner import LEARNER_MODEL_DEFAULTS, LEARNER_WORLD_DEFAULTS
 from gngdt.eval.dynamics import DynamicsSettings, DynamicsTracker
 from gngdt.eval.recording_eval import RecordingSettings, frame_points, replay, summarise_over_time
 from gngdt.io.mcap.writer import RecordingWriter
 from gngdt.io.synth.render import SCENE_METADATA, render_scene, scene_metadata
 from gngdt.io.synth.scenes import build_scene
+from gngdt.schemas.wire import ALL_KEYS, DEFAULT_CAMERA, LEARNER, alive_key
 from gngdt.services.run import DEFAULT_MAX_POINTS as RUN_MAX_POINTS
 
 #: scene -> frames rendered (the walk goes out and back: 240 frames at 30 fps)
@@ -153,8 +152,7 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
     processes beside it; the learner's last status, the end of stream, and every topology's
     node positions by frame sequence."""
     from gngdt.schemas.topology import decode_topology
-    from gngdt.schemas.wire import topic
-    from gngdt.services.logger import LIVELINESS_KEY
+    from gngdt.schemas.wire import LOGGER_ALIVE, topic
     from gngdt.services.plumbing.session import free_tcp_port, open_config
     from gngdt.services.run import Observed, Pipeline, RunAccess, wait_until
 
@@ -168,7 +166,7 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
             topologies[snapshot.frame_sequence] = np.array(snapshot.positions)
 
     declared = [
-        router.liveliness().declare_subscriber("gngdt/**", observed.on_liveliness, history=True),
+        router.liveliness().declare_subscriber(ALL_KEYS, observed.on_liveliness, history=True),
         router.declare_subscriber(topic("camera", "learner/status"), observed.on_status),
         router.declare_subscriber(topic("camera", "eos"), observed.on_eos),
         router.declare_subscriber(topic("camera", "topology"), on_topology)]
@@ -177,8 +175,8 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
         extra = ["--params", str(params)] if params else []
         learner = pipeline.start("learn", ["--exit-on-eos", *extra])
         pipeline.start("log", ["--save", str(workdir / "load.rrd")])
-        wait_until(lambda: observed.has_alive("gngdt/camera/learner/alive")
-                   and observed.has_alive(LIVELINESS_KEY), 300, stop, pipeline)
+        wait_until(lambda: observed.has_alive(alive_key(DEFAULT_CAMERA, LEARNER))
+                   and observed.has_alive(LOGGER_ALIVE), 300, stop, pipeline)
         spinners = [spin() for _ in range(busy)]
         # as `gngdt run` starts it: a random 50,000 points of each cloud
         pipeline.start("capture", [str(recording), "--max-points", str(RUN_MAX_POINTS)])

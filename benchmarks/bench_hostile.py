@@ -36,7 +36,6 @@ import re
 import signal
 import struct
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -46,7 +45,6 @@ from pathlib import Path
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
 
 from hostile_recordings import (  # noqa: E402  (benchmarks/, beside this script)
     lz4_chunk_hiding_its_size,
@@ -56,6 +54,7 @@ from hostile_recordings import (  # noqa: E402  (benchmarks/, beside this script
 from hostile_trust import print_trust, trust_attacks  # noqa: E402  (benchmarks/, beside this)
 from procstat import gngdt, status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
+from gngdt.core.clustering import BY_COLOUR_AND_NORMAL, COL, CONVEXITY, NOR, POS, SEGMENTS  # noqa: E402
 from gngdt.schemas.clouds import cloud_to_msg  # noqa: E402
 from gngdt.schemas.images import image_to_raw  # noqa: E402
 from gngdt.schemas.status import decode_status  # noqa: E402
@@ -95,9 +94,9 @@ def stamp(sequence: int = 1) -> bytes:
 
 
 def big_topology(nodes: int, rng: np.random.Generator) -> bytes:
-    pairs = {prop: rng.integers(0, nodes, (8 * nodes, 2)) for prop in ("pos", "col", "nor", "cvx")}
+    pairs = {prop: rng.integers(0, nodes, (8 * nodes, 2)) for prop in (POS, COL, NOR, CONVEXITY)}
     labels = {name: rng.integers(-1, 50, nodes).astype(np.int32)
-              for name in ("pos", "col", "nor", "col+nor", "segments")}
+              for name in (POS, COL, NOR, BY_COLOUR_AND_NORMAL.name, SEGMENTS.name)}
     return encode_topology(
         positions=rng.random((nodes, 3), dtype=np.float32),
         colors=rng.integers(0, 256, (nodes, 3)), normals=rng.random((nodes, 3)),

@@ -16,8 +16,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from gngdt.io.frame import CameraIntrinsics, Frame
 from gngdt.io.mcap.reader import read_frames
 from gngdt.io.mcap.writer import RecordingWriter

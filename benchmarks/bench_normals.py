@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from gngdt.core import GNGDT
+from gngdt.core.clustering import POS
 from gngdt.io.images import iter_image_frames
 
 LABELLED = Path(__file__).resolve().parents[2] / "shared" / "data" / "labelled"
@@ -91,7 +92,7 @@ def main() -> None:
             if since == args.steps:
                 normal, origin = dominant_plane(points, rng)
                 on_plane = np.abs((model.positions_ - origin) @ normal) < 0.005
-                edges = model.edges("pos")
+                edges = model.edges(POS)
                 keep = on_plane[edges[:, 0]] & on_plane[edges[:, 1]]
                 plane_angles.append(angles(fresh, edges[keep, 0], edges[keep, 1]))
         stale_all = np.concatenate(stale)

@@ -28,9 +28,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from pipeline_runs import (
     TRANSPORTS,
     BenchPipeline,
@@ -41,7 +38,7 @@ from pipeline_runs import (
     shared_memory_use,
 )
 
-from gngdt.services.logger import LIVELINESS_KEY
+from gngdt.schemas.wire import CAPTURE, DEFAULT_CAMERA, LEARNER, LOGGER_ALIVE, alive_key
 
 
 def render_recording(path: Path, frames: int) -> None:
@@ -149,13 +146,14 @@ def run_pipeline(recording: Path, samples_per_frame: int, workdir: Path,
         bench.start("learn", ["--exit-on-eos", "--samples-per-frame", str(samples_per_frame)],
                     "learner")
         bench.start("log", ["--save", str(workdir / "bench.rrd")], "logger")
-        bench.wait(lambda: bench.observer.has_alive("gngdt/camera/learner/alive",
-                                                    LIVELINESS_KEY), 120, "learner and logger")
+        bench.wait(lambda: bench.observer.has_alive(alive_key(DEFAULT_CAMERA, LEARNER),
+                                                    LOGGER_ALIVE), 120, "learner and logger")
         capture = bench.start("capture", [str(recording), *capture_options])
         window = CpuWindow(bench.pids())
         # from capture's liveliness token on (declared after its start-up, just before its
         # first frame) to its exit
-        bench.wait(lambda: bench.observer.has_alive("gngdt/camera/capture/alive"), 60, "capture")
+        bench.wait(lambda: bench.observer.has_alive(alive_key(DEFAULT_CAMERA, CAPTURE)), 60,
+                   "capture")
         window.start()
         while capture.process.poll() is None:
             window.sample()

@@ -22,25 +22,22 @@ from __future__ import annotations
 import argparse
 import os
 import struct
-import sys
 import tempfile
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from procstat import cpu_seconds, gngdt, wait_until
 
+from gngdt.core.clustering import COL, NOR, POS
 from gngdt.core.sensor.geometry import CameraIntrinsics
 from gngdt.io.ros2 import messages as m
 from gngdt.io.ros2.markers import encode_graph_markers
 from gngdt.io.ros2.node import Ros2Node
 from gngdt.io.ros2.wire import decode_attachment
 from gngdt.schemas.clouds import cloud_to_msg
-from gngdt.schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
+from gngdt.schemas.wire import BRIDGE, DEFAULT_CAMERA, ENCODING_POINT_CLOUD, FrameStamp, alive_key
 from gngdt.services.plumbing.session import (
     client_config,
     free_tcp_port,
@@ -239,8 +236,8 @@ def bench_translation() -> None:
     nodes = rng.random((1000, 3)).astype(np.float32)
     edges = rng.integers(0, 1000, (3000, 2))
     grey = np.full((3000, 3), 150, np.uint8)
-    graph = best(lambda: encode_graph_markers(nodes, {"pos": (edges, grey), "col": (edges, grey),
-                                                      "nor": (edges, grey)},
+    graph = best(lambda: encode_graph_markers(nodes, {POS: (edges, grey), COL: (edges, grey),
+                                                      NOR: (edges, grey)},
                                               stamp_ns=1, frame_id="world"), repeats=3)
     print(f"graph MarkerArray, 3 topologies x 3,000 edges: {graph:.0f} ms (hence --graph-rate 2)")
 
@@ -261,7 +258,7 @@ def main() -> None:
                    "--max-points", str(args.max_points), log=log)
     try:
         wait_until(lambda: any(True for _ in session.liveliness().get(
-            "gngdt/camera/ros2/alive", timeout=1.0)), 60, "the bridge")
+            alive_key(DEFAULT_CAMERA, BRIDGE), timeout=1.0)), 60, "the bridge")
         node = Ros2Node(session, "bench")
         print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
         bench_in(session, node, args, bridge.pid)

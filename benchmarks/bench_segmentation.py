@@ -31,9 +31,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from procstat import status_mb
 
 from gngdt.eval.report import markdown_table

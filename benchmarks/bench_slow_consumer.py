@@ -26,24 +26,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from procstat import gngdt
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
-
-from procstat import gngdt  # noqa: E402  (benchmarks/, beside this script)
-
-from gngdt.schemas.status import decode_status  # noqa: E402
-from gngdt.schemas.topology import decode_topology  # noqa: E402
-from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
-from gngdt.services.run import DEFAULT_MAX_POINTS  # noqa: E402
+from gngdt.schemas.status import decode_status
+from gngdt.schemas.topology import decode_topology
+from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config
+from gngdt.services.run import DEFAULT_MAX_POINTS
 
 #: a client of the router subscribed to everything, whose callback never returns
 NEVER_READS = """
-import sys, time
-sys.path.insert(0, {root!r})
+import time
+from gngdt.schemas.wire import ALL_KEYS
 from gngdt.services.plumbing.session import client_config, open_config
 session = open_config(client_config([{endpoint!r}]), wait_s=30)
-session.declare_subscriber("gngdt/**", lambda sample: time.sleep(3600))
+session.declare_subscriber(ALL_KEYS, lambda sample: time.sleep(3600))
 print("subscribed", flush=True)
 time.sleep(3600)
 """
@@ -154,7 +150,7 @@ def main() -> None:
         wait_until(lambda: len(observer.statuses) > 30, 120, "learned frames")
         phase(observer, rrd, args.seconds, "baseline")
         hostile = subprocess.Popen(
-            [sys.executable, "-c", NEVER_READS.format(root=str(REPO_ROOT), endpoint=endpoint)],
+            [sys.executable, "-c", NEVER_READS.format(endpoint=endpoint)],
             stdout=subprocess.PIPE, start_new_session=True)
         assert hostile.stdout.readline().startswith(b"subscribed")
         phase(observer, rrd, args.seconds, "a subscriber that never reads")

@@ -28,7 +28,6 @@ from pathlib import Path
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))
 
 from procstat import status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 

@@ -28,9 +28,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from two_hosts import Deployment, TwoHosts, link_bytes, unavailable
 
 PLACEMENTS = [

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from procstat import REPO_ROOT, cpu_seconds, status_mb
 
-from gngdt.schemas.wire import FrameStamp
+from gngdt.schemas.wire import ALL_KEYS, FrameStamp
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.session import (
     SHARED_MEMORY_POOL_ENV,
@@ -78,7 +78,7 @@ class Observer:
         self.cameras: dict[str, CameraSeen] = {}
         self.session = open_config(client_config(config_file=client_file), wait_s=wait_s)
         self._declared = [
-            self.session.liveliness().declare_subscriber("gngdt/**", self._on_liveliness,
+            self.session.liveliness().declare_subscriber(ALL_KEYS, self._on_liveliness,
                                                          history=True),
             self.session.declare_subscriber("gngdt/*/learner/status", self._on_status),
             self.session.declare_subscriber("gngdt/*/eos", self._on_eos),

@@ -21,6 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from gngdt.schemas.wire import DEFAULT_CAMERA, LEARNER, LOGGER_ALIVE, alive_key
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PREFIX = "gngdt-"
 ADDRESSES = {"A": "10.99.0.1", "B": "10.99.0.2"}
@@ -92,8 +94,7 @@ class Host:
             process = subprocess.Popen(
                 ["nsenter", "-t", str(self.anchor.pid), "-m", "-n", "--", *command],
                 cwd=REPO_ROOT, stdout=log_file, stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL, start_new_session=True,
-                env={**os.environ, "PYTHONPATH": str(REPO_ROOT)})
+                stdin=subprocess.DEVNULL, start_new_session=True)
         process.log_path = log_path  # type: ignore[attr-defined]
         self.processes.append(process)
         return process
@@ -106,7 +107,7 @@ class Host:
         """``command`` on this host, to its end."""
         return subprocess.run(["nsenter", "-t", str(self.anchor.pid), "-m", "-n", "--",
                                *command], cwd=REPO_ROOT, capture_output=True, text=True,
-                              timeout=timeout_s, env={**os.environ, "PYTHONPATH": str(REPO_ROOT)})
+                              timeout=timeout_s)
 
     def shm_device(self) -> str:
         """The device of this host's /dev/shm (private hosts have different ones)."""
@@ -258,11 +259,11 @@ class Deployment:
             self.start_router(label)
         self.probe("B", "watch", self.watch_path)
         self.service("learner", self.learner_on, "learn", *self.learner_options)
-        expected = ["gngdt/camera/learner/alive"]
+        expected = [alive_key(DEFAULT_CAMERA, LEARNER)]
         if self.logger_on is not None:
             self.service("logger", self.logger_on, "log", "--save", str(self.rrd_path),
                          "--keep-running")
-            expected.append("gngdt/logger/alive")
+            expected.append(LOGGER_ALIVE)
         self.wait(lambda: all(self.alive(key) for key in expected), timeout_s,
                   "the learner and the logger")
         self.service("capture", "A", "capture", str(self.recording), "--loop",

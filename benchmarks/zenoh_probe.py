@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 from gngdt.schemas.topology import decode_topology
-from gngdt.schemas.wire import FrameStamp
+from gngdt.schemas.wire import ALL_KEYS, FrameStamp
 from gngdt.services.plumbing.session import client_config, open_config
 
 
@@ -57,7 +57,7 @@ def watch(endpoint: str, out: Path) -> None:
     session = open_config(client_config([endpoint]), wait_s=30.0)
     declared = [session.declare_subscriber("gngdt/*/topology", on_topology),
                 session.declare_subscriber("gngdt/*/objects", on_objects),
-                session.liveliness().declare_subscriber("gngdt/**", on_token, history=True)]
+                session.liveliness().declare_subscriber(ALL_KEYS, on_token, history=True)]
     write(ev="ready", t=time.time_ns())
     wait_for_stop()
     for entity in declared:
@@ -86,7 +86,7 @@ def count(endpoint: str, out: Path) -> None:
             total[1] += len(sample.payload)
 
     session = open_config(client_config([endpoint]), wait_s=30.0)
-    subscriber = session.declare_subscriber("gngdt/**", on_sample)
+    subscriber = session.declare_subscriber(ALL_KEYS, on_sample)
     print("READY", flush=True)
     wait_for_stop()
     subscriber.undeclare()

@@ -21,7 +21,6 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 REPO_ROOT = HERE.parent
-sys.path.insert(0, str(REPO_ROOT))
 sys.path.insert(0, str(HERE))
 
 from screenshot_viewer import screenshot  # noqa: E402

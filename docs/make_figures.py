@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))  # runnable from a plain checkout, without `pip install -e`
 
+from gngdt.core.clustering import COL, NOR, POS  # noqa: E402
 from gngdt.io.frame import CameraIntrinsics  # noqa: E402
 
 if TYPE_CHECKING:
@@ -37,8 +37,8 @@ PNG_COLOURS = 256
 BACKGROUND_STRENGTH = 0.35
 #: the two clusterings drawn, with the topology whose edges define each and a caption
 CLUSTERING_PANELS = (
-    ("col", "Clusters by colour (colour topology)"),
-    ("nor", "Clusters by surface orientation (normal topology)"),
+    (COL, "Clusters by colour (colour topology)"),
+    (NOR, "Clusters by surface orientation (normal topology)"),
 )
 
 
@@ -141,7 +141,7 @@ def make_topology_figure(scene: LearnedScene, out: Path, source: str) -> Path:
     finish_panel(image_axis, scene, f"What the camera sees (frame {scene.frames} of {source})")
 
     learned_colours = model.colors_.astype(np.float64) / 255.0
-    draw_network(network_axis, scene, model.edges("pos"), learned_colours, "0.25",
+    draw_network(network_axis, scene, model.edges(POS), learned_colours, "0.25",
                  f"Learned network: {model.n_nodes_} nodes, learned colours")
 
     for axis, (prop, caption) in zip(cluster_axes, CLUSTERING_PANELS, strict=True):

@@ -19,8 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
+from gngdt.core.clustering import POS
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO_ROOT))  # runnable from a plain checkout, without `pip install -e`
 
 log = logging.getLogger("make_world_frame_figure")
 
@@ -86,7 +87,7 @@ def learn_network(frames: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
     for points, colors, pose in frames:
         model.partial_fit(points, colors, n_steps=SAMPLES_PER_FRAME, camera_pose=pose)
     nodes = model.positions_ @ first_from_world[:3, :3].T + first_from_world[:3, 3]
-    errors = [model.quantization_error(points @ pose[:3, :3].T + pose[:3, 3])["pos"]
+    errors = [model.quantization_error(points @ pose[:3, :3].T + pose[:3, 3])[POS]
               for points, _, pose in frames]
     return model, nodes, errors
 
@@ -122,7 +123,7 @@ def draw_network(axes, model, nodes: np.ndarray, errors: list[float]) -> None:
     """Draw the network's position edges and coloured nodes in the last column of ``axes``."""
     from matplotlib.collections import LineCollection
 
-    edges = model.edges("pos")
+    edges = model.edges(POS)
     for row, axis in enumerate(axes[:, 2]):
         axis.add_collection(LineCollection(nodes[edges][:, :, [0, 2]], colors="0.6",
                                            linewidths=0.4))

@@ -20,7 +20,6 @@ import os
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
 import urllib.error
@@ -30,7 +29,6 @@ from urllib.parse import quote
 
 HERE = Path(__file__).resolve().parent
 REPO_ROOT = HERE.parent
-sys.path.insert(0, str(REPO_ROOT))
 
 from gngdt.io.outputs.rerun_sinks import rerun_binary  # noqa: E402
 from gngdt.services.plumbing.session import free_tcp_port  # noqa: E402

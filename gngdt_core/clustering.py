@@ -55,7 +55,7 @@ class Clustering:
     """One way of grouping a network's nodes, published and drawn under ``name``.
 
     topologies: the edge sets whose connected components are its clusters (an edge counts where
-    every named topology has it), or ``("cvx",)``: the segmentation by local convexity
+    every named topology has it), or ``(CONVEXITY,)``: the segmentation by local convexity
     (`gngdt.core.segmentation.network`), whose segments are not plain components. Every clustering
     is drawn the same way: nodes and its edges coloured by persistent cluster id, grey outside any
     cluster (`gngdt.schemas.cluster_colors`).
@@ -71,20 +71,22 @@ class Clustering:
         return self.topologies == (CONVEXITY,)
 
 
-#: the paper's topologies, one edge set per property
-EDGE_PROPERTIES = ("pos", "col", "nor")
+#: the paper's node properties, one topology (edge set) each: position, colour, normal
+POS, COL, NOR = "pos", "col", "nor"
+EDGE_PROPERTIES = (POS, COL, NOR)
 #: the local-convexity topology (derived from positions, fresh normals and position edges)
 CONVEXITY = "cvx"
-#: every clustering gngdt publishes, in the order views show them; read by the learner, the
-#: logger, the scene output and evaluation
+#: every clustering gngdt publishes; the registry below holds them in the order views show them
+SEGMENTS = Clustering("segments", (CONVEXITY,), "objects: segments by local convexity")
+BY_POSITION = Clustering(POS, (POS,), "objects by shape: nodes joined by position edges")
+BY_COLOUR = Clustering(COL, (COL,), "regions of one colour")
+BY_NORMAL = Clustering(NOR, (NOR,), "planes: surfaces of one orientation")
+BY_COLOUR_AND_NORMAL = Clustering(f"{COL}+{NOR}", (COL, NOR),
+                                  "faces of one colour and one orientation")
+#: read by the learner, the logger, the scene output and evaluation
 CLUSTERINGS: dict[str, Clustering] = {
-    clustering.name: clustering for clustering in (
-        Clustering("segments", (CONVEXITY,), "objects: segments by local convexity"),
-        Clustering("pos", ("pos",), "objects by shape: nodes joined by position edges"),
-        Clustering("col", ("col",), "regions of one colour"),
-        Clustering("nor", ("nor",), "planes: surfaces of one orientation"),
-        Clustering("col+nor", ("col", "nor"), "faces of one colour and one orientation"),
-    )
+    clustering.name: clustering
+    for clustering in (SEGMENTS, BY_POSITION, BY_COLOUR, BY_NORMAL, BY_COLOUR_AND_NORMAL)
 }
 #: the clusterings that are connected components of the paper's topologies (all but segments)
 TOPOLOGY_CLUSTERINGS = tuple(name for name, clustering in CLUSTERINGS.items()

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gngdt.core.clustering import COL, POS
 from gngdt.io.deproject import voxel_downsample, voxel_keys
 
 
@@ -50,9 +51,9 @@ def quantization_error(
     from gngdt.core.metrics import quantization_error as rms_error
 
     _, winners = cKDTree(representative_positions).query(positions, k=1)
-    result = {"pos": rms_error(positions, representative_positions, winners)}
+    result = {POS: rms_error(positions, representative_positions, winners)}
     if colors is not None and representative_colors is not None:
-        result["col"] = rms_error(colors, representative_colors, winners)
+        result[COL] = rms_error(colors, representative_colors, winners)
     return result
 
 

@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from gngdt.core.clustering import POS
+
 #: a point of the world sample is seen through (and dropped) when the current frame measures a
 #: surface this fraction of the depth behind it (5 %: 10 cm at 2 m, well above Kinect noise)
 FREE_SPACE_MARGIN = 0.05
@@ -228,8 +230,8 @@ class DynamicsTracker:
         order = np.random.default_rng(len(sample)).permutation(len(sample))
         fit, held_out = sample[order[::2]], sample[order[1::2]]
         kmeans = kmeans_reference(fit, None, len(nodes), fit_points=len(fit))
-        theirs = quantization_error(held_out, None, kmeans.positions, None)["pos"]
-        ours = quantization_error(held_out, None, nodes, None)["pos"]
+        theirs = quantization_error(held_out, None, kmeans.positions, None)[POS]
+        ours = quantization_error(held_out, None, nodes, None)[POS]
         return {
             "world_qe_pos": ours,
             "world_kmeans_qe_pos": theirs,

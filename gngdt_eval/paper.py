@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from gngdt.core.clustering import COL, POS
 from gngdt.eval.paper_common import (
     GNGDT_THRESHOLDS,
     GNGW_WEIGHTS,
@@ -102,8 +103,8 @@ def run_trial(task: TrialTask) -> dict[str, Any]:
     learn_seconds = time.perf_counter() - started
 
     winners = model.predict(positions)  # once: eq. 17 and the ARI below share them
-    error = {"pos": quantization_error(positions, model.positions_, winners),
-             "col": quantization_error(colors, model.colors_, winners)}
+    error = {POS: quantization_error(positions, model.positions_, winners),
+             COL: quantization_error(colors, model.colors_, winners)}
     result: dict[str, Any] = {
         "kind": "simulation",
         "method": task.method,
@@ -115,8 +116,8 @@ def run_trial(task: TrialTask) -> dict[str, Any]:
         "nodes": int(model.n_nodes_),
         "steps": int(model.n_steps_),
         "learn_seconds": learn_seconds,
-        "qe_pos": float(error["pos"]),
-        "qe_col": float(error["col"]),
+        "qe_pos": float(error[POS]),
+        "qe_col": float(error[COL]),
         "clusters": {},
         "clusters_all": {},
         "ari": {},
@@ -133,7 +134,7 @@ def run_trial(task: TrialTask) -> dict[str, Any]:
         topology["edges"][name] = model.edges(*props)
 
     if task.method == "GNG-DT" and task.dataset == "Data1":
-        col_labels = np.asarray(model.clusters("col", min_size=settings.min_cluster_size))
+        col_labels = np.asarray(model.clusters(COL, min_size=settings.min_cluster_size))
         centres = data1_centres(task.scale)
         centre_errors = cluster_centre_errors(model.positions_, col_labels, centres)
         result["centre_errors"] = dict(zip(RECTANGLES, map(float, centre_errors), strict=True))
@@ -148,7 +149,7 @@ def run_trial(task: TrialTask) -> dict[str, Any]:
         result["normal_edges"] = normal_edge_spread(model, winners, labels)
     if task.dataset == "Data1":
         # the clustering that should find the rectangles: GNG-DT's colour topology, else the one
-        main = "col" if task.method == "GNG-DT" else "pos"
+        main = COL if task.method == "GNG-DT" else POS
         result["rectangles_separated"] = separates_regions(
             labels, topology["labels"][main][winners], len(RECTANGLES)
         )
@@ -176,7 +177,7 @@ def normal_edge_spread(model: Any, winners: np.ndarray, labels: np.ndarray) -> d
     counts = np.zeros((model.n_nodes_, len(surfaces)), dtype=np.int64)
     np.add.at(counts, (winners, labels), 1)
     node_surface = np.where(counts.sum(axis=1) > 0, counts.argmax(axis=1), -1)
-    edges = model.edges("pos")
+    edges = model.edges(POS)
     normals = model.normals_
     difference = normals[edges[:, 0]] - normals[edges[:, 1]]
     total = normals[edges[:, 0]] + normals[edges[:, 1]]

@@ -12,6 +12,8 @@ import math
 import os
 from dataclasses import dataclass, field
 
+from gngdt.core.clustering import BY_COLOUR_AND_NORMAL, COL, NOR, POS
+
 METHODS = ("GNG", "GNG-W", "GNG-DT")
 #: command-line method names -> the paper's names
 METHOD_NAMES = {"gngdt": "GNG-DT", "gng": "GNG", "gngw": "GNG-W"}
@@ -135,7 +137,7 @@ PAPER_TABLE4: dict[str, dict[float, Cell | None]] = {
 
 
 # Figure 11 of the paper (Section 3.1): GNG-DT's cluster counts on Data2 per topology.
-PAPER_FIGURE11_CLUSTERS: dict[str, int] = {"pos": 1, "col": 3, "nor": 4, "col+nor": 5}
+PAPER_FIGURE11_CLUSTERS: dict[str, int] = {POS: 1, COL: 3, NOR: 4, BY_COLOUR_AND_NORMAL.name: 5}
 
 
 #: The paper's six RGB-D scenes (Figure 12 a-f, Azure Kinect DK), mean ± std over 50 trials.

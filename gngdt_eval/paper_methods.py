@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from gngdt.core.clustering import COL, NOR, POS
 from gngdt.eval.paper_common import GNGDT_THRESHOLDS, GNGW_WEIGHTS, METHODS, PAPER_PARAMETERS
 
 
@@ -61,7 +62,7 @@ def make_model(method: str, max_nodes: int, random_state: int, **gngdt_extra: An
 def clusterings_of(method: str, dimensions: int) -> tuple[tuple[str, ...], ...]:
     """The clusterings to count for a method: GNG-DT's topologies (normals only in 3D), else pos."""
     if method != "GNG-DT":
-        return (("pos",),)
+        return ((POS,),)
     if dimensions == 3:
-        return (("pos",), ("col",), ("nor",), ("col", "nor"))
-    return (("pos",), ("col",))
+        return ((POS,), (COL,), (NOR,), (COL, NOR))
+    return ((POS,), (COL,))

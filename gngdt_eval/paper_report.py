@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from gngdt.core.clustering import POS
 from gngdt.eval.paper_common import (
     GNGDT_THRESHOLDS,
     GNGW_WEIGHTS,
@@ -63,7 +64,7 @@ def write_plots(
                 topology = topologies.get((dataset, method, scale))
                 if topology is None:
                     continue
-                names = list(topology["labels"]) if method == "GNG-DT" else ["pos"]
+                names = list(topology["labels"]) if method == "GNG-DT" else [POS]
                 for name in names:
                     title = f"{method}" + (f" (C^{name})" if method == "GNG-DT" else "")
                     row.append(

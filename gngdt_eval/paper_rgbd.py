@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from gngdt.core.clustering import COL, POS
 from gngdt.eval.paper_common import METHODS, PAPER_WINNERS, PaperSettings
 from gngdt.eval.paper_methods import learn, make_model, trial_seed
 from gngdt.eval.report import mean_std
@@ -63,7 +64,7 @@ def extract_frames(folders: Sequence[str | Path], all_frames: bool, cache_dir: P
     for folder in map(Path, folders):
         for frame in iter_image_frames(folder, detect_format(folder)):
             positions, colors = deproject(frame.depth, frame.color, frame.intrinsics)
-            name = f"{folder.name}/{Path(frame.extras['color_path']).stem}"
+            name = f"{folder.name}/{frame.color_path.stem}"
             path = cache_dir / f"{len(frames):04d}.npz"
             np.savez(path, positions=positions * np.float32(MILLIMETRES_PER_METRE), colors=colors)
             frames.append(RealFrame(name, str(path), len(positions)))
@@ -93,7 +94,7 @@ def run_frame_trial(task: FrameTask) -> dict[str, Any]:
     error = model.quantization_error(positions, colors)
     return {"kind": "frame", "method": task.method, "frame": task.frame.name,
             "trial": task.trial, "nodes": model.n_nodes_, "steps": model.n_steps_,
-            "qe_pos": float(error["pos"]), "qe_col": float(error["col"])}
+            "qe_pos": float(error[POS]), "qe_col": float(error[COL])}
 
 
 def summarise_frames(results: list[dict[str, Any]], frames: Sequence[RealFrame],

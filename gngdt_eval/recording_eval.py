@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from gngdt.core.clustering import COL, POS, SEGMENTS
 from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig, PoseRejectedError
 from gngdt.core.sensor.geometry import apply_pose
 from gngdt.eval.dynamics import (
@@ -302,7 +303,7 @@ def _frame_record(model: Any, points: FramePoints, labels: dict[str, np.ndarray]
     record: dict[str, Any] = {
         "frame": points.index, "points": len(points.positions), "nodes": int(model.n_nodes_),
         "steps": int(model.n_steps_), "learn_seconds": learn_seconds,
-        "qe_pos": float(error["pos"]), "qe_col": float(error["col"]), "clusters": {},
+        "qe_pos": float(error[POS]), "qe_col": float(error[COL]), "clusters": {},
     }
     labelled = None if points.labels is None else points.labels != NO_LABEL
     has_truth = labelled is not None and bool(labelled.any())
@@ -310,11 +311,11 @@ def _frame_record(model: Any, points: FramePoints, labels: dict[str, np.ndarray]
     if labelled is not None:
         record["ari"] = {}
     for name, node_labels in labels.items():
-        if name != "segments":  # segments are scored as objects (identity), not counted
+        if name != SEGMENTS.name:  # segments are scored as objects (identity), not counted
             record["clusters"][name] = cluster_count(node_labels)
         identity.update(name, model.node_ids_, node_labels, winners if has_truth else None,
                         points.labels[labelled] if has_truth else None)
-        if has_truth and name != "segments":
+        if has_truth and name != SEGMENTS.name:
             record["ari"][name] = float(
                 adjusted_rand_index(points.labels[labelled], node_labels[winners]))
     return record
@@ -444,10 +445,10 @@ def summarise_runs(runs: list[dict[str, Any]], refs: dict[str, Any]) -> dict[str
         reference = refs["by_nodes"].get(nodes)
         if reference is not None:
             entry["ratio_to_kmeans_pos"] = (
-                entry["qe_pos"]["mean"] / reference["kmeans"]["qe"]["pos"]
+                entry["qe_pos"]["mean"] / reference["kmeans"]["qe"][POS]
             )
             entry["ratio_to_voxel_grid_pos"] = (
-                entry["qe_pos"]["mean"] / reference["voxel_grid"]["qe"]["pos"]
+                entry["qe_pos"]["mean"] / reference["voxel_grid"]["qe"][POS]
             )
         entry["over_time"] = summarise_over_time([r for r in runs if r["method"] == method])
         summary[method] = entry

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from gngdt.core.clustering import COL, POS
 from gngdt.eval.paper_methods import clusterings_of
 from gngdt.eval.report import format_mean_std, format_number, markdown_table
 
@@ -76,10 +77,10 @@ def _plot_curves(runs: list[dict[str, Any]], refs: dict[str, Any], summary: dict
             for name, label in (("kmeans", "k-means"), ("voxel_grid", "voxel grid")):
                 lines["position error (m)"][f"{label}, {nodes} (last frame)"] = reference[name][
                     "qe"
-                ]["pos"]
+                ][POS]
                 lines["colour error (0-255)"][f"{label}, {nodes} (last frame)"] = reference[name][
                     "qe"
-                ]["col"]
+                ][COL]
     return plot_method_curves(
         curves,
         out_dir / "recording_curves.png",
@@ -272,14 +273,14 @@ def _references_section(refs: dict[str, Any]) -> list[str]:
     for nodes, ref in refs["by_nodes"].items():
         rows.append([
             f"k-means, {nodes} centres",
-            format_number(ref["kmeans"]["qe"]["pos"], 4),
-            format_number(ref["kmeans"]["qe"]["col"], 2),
+            format_number(ref["kmeans"]["qe"][POS], 4),
+            format_number(ref["kmeans"]["qe"][COL], 2),
             f"fitted on {int(ref['kmeans']['fit_points']):,} points",
         ])
         rows.append([
             f"voxel grid, {int(ref['voxel_grid']['points'])} points",
-            format_number(ref["voxel_grid"]["qe"]["pos"], 4),
-            format_number(ref["voxel_grid"]["qe"]["col"], 2),
+            format_number(ref["voxel_grid"]["qe"][POS], 4),
+            format_number(ref["voxel_grid"]["qe"][COL], 2),
             f"voxel {ref['voxel_grid']['voxel_size'] * 1000:.1f} mm",
         ])
     parts = [f"## References on the last frame's {refs['points']:,} points",

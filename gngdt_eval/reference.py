@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gngdt.core.clustering import COL, NOR, POS
 from gngdt.core.gas.model import GNGDT
 from gngdt.core.gas.sampling import as_samples, initial_indices, sample_orders
 from gngdt.core.kernels.layout import COL_BIT, I_NEXT_ID, MAX_DEGREE, NOR_BIT
@@ -31,7 +32,7 @@ from gngdt.core.kernels.layout import COL_BIT, I_NEXT_ID, MAX_DEGREE, NOR_BIT
 @dataclass
 class Edge:
     age: int
-    properties: set[str] = field(default_factory=lambda: {"pos"})
+    properties: set[str] = field(default_factory=lambda: {POS})
 
 
 def _key(i: int, j: int) -> tuple[int, int]:
@@ -70,7 +71,7 @@ class ReferenceGNGDT:
         ref.errors = model.errors_
         ref.ids = model.node_ids_
         ref.next_id = int(model._istate[I_NEXT_ID])
-        ref.has_col = "col" in model.properties_
+        ref.has_col = COL in model.properties_
         ref.n_steps = model.n_steps_
         a = model._arrays
         for i in range(model.n_nodes_):
@@ -78,7 +79,7 @@ class ReferenceGNGDT:
             for k, j in enumerate(ref.adjacency[i]):
                 if i < j:
                     bits = int(a["emask"][i, k])
-                    props = {"pos"} | {name for name, bit in (("col", COL_BIT), ("nor", NOR_BIT))
+                    props = {POS} | {name for name, bit in ((COL, COL_BIT), (NOR, NOR_BIT))
                                        if bits & bit and name in model.properties_}
                     ref.edges[(i, j)] = Edge(int(a["age"][i, k]), props)
         return ref
@@ -106,17 +107,17 @@ class ReferenceGNGDT:
 
     def _edge_properties(self, i: int, j: int) -> set[str]:
         """Eqs. 4 and 9: the position edge plus every property whose values are within tau."""
-        props = {"pos"}
+        props = {POS}
         if self.has_col and np.linalg.norm(self.colors[i] - self.colors[j]) < self.params[
             "tau_col"
         ]:
-            props.add("col")
+            props.add(COL)
         if self.positions.shape[1] == 3:
             ni, nj = self.normals[i], self.normals[j]
             if ni.any() and nj.any():
                 distance = min(np.linalg.norm(ni - nj), np.linalg.norm(ni + nj))
                 if distance < self.params["tau_nor"]:
-                    props.add("nor")
+                    props.add(NOR)
         return props
 
     def _orient(self, i: int) -> None:
@@ -180,7 +181,7 @@ class ReferenceGNGDT:
             self.adjacency = [[1], [0]]
             self.ids = np.array([0, 1], dtype=np.int64)
             self.next_id = 2
-            self.edges = {(0, 1): Edge(0, {"pos", "col", "nor"})}
+            self.edges = {(0, 1): Edge(0, {POS, COL, NOR})}
         for order in sample_orders(self.rng, samples.shape[0], steps):
             for index in order:  # Step 1
                 colour = sample_colors[index] if self.has_col else None
@@ -198,7 +199,7 @@ class ReferenceGNGDT:
         self.errors[s1] += squared[s1]
         # Step 4
         key = _key(s1, s2)
-        if key in self.edges or self._connect(s1, s2, {"pos"}):
+        if key in self.edges or self._connect(s1, s2, {POS}):
             self.edges[key].age = 0
             self.edges[key].properties = self._edge_properties(s1, s2)
         else:
@@ -209,7 +210,7 @@ class ReferenceGNGDT:
             self.colors[s1] += p["eta1"] * (colour - self.colors[s1])
         for j, edge in self.neighbours(s1):
             self.positions[j] += p["eta2"] * (x - self.positions[j])
-            if self.has_col and "col" in edge.properties:
+            if self.has_col and COL in edge.properties:
                 self.colors[j] += p["eta2"] * (colour - self.colors[j])
             edge.age += 1  # Step 6
         # Step 7: expired edges of s1 in slot order (a removed slot is refilled: look again)

@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -42,7 +43,11 @@ class Frame:
 
     color: (H, W, 3) uint8 RGB. depth: (H, W) uint16 millimetres, 0 = no measurement.
     labels: (H, W) uint16 ground-truth segment ids (synthetic scenes only), 0 = background/none.
-    pose: the camera's pose in a fixed frame, when the recording has one.
+    pose: the camera's pose in a fixed frame, when the recording has one. pose_error: why a
+    recording that has poses has none for this frame ("": it has one, or the recording none).
+    color_path, depth_path: the image files of a frame read from a folder.
+    extras: a source's own metadata, for people and evaluation (a RealSense's frame numbers, a
+    synthetic scene's segment names); the pipeline never reads it.
     """
 
     index: int
@@ -52,4 +57,7 @@ class Frame:
     intrinsics: CameraIntrinsics
     labels: np.ndarray | None = None
     pose: CameraPose | None = None
+    pose_error: str = ""
+    color_path: Path | None = None
+    depth_path: Path | None = None
     extras: dict[str, object] = field(default_factory=dict)

@@ -402,5 +402,6 @@ def iter_image_frames(
             color=color,
             depth=depth,
             intrinsics=frame_intrinsics,
-            extras={"color_path": str(pair.color), "depth_path": str(pair.depth)},
+            color_path=Path(pair.color),
+            depth_path=Path(pair.depth),
         )

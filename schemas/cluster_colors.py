@@ -12,6 +12,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from gngdt.core.clustering import POS
+
 #: colour of nodes in no cluster (label -1), and of edges leaving a cluster
 UNCLUSTERED_RGB = (150, 150, 150)
 _GOLDEN = 0.618033988749895
@@ -68,7 +70,7 @@ def clustering_edges(name: str, edges: Mapping[str, np.ndarray], labels: np.ndar
             prop_keys = np.unique(pairs[:, 0] << 32 | pairs[:, 1])
             keys = prop_keys if keys is None else np.intersect1d(keys, prop_keys)
         return np.stack([keys >> 32, keys & 0xFFFFFFFF], axis=1)
-    pairs = np.asarray(edges.get("pos", np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
+    pairs = np.asarray(edges.get(POS, np.zeros((0, 2))), dtype=np.int64).reshape(-1, 2)
     labels = np.asarray(labels)
     inside = (labels[pairs[:, 0]] >= 0) & (labels[pairs[:, 0]] == labels[pairs[:, 1]])
     return pairs[inside]

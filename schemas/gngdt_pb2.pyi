@@ -75,7 +75,7 @@ class Topology(_message.Message):
     def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., steps: _Optional[int] = ..., frame_id: _Optional[str] = ..., positions: _Optional[_Union[PackedArray, _Mapping]] = ..., colors: _Optional[_Union[PackedArray, _Mapping]] = ..., normals: _Optional[_Union[PackedArray, _Mapping]] = ..., errors: _Optional[_Union[PackedArray, _Mapping]] = ..., edges: _Optional[_Iterable[_Union[EdgeSet, _Mapping]]] = ..., clusterings: _Optional[_Iterable[_Union[Clustering, _Mapping]]] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., node_ids: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
 
 class LearnerStatus(_message.Message):
-    __slots__ = ("timestamp", "frame_sequence", "frame_id", "steps", "steps_per_second", "nodes", "frames_received", "frames_used", "frames_dropped", "malformed_messages", "latency_ms", "latency_p50_ms", "latency_p99_ms", "quantization_error", "cluster_counts", "settled", "seen_nodes", "ghost_share", "ghost_distance_m", "nodes_forgotten", "frames_other_frame", "frames_pose_rejected", "pose_problem", "frame_budget_ms", "frame_steps", "frames_lost_tracking", "tracking")
+    __slots__ = ("timestamp", "frame_sequence", "frame_id", "steps", "steps_per_second", "nodes", "frames_received", "frames_used", "frames_dropped", "malformed_messages", "latency_ms", "latency_p50_ms", "latency_p99_ms", "quantization_error", "cluster_counts", "settle_reason", "seen_nodes", "ghost_share", "ghost_distance_m", "nodes_forgotten", "frames_other_frame", "frames_pose_rejected", "pose_problem", "frame_budget_ms", "frame_steps", "frames_lost_tracking", "tracking", "settled")
     class QuantizationErrorEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -105,7 +105,7 @@ class LearnerStatus(_message.Message):
     LATENCY_P99_MS_FIELD_NUMBER: _ClassVar[int]
     QUANTIZATION_ERROR_FIELD_NUMBER: _ClassVar[int]
     CLUSTER_COUNTS_FIELD_NUMBER: _ClassVar[int]
-    SETTLED_FIELD_NUMBER: _ClassVar[int]
+    SETTLE_REASON_FIELD_NUMBER: _ClassVar[int]
     SEEN_NODES_FIELD_NUMBER: _ClassVar[int]
     GHOST_SHARE_FIELD_NUMBER: _ClassVar[int]
     GHOST_DISTANCE_M_FIELD_NUMBER: _ClassVar[int]
@@ -117,6 +117,7 @@ class LearnerStatus(_message.Message):
     FRAME_STEPS_FIELD_NUMBER: _ClassVar[int]
     FRAMES_LOST_TRACKING_FIELD_NUMBER: _ClassVar[int]
     TRACKING_FIELD_NUMBER: _ClassVar[int]
+    SETTLED_FIELD_NUMBER: _ClassVar[int]
     timestamp: _timestamp_pb2.Timestamp
     frame_sequence: int
     frame_id: str
@@ -132,7 +133,7 @@ class LearnerStatus(_message.Message):
     latency_p99_ms: float
     quantization_error: _containers.ScalarMap[str, float]
     cluster_counts: _containers.ScalarMap[str, int]
-    settled: str
+    settle_reason: str
     seen_nodes: int
     ghost_share: float
     ghost_distance_m: float
@@ -144,7 +145,8 @@ class LearnerStatus(_message.Message):
     frame_steps: int
     frames_lost_tracking: int
     tracking: str
-    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., frame_id: _Optional[str] = ..., steps: _Optional[int] = ..., steps_per_second: _Optional[float] = ..., nodes: _Optional[int] = ..., frames_received: _Optional[int] = ..., frames_used: _Optional[int] = ..., frames_dropped: _Optional[int] = ..., malformed_messages: _Optional[int] = ..., latency_ms: _Optional[float] = ..., latency_p50_ms: _Optional[float] = ..., latency_p99_ms: _Optional[float] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., cluster_counts: _Optional[_Mapping[str, int]] = ..., settled: _Optional[str] = ..., seen_nodes: _Optional[int] = ..., ghost_share: _Optional[float] = ..., ghost_distance_m: _Optional[float] = ..., nodes_forgotten: _Optional[int] = ..., frames_other_frame: _Optional[int] = ..., frames_pose_rejected: _Optional[int] = ..., pose_problem: _Optional[str] = ..., frame_budget_ms: _Optional[float] = ..., frame_steps: _Optional[int] = ..., frames_lost_tracking: _Optional[int] = ..., tracking: _Optional[str] = ...) -> None: ...
+    settled: bool
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., frame_id: _Optional[str] = ..., steps: _Optional[int] = ..., steps_per_second: _Optional[float] = ..., nodes: _Optional[int] = ..., frames_received: _Optional[int] = ..., frames_used: _Optional[int] = ..., frames_dropped: _Optional[int] = ..., malformed_messages: _Optional[int] = ..., latency_ms: _Optional[float] = ..., latency_p50_ms: _Optional[float] = ..., latency_p99_ms: _Optional[float] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., cluster_counts: _Optional[_Mapping[str, int]] = ..., settle_reason: _Optional[str] = ..., seen_nodes: _Optional[int] = ..., ghost_share: _Optional[float] = ..., ghost_distance_m: _Optional[float] = ..., nodes_forgotten: _Optional[int] = ..., frames_other_frame: _Optional[int] = ..., frames_pose_rejected: _Optional[int] = ..., pose_problem: _Optional[str] = ..., frame_budget_ms: _Optional[float] = ..., frame_steps: _Optional[int] = ..., frames_lost_tracking: _Optional[int] = ..., tracking: _Optional[str] = ..., settled: _Optional[bool] = ...) -> None: ...
 
 class StreamEnd(_message.Message):
     __slots__ = ("timestamp", "frames_sent", "last_frame_sequence", "recording", "frame_id")

@@ -41,7 +41,7 @@ class LearnerStatusInfo:
     quantization_error: dict[str, float] = field(default_factory=dict)
     cluster_counts: dict[str, int] = field(default_factory=dict)
     #: after the stream ended: how learning on its last frame stopped ("" while streaming)
-    settled: str = ""
+    settle_reason: str = ""
     seen_nodes: int = 0
     ghost_share: float = 0.0
     ghost_distance_m: float = 0.0
@@ -54,6 +54,8 @@ class LearnerStatusInfo:
     frame_steps: int = 0
     frames_lost_tracking: int = 0
     tracking: str = ""
+    #: the stream ended and the learner settled on its last frame: nothing more will come
+    settled: bool = False
 
 
 @dataclass

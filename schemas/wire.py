@@ -38,11 +38,44 @@ MAX_SEQUENCE = 2**63 - 1
 MAX_CLOCK_OFFSET_NS = 24 * 3600 * 1_000_000_000
 
 
+#: every key gngdt uses (what the logger and `gngdt run` subscribe to)
+ALL_KEYS = "gngdt/**"
+#: a camera wildcard, for patterns over every camera (``topic(ANY_CAMERA, "points")``)
+ANY_CAMERA = "*"
+#: the services that announce themselves per camera with a liveliness token
+#: ``gngdt/<cam>/<service>/alive`` (docs/contracts.md "Liveliness")
+CAPTURE, LEARNER, BRIDGE = "capture", "learner", "ros2"
+#: each logger's token is ``gngdt/logger/alive/<zenoh id>`` (a logger takes every camera)
+LOGGER_ALIVE = "gngdt/logger/alive"
+
+
 def topic(camera: str, name: str) -> str:
-    """Key expression of one stream of one camera: ``topic("camera", "points")``."""
-    if not camera or "/" in camera or "*" in camera or "$" in camera:
+    """Key expression of one stream of one camera: ``topic("camera", "points")``;
+    `ANY_CAMERA` gives the pattern over every camera."""
+    if camera != ANY_CAMERA and (not camera or "/" in camera or "*" in camera or "$" in camera):
         raise ValueError(f"camera name must be a single key chunk, got {camera!r}")
     return f"gngdt/{camera}/{name}"
+
+
+def alive_key(camera: str, service: str) -> str:
+    """The liveliness token of one camera's ``service`` (`CAPTURE`, `LEARNER`, `BRIDGE`)."""
+    return topic(camera, f"{service}/alive")
+
+
+def learner_instance_key(camera: str, zenoh_id: str = "*") -> str:
+    """The token each learner of ``camera`` declares (``*``: any learner's), so that a second
+    learner of one camera can see the first."""
+    return topic(camera, f"{LEARNER}/instance/{zenoh_id}")
+
+
+def logger_alive_key(zenoh_id: str = "*") -> str:
+    """One logger's liveliness token (``*``: any logger's)."""
+    return f"{LOGGER_ALIVE}/{zenoh_id}"
+
+
+def camera_of(key: str) -> str:
+    """The camera a ``gngdt/<cam>/...`` key belongs to."""
+    return key.split("/")[1]
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,7 @@ from gngdt.io.mcap.limits import ReadLimits
 from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS, SourceOptions
 from gngdt.schemas.clouds import MAX_CLOUD_POINTS
 from gngdt.schemas.wire import (
+    CAPTURE,
     DEFAULT_CAMERA,
     ENCODING_CALIBRATION,
     ENCODING_FRAME_TRANSFORM,
@@ -42,6 +43,7 @@ from gngdt.schemas.wire import (
     ENCODING_RAW_IMAGE,
     ENCODING_STREAM_END,
     FrameStamp,
+    alive_key,
     topic,
 )
 from gngdt.services.plumbing import lifecycle
@@ -389,7 +391,7 @@ def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
     """Publish the source's frames on ``session`` until it ends or a stop signal, then the end
     of stream; the replay (what was read, what went wrong)."""
     publisher = CapturePublisher(session, args.cam)
-    token = session.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive")
+    token = session.liveliness().declare_token(alive_key(args.cam, CAPTURE))
     with lifecycle.graceful() as stop:
         replay = Replay(source, args.loop, stop)
         if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
@@ -425,7 +427,7 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         except ValueError as error:
             log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
             continue
-        if "pose_error" in frame.extras:  # the reader warned; the cloud would not fit the map
+        if frame.pose_error:  # the reader warned; the cloud would not fit the map
             positions = colors = None
             without_pose += 1
         publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),

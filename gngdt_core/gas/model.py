@@ -20,7 +20,7 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 
-from gngdt.core.clustering import connected_component_labels
+from gngdt.core.clustering import COL, NOR, POS, connected_component_labels
 from gngdt.core.gas import queries
 from gngdt.core.gas.coverage import SurfaceCoverage
 from gngdt.core.gas.rehearsal import SampleMemory
@@ -45,7 +45,7 @@ from gngdt.core.parameters import validate_parameters
 from gngdt.core.segmentation.network import Segmentation, SegmentationParams, segment_network
 from gngdt.core.sensor.view import SensorView, rigid_inverse, see_batch
 
-_PROPERTY_BITS = {"pos": K.POS_BIT, "col": K.COL_BIT, "nor": K.NOR_BIT}
+_PROPERTY_BITS = {POS: K.POS_BIT, COL: K.COL_BIT, NOR: K.NOR_BIT}
 
 
 class GrowingGas:
@@ -88,9 +88,9 @@ class GrowingGas:
         self._dim = dim
         self._has_col = has_col
         self._arrays = {
-            "pos": np.zeros((cap, dim)),
-            "col": np.zeros((cap, 3)),
-            "nor": np.zeros((cap, 3)),
+            POS: np.zeros((cap, dim)),
+            COL: np.zeros((cap, 3)),
+            NOR: np.zeros((cap, 3)),
             "err": np.zeros(cap),
             "nbr": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
             "age": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
@@ -228,7 +228,7 @@ class GrowingGas:
         kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
         for part in self._refresh_parts(order):
             learn(samples, kernel_colors, part,
-                  a["pos"], a["col"], a["nor"], a["err"],
+                  a[POS], a[COL], a[NOR], a["err"],
                   a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
                   a["util"], a["judged"], a["wins"],
                   a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
@@ -271,10 +271,10 @@ class GrowingGas:
         a = self._arrays
         n = self.n_nodes_
         if iparams[K.Q_HAS_NOR]:
-            SK.refresh_normals(n, a["pos"], a["nor"], a["nbr"], a["deg"], fparams[K.P_MU],
+            SK.refresh_normals(n, a[POS], a[NOR], a["nbr"], a["deg"], fparams[K.P_MU],
                                bool(iparams[K.Q_ORIENT]), fparams[K.P_VX], fparams[K.P_VY],
                                fparams[K.P_VZ])
-        SK.refresh_property_bits(n, a["col"], a["nor"], a["nbr"], a["emask"], a["rev"], a["deg"],
+        SK.refresh_property_bits(n, a[COL], a[NOR], a["nbr"], a["emask"], a["rev"], a["deg"],
                                  bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
                                  fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
         self._normals_fresh = bool(iparams[K.Q_HAS_NOR])
@@ -284,7 +284,7 @@ class GrowingGas:
         """What this batch's sensor saw (`gngdt.core.sensor.view.see_batch`): the nodes forgetting
         judges, the samples of ``memory`` (rehearsal) it saw through."""
         if self._forgets or memory is not None:
-            see_batch(camera_samples, camera_pose, self._arrays["pos"], self.n_nodes_,
+            see_batch(camera_samples, camera_pose, self._arrays[POS], self.n_nodes_,
                       self._arrays["judged"] if self._forgets else None, self._dim,
                       self._fstate[K.F_SPACING], self._params["view_depth_margin"], memory)
 
@@ -300,9 +300,9 @@ class GrowingGas:
         property with age 0."""
         a = self._arrays
         for node in (0, 1):
-            a["pos"][node] = samples[node]
+            a[POS][node] = samples[node]
             if sample_colors is not None:
-                a["col"][node] = sample_colors[node]
+                a[COL][node] = sample_colors[node]
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
         add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
         a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
@@ -328,7 +328,7 @@ class GrowingGas:
 
     @property
     def properties_(self) -> tuple[str, ...]:
-        return ("pos",)
+        return (POS,)
 
     def _node_array(self, name: str, width: int) -> np.ndarray:
         if not self._arrays:
@@ -338,17 +338,17 @@ class GrowingGas:
     @property
     def positions_(self) -> np.ndarray:
         """(n_nodes, D) float64 node positions, in the input's units."""
-        return self._node_array("pos", max(self._dim, 2))
+        return self._node_array(POS, max(self._dim, 2))
 
     @property
     def colors_(self) -> np.ndarray:
         """(n_nodes, 3) float64 node colours on the input's scale (zeros if none learned)."""
-        return self._node_array("col", 3)
+        return self._node_array(COL, 3)
 
     @property
     def normals_(self) -> np.ndarray:
         """(n_nodes, 3) float64 unit normals; (0, 0, 0) where undefined or not learned."""
-        return self._node_array("nor", 3)
+        return self._node_array(NOR, 3)
 
     @property
     def node_ids_(self) -> np.ndarray:
@@ -374,7 +374,7 @@ class GrowingGas:
         An edge is kept where every named property has it (``edges("col", "nor")``); no name
         means "pos".
         """
-        return self._edges_with(self._property_mask(props or ("pos",)))
+        return self._edges_with(self._property_mask(props or (POS,)))
 
     def _property_mask(self, props: tuple[str, ...]) -> int:
         mask = 0
@@ -396,7 +396,7 @@ class GrowingGas:
         An edge is kept where every named property has it (``clusters("col", "nor")``); no name
         means "pos". Labels 0..k-1 by decreasing cluster size; -1 for clusters below ``min_size``.
         """
-        mask = self._property_mask(props or ("pos",))
+        mask = self._property_mask(props or (POS,))
         return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
 
     def predict(self, positions: Any, return_distance: bool = False) -> Any:
@@ -435,7 +435,7 @@ class GrowingGas:
     def _grid_arrays(self) -> queries.NodeGrid:
         """Node positions, count and spatial grid, as the nearest-node kernels take them."""
         a = self._arrays
-        return (a["pos"], self.n_nodes_, a["ghead"], a["gnext"],
+        return (a[POS], self.n_nodes_, a["ghead"], a["gnext"],
                 bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL])
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
@@ -446,9 +446,9 @@ class GrowingGas:
         """
         samples, sample_colors, _ = as_samples(positions, colors)
         winners = self.predict(samples)
-        result = {"pos": _rms_error(samples, self.positions_, winners)}
+        result = {POS: _rms_error(samples, self.positions_, winners)}
         if sample_colors is not None and self._has_col:
-            result["col"] = _rms_error(sample_colors, self.colors_, winners)
+            result[COL] = _rms_error(sample_colors, self.colors_, winners)
         return result
 
     # ------------------------------------------------------------------ checkpoints
@@ -557,11 +557,11 @@ class GNGDT(GrowingGas):
 
     @property
     def properties_(self) -> tuple[str, ...]:
-        props = ["pos"]
+        props = [POS]
         if self._has_col:
-            props.append("col")
+            props.append(COL)
         if self._dim == 3:
-            props.append("nor")
+            props.append(NOR)
         return tuple(props)
 
     def fresh_normals(self) -> np.ndarray:
@@ -574,9 +574,9 @@ class GNGDT(GrowingGas):
         if self._normals_fresh:  # refreshed after the last step (``normal_refresh_steps``)
             return self.normals_
         a = self._arrays
-        normals = a["nor"].copy()
+        normals = a[NOR].copy()
         fparams, iparams = self._kernel_parameters()
-        SK.refresh_normals(self.n_nodes_, a["pos"], normals, a["nbr"], a["deg"],
+        SK.refresh_normals(self.n_nodes_, a[POS], normals, a["nbr"], a["deg"],
                            fparams[K.P_MU], bool(iparams[K.Q_ORIENT]), fparams[K.P_VX],
                            fparams[K.P_VY], fparams[K.P_VZ])
         return normals[: self.n_nodes_]
@@ -589,7 +589,7 @@ class GNGDT(GrowingGas):
         view: what the sensor measured in the frame just learned (`SensorView.of` its points in
         the camera frame), to bridge gaps of missing depth; camera_pose: (4, 4) camera-to-model
         of that frame (None: the model is in the camera frame)."""
-        return segment_network(self.positions_, self.fresh_normals(), self.edges("pos"), params,
+        return segment_network(self.positions_, self.fresh_normals(), self.edges(POS), params,
                                view, None if camera_pose is None else rigid_inverse(camera_pose))
 
     def segment(self, params: SegmentationParams | None = None) -> np.ndarray:

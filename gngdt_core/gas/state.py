@@ -8,6 +8,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
+from gngdt.core.clustering import COL, NOR, POS
 from gngdt.core.gas.sampling import checked_pose
 from gngdt.core.kernels import layout as K
 from gngdt.core.kernels.grid import grid_rebuild
@@ -24,7 +25,7 @@ MAX_STATE_COUNTER = 2**62
 #: float dtypes of a state's arrays (float16 loses what was learned; others are not ours)
 _FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
-_FLOAT_ARRAYS = ("pos", "col", "nor", "err")
+_FLOAT_ARRAYS = (POS, COL, NOR, "err")
 _INT_ARRAYS = ("nbr", "age", "emask", "rev", "deg")
 
 
@@ -52,7 +53,7 @@ def snapshot(model: Any) -> dict[str, np.ndarray]:
         state["memory_offered"] = np.array(model._memory.offered, dtype=np.int64)
     if model._coverage is not None:
         state["coverage_cells"] = model._coverage.cells()
-    for name in ("pos", "col", "nor", "err", "nbr", "age", "emask", "rev", "deg", "ids",
+    for name in (POS, COL, NOR, "err", "nbr", "age", "emask", "rev", "deg", "ids",
                  "util", "wins"):
         if a:
             state[name] = a[name][:n].copy()
@@ -158,7 +159,7 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         model._coverage.restore(state["coverage_cells"])
     if counters[K.I_GRID]:
         a = model._arrays
-        grid_rebuild(a["pos"], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
+        grid_rebuild(a[POS], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
                      float(scalars[K.F_CELL]))
     return model
 
@@ -167,7 +168,7 @@ def _node_arrays(state: dict[str, np.ndarray], n: int, dim: int,
                  counters: np.ndarray) -> dict[str, np.ndarray]:
     """The ``n`` nodes' arrays of ``state``, checked (shapes, finite, a symmetric adjacency);
     sets ``counters[I_NEXT_ID]`` when the state predates node ids (see `_node_ids`)."""
-    shapes = {"pos": (n, dim), "col": (n, 3), "nor": (n, 3), "err": (n,), "deg": (n,)}
+    shapes = {POS: (n, dim), COL: (n, 3), NOR: (n, 3), "err": (n,), "deg": (n,)}
     for key in _FLOAT_ARRAYS + _INT_ARRAYS:
         if key not in state:
             raise ValueError(f"state is missing {key!r}")

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from gngdt.core.clustering import CLUSTERINGS, CONVEXITY, EDGE_PROPERTIES
+from gngdt.core.clustering import CLUSTERINGS, CONVEXITY, EDGE_PROPERTIES, POS, SEGMENTS
 from gngdt.core.gas.model import GNGDT
 from gngdt.core.learner.stream_learner import FrameSchedule, StreamLearner
 from gngdt.core.metrics import ghost_nodes
@@ -102,7 +102,7 @@ class LearnerOptions:
     ghost_sample: int = param(10_000, Interval(int, 0),
                               "status: points of each frame the ghost share is measured on "
                               "(0: not measured)")
-    objects_from: str = param("segments", OneOf(tuple(CLUSTERINGS)),
+    objects_from: str = param(SEGMENTS.name, OneOf(tuple(CLUSTERINGS)),
                               "clustering whose clusters are published as objects")
     object_confirm_frames: int = param(5, Interval(int, 1),
                                        "a cluster is an object once seen in this many learned "
@@ -400,7 +400,7 @@ class FrameLearner:
         model = self.model
         segmentation = self.last_segmentation or model.segmentation(self.config.segmentation)
         edges = {prop: model.edges(prop) for prop in EDGE_PROPERTIES}
-        edges[CONVEXITY] = edges["pos"][segmentation.convex]
+        edges[CONVEXITY] = edges[POS][segmentation.convex]
         labels = {}
         for name, clustering in CLUSTERINGS.items():
             labels[name] = (segmentation.labels if clustering.is_segmentation
@@ -441,7 +441,7 @@ class FrameLearner:
                                                         min(len(positions), 5_000),
                                                         replace=False)])
         steps = 0
-        previous = model.quantization_error(sample)["pos"]
+        previous = model.quantization_error(sample)[POS]
         started = time.perf_counter()
         reason = ""
         while steps < limit and not reason:
@@ -451,7 +451,7 @@ class FrameLearner:
             else:
                 self.stream.refine(positions, colors, chunk, camera_pose=self.last_pose)
             steps += chunk
-            error = model.quantization_error(sample)["pos"]
+            error = model.quantization_error(sample)[POS]
             change = abs(previous - error) / previous if previous > 0 else 0.0
             previous = error
             if model.n_nodes_ >= model.max_nodes and change < SETTLED_CHANGE:

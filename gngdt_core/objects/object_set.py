@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gngdt.core.clustering import POS, SEGMENTS
 from gngdt.core.clustering import clustering as clustering_spec
 from gngdt.core.objects.ids import ClusterIds
 
@@ -172,7 +173,7 @@ class ObjectFinder:
     `ClusterIds` (``ids``).
     """
 
-    def __init__(self, clustering: str = "segments", min_size: int = 5, confirm_frames: int = 5,
+    def __init__(self, clustering: str = SEGMENTS.name, min_size: int = 5, confirm_frames: int = 5,
                  **id_args: Any):
         self.clustering = clustering_spec(clustering)
         self.min_size = min_size
@@ -185,7 +186,7 @@ class ObjectFinder:
         if self.clustering.is_segmentation:
             if hasattr(model, "segment"):
                 return np.asarray(model.segment())
-            topologies = ("pos",)
+            topologies = (POS,)
         return model.clusters(*topologies, min_size=self.min_size)
 
     def label_ids(self, node_ids: np.ndarray, labels: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
+from gngdt.core.clustering import COL, POS
 from gngdt.core.kernels import odometry as OK
 
 #: a nearest-node search: (M, 3) map-frame points in scan order -> ((M,) row of each point's
@@ -90,9 +91,9 @@ class MapSurface:
         nearest-node search goes through the model's own grid (`GNGDT.predict`; on scan-ordered
         points about 4x faster than a cKDTree), so the model must not learn while the surface
         is in use."""
-        colors = model.colors_ if "col" in model.properties_ else None
+        colors = model.colors_ if COL in model.properties_ else None
         normals = model.fresh_normals()
-        surface = cls.from_arrays(model.positions_, normals, colors, model.edges("pos"),
+        surface = cls.from_arrays(model.positions_, normals, colors, model.edges(POS),
                                   ids=model.node_ids_)
         row_of = np.full(model.n_nodes_ + 1, -1, dtype=np.int64)  # the last: "no node"
         row_of[np.flatnonzero(np.linalg.norm(normals, axis=1) > 0.5)] = np.arange(len(surface))

@@ -203,7 +203,7 @@ class FrameAssembler:
             intrinsics=intrinsics,
             labels=None if labels is None else labels.astype(np.uint16, copy=False),
             pose=pose,
-            extras={} if pose_error is None else {"pose_error": pose_error},
+            pose_error=pose_error or "",
         )
         self.next_index += 1
         return frame

@@ -20,7 +20,7 @@ The fixed frame is ``fixed_frame``, or with ``"auto"`` the first of ``world``, `
 connected to the camera, else the root of the camera's tree. A recording whose transforms never
 connect the fixed frame and the camera gives frames without a pose, with one warning naming the
 frames; a frame whose time the transforms do not cover has no pose either (warned), and says why
-in ``frame.extras["pose_error"]``: the recording has poses, only not for that frame.
+in ``frame.pose_error``: the recording has poses, only not for that frame.
 
 Messages are read in file order, one chunk inflated at a time (MCAP writers write in log-time
 order; see :func:`gngdt.io.mcap.limits.open_messages` for why not mcap's merge by log time).

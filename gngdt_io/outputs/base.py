@@ -21,7 +21,7 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar
 
-from gngdt.schemas.wire import FrameStamp
+from gngdt.schemas.wire import FrameStamp, topic
 
 if TYPE_CHECKING:
     import zenoh
@@ -39,7 +39,7 @@ class StreamSample:
 
     @property
     def key(self) -> str:
-        return f"gngdt/{self.camera}/{self.stream}"
+        return topic(self.camera, self.stream)
 
 
 def split_bind(address: str, default_port: int) -> tuple[str, int]:

@@ -17,13 +17,13 @@ from typing import Any
 
 import numpy as np
 
-from gngdt.core.clustering import CLUSTERINGS
+from gngdt.core.clustering import CLUSTERINGS, SEGMENTS
 from gngdt.schemas.wire import DEFAULT_CAMERA
 
 #: clusterings with a 3D view, in view order
 CLUSTERING_VIEWS = tuple(CLUSTERINGS)
 #: the clustering whose view also shows the objects
-OBJECTS_VIEW = "segments"
+OBJECTS_VIEW = SEGMENTS.name
 
 
 @dataclass(frozen=True)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from gngdt.core.clustering import NOR
 from gngdt.io.outputs.rerun_blueprint import (
     CLUSTERING_VIEWS,
     EntityPaths,
@@ -203,7 +204,7 @@ class RerunLog:
     def static_up(self, paths: EntityPaths, snapshot: TopologySnapshot) -> None:
         """A static camera's up from the largest horizontal plane of its topology (in its
         frame), unless camera poses already say where up is."""
-        labels = snapshot.clusterings.get("nor")
+        labels = snapshot.clusterings.get(NOR)
         if (self._pose_up.count or snapshot.frame_id != paths.camera
                 or snapshot.normals is None or labels is None):
             return

@@ -56,7 +56,7 @@ class ImageFolderSource(FrameSource):
             camera = replace(camera, depth_scale=self.depth_scale)
         names: dict[str, str] = {}
         for frame in iter_image_frames(self.path, self.format, camera=camera):
-            color_path = str(frame.extras["color_path"])
+            color_path = str(frame.color_path)
             name = Path(color_path).stem
             if name in names:
                 raise RecordingError(color_path, frame.index,

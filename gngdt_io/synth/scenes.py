@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
+from gngdt.core.clustering import BY_COLOUR_AND_NORMAL, COL, NOR, POS
 from gngdt.io.synth.motion import CameraPath, Motion, Orbit, Walk
 from gngdt.io.synth.primitives import (
     Cylinder,
@@ -116,7 +117,7 @@ def data2_scene() -> Scene:
             period_s=8.0,
         ),
         background=(0, 0, 0),
-        ground_truth={"pos": 1, "col": 3, "nor": 4, "col+nor": 5},
+        ground_truth={POS: 1, COL: 3, NOR: 4, BY_COLOUR_AND_NORMAL.name: 5},
     )
 
 
@@ -204,7 +205,7 @@ def tabletop_scene() -> Scene:
         orbit=TABLETOP_ORBIT,
         background=(0, 0, 0),
         ground_truth={
-            "col": 7,
+            COL: 7,
             "plane_normals": {"up": (0.0, 0.0, 1.0), "wall": (0.0, -1.0, 0.0)},
         },
     )

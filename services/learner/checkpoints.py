@@ -11,6 +11,7 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
+from gngdt.core.clustering import POS
 from gngdt.core.gas.model import GNGDT
 from gngdt.core.learner.frame_learner import Counters, FrameLearner, LearnerConfig
 from gngdt.core.odometry.pose_checks import points_beyond_workspace
@@ -92,7 +93,7 @@ def check_workspace(path: Path, state: dict, config: LearnerConfig) -> None:
     learner's poses may span (`PoseLimits.workspace_m`): anything beyond is a forged or broken
     file, and would be learned from."""
     limits = config.options.pose_limits()
-    for key, what in (("pos", "nodes"), ("memory_positions", "remembered samples")):
+    for key, what in ((POS, "nodes"), ("memory_positions", "remembered samples")):
         beyond = points_beyond_workspace(state[key], limits) if key in state else 0
         if beyond:
             raise CheckpointError(

@@ -8,6 +8,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from gngdt.core.clustering import POS
 from gngdt.core.gas.sampling import finite_rows
 from gngdt.core.learner.frame_budget import Budget
 from gngdt.core.learner.frame_learner import DEFAULT_MAX_POINTS, FrameLearner, LearnedFrame
@@ -57,7 +58,7 @@ def scene_message(learner: FrameLearner, stamp: FrameStamp, learned: LearnedFram
         pairs = clustering_edges(name, learned.edges, labels)
         layers[name] = (pairs, node_colors(labels, learned.cluster_ids[name],
                                            learner.options.min_cluster_size))
-    pos_edges = learned.edges["pos"]
+    pos_edges = learned.edges[POS]
     spacing = (float(np.median(np.linalg.norm(
         positions[pos_edges[:, 0]] - positions[pos_edges[:, 1]], axis=1)))
         if len(pos_edges) else 0.02)
@@ -104,7 +105,8 @@ def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
         frames_other_frame=counters.frames_other_frame,
         frames_pose_rejected=counters.frames_pose_rejected,
         pose_problem=learner.poses.last_problem,
-        settled=settled,
+        settle_reason=settled,
+        settled=bool(settled),
         frame_budget_ms=0.0 if budget is None else budget.seconds * 1000.0,
         frame_steps=learner.last_steps,
         frames_lost_tracking=counters.frames_lost_tracking,

@@ -36,7 +36,10 @@ from gngdt.schemas.wire import (
     ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
     ENCODING_TOPOLOGY,
+    LEARNER,
     FrameStamp,
+    alive_key,
+    learner_instance_key,
     topic,
 )
 from gngdt.services.learner import checkpoints
@@ -129,19 +132,18 @@ class LearnerInstances:
     def __init__(self, session: zenoh.Session, camera: str) -> None:
         self.camera = camera
         self.own_id = str(session.zid())
-        self._prefix = f"gngdt/{camera}/learner/instance"
         self.conflict = threading.Event()
         self.other_id = ""
         others = [str(reply.ok.key_expr).rsplit("/", 1)[-1]
-                  for reply in session.liveliness().get(f"{self._prefix}/*", timeout=2.0)
+                  for reply in session.liveliness().get(learner_instance_key(camera), timeout=2.0)
                   if reply.ok is not None]
         if others:
             raise DuplicateLearnerError(
                 f"another learner (zenoh id {others[0]}) already learns camera {camera!r}; "
                 "stop it, or give this one another --cam")
-        self._token = session.liveliness().declare_token(f"{self._prefix}/{self.own_id}")
+        self._token = session.liveliness().declare_token(learner_instance_key(camera, self.own_id))
         self._subscriber = session.liveliness().declare_subscriber(
-            f"{self._prefix}/*", self._on_token, history=True)
+            learner_instance_key(camera), self._on_token, history=True)
 
     def _on_token(self, sample: zenoh.Sample) -> None:
         import zenoh
@@ -239,7 +241,7 @@ class LearnerService:
         self._scene = declare_publisher(session, topic(camera, "scene"),
                                         ENCODING_SCENE_UPDATE, latest_wins=True)
         self._queryable = session.declare_queryable(topic(camera, "topology"), self.latest.reply)
-        self._token = session.liveliness().declare_token(f"gngdt/{camera}/learner/alive")
+        self._token = session.liveliness().declare_token(alive_key(camera, LEARNER))
         options = self.options
         self.budget = StepBudget(options.frame_time_share,
                                  min(options.min_samples_per_frame, options.samples_per_frame),

@@ -18,9 +18,8 @@ from typing import TYPE_CHECKING
 
 from gngdt.services.logger.cameras import DEFAULT_MAX_CAMERAS
 from gngdt.services.logger.inbox import DEFAULT_QUEUE_MB
-from gngdt.services.logger.run import LIVELINESS_KEY
 
-__all__ = ["EXAMPLES", "LIVELINESS_KEY", "add_arguments", "main"]
+__all__ = ["EXAMPLES", "add_arguments", "main"]
 from gngdt.services.plumbing.session import add_zenoh_arguments
 
 if TYPE_CHECKING:

@@ -8,6 +8,8 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from gngdt.schemas.wire import ANY_CAMERA, CAPTURE, alive_key, camera_of
+
 if TYPE_CHECKING:
     import zenoh
 
@@ -40,7 +42,7 @@ class CaptureWatch:
     """Captures coming and going (their liveliness tokens ``gngdt/<cam>/capture/alive``): a
     camera is expected from its capture's start, not only from its first message."""
 
-    KEY = "gngdt/*/capture/alive"
+    KEY = alive_key(ANY_CAMERA, CAPTURE)
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
@@ -49,7 +51,7 @@ class CaptureWatch:
     def on_token(self, sample: zenoh.Sample) -> None:
         import zenoh
 
-        camera = str(sample.key_expr).split("/")[1]
+        camera = camera_of(str(sample.key_expr))
         with self._lock:
             self._events.append((camera, sample.kind == zenoh.SampleKind.PUT))
 

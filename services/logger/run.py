@@ -6,6 +6,7 @@ import argparse
 import logging
 
 from gngdt.io.outputs import Output
+from gngdt.schemas.wire import ALL_KEYS, logger_alive_key
 from gngdt.services.logger.cameras import Cameras, CaptureWatch
 from gngdt.services.logger.dispatch import Dispatcher
 from gngdt.services.logger.inbox import Inbox
@@ -15,7 +16,6 @@ from gngdt.services.plumbing.session import ZenohSetupError, open_session
 log = logging.getLogger(__name__)
 
 #: the logger's liveliness token (``gngdt run`` waits for it)
-LIVELINESS_KEY = "gngdt/logger/alive"
 
 
 def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
@@ -30,13 +30,13 @@ def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
         for output in outputs:
             output.close()
         return 1
-    declared = [session.declare_subscriber("gngdt/**", inbox.put)]
-    declared += [session.declare_subscriber("gngdt/**", output.receive)
+    declared = [session.declare_subscriber(ALL_KEYS, inbox.put)]
+    declared += [session.declare_subscriber(ALL_KEYS, output.receive)
                  for output in outputs if output.raw]
     captures = CaptureWatch()
     declared.append(session.liveliness().declare_subscriber(
         CaptureWatch.KEY, captures.on_token, history=True))
-    declared.append(session.liveliness().declare_token(f"{LIVELINESS_KEY}/{session.zid()}"))
+    declared.append(session.liveliness().declare_token(logger_alive_key(str(session.zid()))))
     try:
         with lifecycle.graceful() as stop:
             while not stop.is_set():

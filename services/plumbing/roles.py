@@ -26,7 +26,19 @@ import secrets
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from gngdt.schemas.wire import CAPTURE_STREAMS, LEARNER_STREAMS
+from gngdt.schemas.wire import (
+    ALL_KEYS,
+    ANY_CAMERA,
+    BRIDGE,
+    CAPTURE,
+    CAPTURE_STREAMS,
+    LEARNER,
+    LEARNER_STREAMS,
+    alive_key,
+    learner_instance_key,
+    logger_alive_key,
+    topic,
+)
 from gngdt.services.plumbing.session import client_settings, router_config, settings_file_text
 
 if TYPE_CHECKING:
@@ -45,17 +57,17 @@ ROLE_STREAMS: dict[str, tuple[str, ...]] = {
 }
 #: the liveliness tokens each role may declare
 ROLE_TOKENS: dict[str, tuple[str, ...]] = {
-    "capture": ("gngdt/*/capture/alive",),
-    "learner": ("gngdt/*/learner/alive", "gngdt/*/learner/instance/*"),
-    "logger": ("gngdt/logger/alive/*",),
-    "bridge": ("gngdt/*/ros2/alive", "gngdt/*/capture/alive"),
+    "capture": (alive_key(ANY_CAMERA, CAPTURE),),
+    "learner": (alive_key(ANY_CAMERA, LEARNER), learner_instance_key(ANY_CAMERA)),
+    "logger": (logger_alive_key(),),
+    "bridge": (alive_key(ANY_CAMERA, BRIDGE), alive_key(ANY_CAMERA, CAPTURE)),
     "viewer": (),
 }
 ROLES = tuple(ROLE_STREAMS)
 #: the role of each gngdt service (subcommand)
 SERVICE_ROLES = {"capture": "capture", "learn": "learner", "log": "logger", "ros2": "bridge"}
 
-_EVERYTHING = ["gngdt/**"]
+_EVERYTHING = [ALL_KEYS]
 
 
 def _rule(rule_id: str, flow: str, messages: list[str], keys: list[str]) -> dict[str, Any]:
@@ -67,7 +79,7 @@ def _role_rules(role: str) -> list[dict[str, Any]]:
     """What ``role`` may send in: its puts (the learner also answers topology queries) and its
     liveliness tokens."""
     rules = []
-    streams = [f"gngdt/*/{stream}" for stream in ROLE_STREAMS[role]]
+    streams = [topic(ANY_CAMERA, stream) for stream in ROLE_STREAMS[role]]
     if streams:
         messages = ["put"] + (["declare_queryable", "reply"] if role == "learner" else [])
         rules.append(_rule(f"{role} puts", "ingress", messages, streams))

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 
 from gngdt.io.mcap.limits import ReadLimits
 from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS
-from gngdt.schemas.wire import DEFAULT_CAMERA
+from gngdt.schemas.wire import BRIDGE, CAPTURE, DEFAULT_CAMERA, alive_key, topic
 from gngdt.services.capture import add_cloud_arguments
 from gngdt.services.plumbing.session import add_zenoh_arguments
 
@@ -201,7 +201,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
     outbound = GngdtToRos(gngdt, node, args.cam, args.camera_frame or args.cam,
                           1.0 / args.graph_rate)
     inbound = None
-    tokens = [gngdt.liveliness().declare_token(f"gngdt/{args.cam}/ros2/alive")]
+    tokens = [gngdt.liveliness().declare_token(alive_key(args.cam, BRIDGE))]
     try:
         if not args.no_input:
             inbound = RosToGngdt(
@@ -210,7 +210,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
                 to_cloud, max_skew_ns=int(args.max_skew_ms * 1e6),
                 max_pixels=args.max_frame_pixels, max_held_bytes=args.max_pending_mb << 20,
                 fixed_frame=args.fixed_frame)
-            tokens.append(gngdt.liveliness().declare_token(f"gngdt/{args.cam}/capture/alive"))
+            tokens.append(gngdt.liveliness().declare_token(alive_key(args.cam, CAPTURE)))
         log.info("ROS 2 node gngdt_%s in domain %d: %s", args.cam, domain,
                  "camera in, results out" if inbound else "results out")
         skipped = 0
@@ -220,7 +220,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
                 bad = sum(value for key, value in values.items()
                           if key.endswith(("malformed", "failed", "bad_frames")))
                 outbound.publish_status(Status(
-                    f"gngdt/{args.cam}/ros2", WARN if bad > skipped else OK,
+                    topic(args.cam, BRIDGE), WARN if bad > skipped else OK,
                     f"skipped {bad - skipped} bad messages" if bad > skipped else "bridging",
                     args.cam, values))
                 skipped = bad

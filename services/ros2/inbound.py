@@ -190,11 +190,11 @@ class RosToGngdt:
                 self._simulated_time = True
             capture_time = now
         positions = colors = None
-        if "pose_error" in frame.extras:
+        if frame.pose_error:
             self.counts.frames_without_pose += 1
             if self.counts.frames_without_pose <= WARN_FIRST:
                 log.warning("frame %d has no pose in %r: %s; its images are published, not its "
-                            "cloud", frame.index, self.fixed_frame, frame.extras["pose_error"])
+                            "cloud", frame.index, self.fixed_frame, frame.pose_error)
         else:
             positions, colors = self.to_cloud(frame)
         self.publisher.publish_frame(frame, FrameStamp(self._sequence, capture_time), positions,

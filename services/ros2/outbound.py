@@ -31,7 +31,7 @@ from gngdt.io.ros2.messages import (
     type_hash,
 )
 from gngdt.io.ros2.wire import QOS_DEFAULT_10, QOS_TF
-from gngdt.schemas.wire import topic
+from gngdt.schemas.wire import LEARNER, topic
 from gngdt.services.ros2.worker import Worker
 
 if TYPE_CHECKING:
@@ -225,7 +225,7 @@ class GngdtToRos:
                            for name, count in learner.cluster_counts.items()})
             stale = time.monotonic() - received_at > STATUS_STALE_S
             statuses.append(Status(
-                f"gngdt/{self.camera}/learner", STALE if stale else OK,
+                topic(self.camera, LEARNER), STALE if stale else OK,
                 "no status for a while" if stale else f"{learner.nodes} nodes",
                 self.camera, values))
         self._publish("status", encode_diagnostics(statuses, stamp_ns=time.time_ns()))

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import shutil
 import signal
 import subprocess
@@ -35,9 +34,16 @@ from gngdt.io.outputs.rerun_output import (
     add_serve_arguments,
     rate_arguments,
 )
-from gngdt.schemas.wire import DEFAULT_CAMERA, topic
+from gngdt.schemas.wire import (
+    ALL_KEYS,
+    BRIDGE,
+    DEFAULT_CAMERA,
+    LEARNER,
+    LOGGER_ALIVE,
+    alive_key,
+    topic,
+)
 from gngdt.services.capture import add_camera_arguments, add_source_arguments
-from gngdt.services.logger import LIVELINESS_KEY
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.roles import RunAccess
 from gngdt.services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
@@ -64,7 +70,6 @@ EXAMPLES = """examples:
   gngdt run walk.mcap --track                        # camera poses estimated, not read
 """
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 #: capture's point cap under `gngdt run`: a uniform random subset, as the learner's own sampling
 DEFAULT_MAX_POINTS = 50_000
 #: where `--ros2` finds ROS 2 by default: rmw_zenohd listens there
@@ -215,16 +220,13 @@ class Pipeline:
         self.interrupted = False
 
     def start(self, name: str, arguments: list[str]) -> Child:
-        # -P: the user's current folder, which may hold its own services/ or schemas/, is not
-        # put first on the children's import path
+        # -P: the user's current folder is not put first on the children's import path
         command = [sys.executable, "-P", "-m", "gngdt.services.cli", name, *arguments,
                    "--zenoh-config", str(self.access.client_file(name)),
                    "--log-level", self.log_level]
         stderr_path = self.log_dir / f"{name}.log"
         stderr_file = open(stderr_path, "wb")  # closed in Pipeline.close()
         env = lifecycle.child_environment()  # the child dies with this process
-        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO_ROOT),
-                                                          env.get("PYTHONPATH")]))
         log.debug("starting %s", " ".join(command))
         process = subprocess.Popen(command, stdout=stderr_file, stderr=subprocess.STDOUT,
                                    stdin=subprocess.DEVNULL, env=env, start_new_session=True)
@@ -393,7 +395,7 @@ def run_pipeline(args: argparse.Namespace, plan: RunPlan, log_dir: Path) -> RunO
     router = open_config(access.router(), what="router")
     observed = Observed()
     declared = [
-        router.liveliness().declare_subscriber("gngdt/**", observed.on_liveliness, history=True),
+        router.liveliness().declare_subscriber(ALL_KEYS, observed.on_liveliness, history=True),
         router.declare_subscriber(topic(args.cam, "learner/status"), observed.on_status),
         router.declare_subscriber(topic(args.cam, "eos"), observed.on_eos),
     ]
@@ -486,10 +488,10 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
              "learning kernels: 15-40 s, longer on a busy machine; later runs take seconds)")
     learner = pipeline.start("learn", learner_arguments(args))
     logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
-    starting = {learner: f"gngdt/{args.cam}/learner/alive", logger: LIVELINESS_KEY}
+    starting = {learner: alive_key(args.cam, LEARNER), logger: LOGGER_ALIVE}
     if args.ros2:  # the results into ROS 2 as well (see `gngdt ros2`)
         bridge = pipeline.start("ros2", ros2_arguments(args))
-        starting[bridge] = f"gngdt/{args.cam}/ros2/alive"
+        starting[bridge] = alive_key(args.cam, BRIDGE)
     silent = wait_for_startup(starting, observed, args.startup_timeout, stop, pipeline)
     ready = not silent and not stop.is_set() and pipeline.failed() is None
     early_end, stream_ended = "", False

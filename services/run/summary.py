@@ -42,7 +42,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             f"forgetting:         {status.nodes_forgotten} nodes forgotten; ghost share "
             f"{status.ghost_share:.1%} (seen nodes > {status.ghost_distance_m * 100:g} cm from "
             "the last frame)",
-            *([f"last frame:         {status.settled}"] if status.settled else []),
+            *([f"last frame:         {status.settle_reason}"] if status.settled else []),
             *pose_lines(status),
             f"clusters:           {clusters}",
             f"latency:            p50 {status.latency_p50_ms:.1f} ms, "

@@ -19,8 +19,7 @@ from gngdt.core.kernels.odometry import motion_size
 from gngdt.core.sensor.geometry import rigid_inverse
 from gngdt.schemas.clouds import transform_to_pose
 from gngdt.schemas.topology import decode_topology
-from gngdt.schemas.wire import FrameStamp
-from gngdt.services.logger import LIVELINESS_KEY
+from gngdt.schemas.wire import LOGGER_ALIVE, FrameStamp
 from gngdt.services.plumbing.session import client_config, open_config
 
 FRAMES = 20
@@ -78,7 +77,7 @@ def test_a_tracked_walk_is_published_learned_in_odom_and_drawn(
     try:
         learner = spawn("learn", "--track", "--exit-on-eos", "--zenoh-connect", router_endpoint)
         logger = spawn("log", "--save", str(rrd), "--zenoh-connect", router_endpoint)
-        for key in ("gngdt/camera/learner/alive", f"{LIVELINESS_KEY}/*"):  # both ready
+        for key in ("gngdt/camera/learner/alive", f"{LOGGER_ALIVE}/*"):  # both ready
             _wait_alive(watcher.session, key)
         # half speed: frames the learner drops while it learns the map's first frame (200,000
         # steps) are a jump with no motion known yet; later drops are predicted over
@@ -87,7 +86,7 @@ def test_a_tracked_walk_is_published_learned_in_odom_and_drawn(
         assert wait_exit(capture, 120) == 0, log_text(capture)
         assert wait_exit(learner, 120) == 0, log_text(learner)
         assert wait_exit(logger, 120) == 0, log_text(logger)
-        statuses = watcher.wait_for(lambda s: bool(s) and s[-1].settled != "", 30)
+        statuses = watcher.wait_for(lambda s: bool(s) and s[-1].settled, 30)
     finally:
         watcher.close()
         transforms.close()

@@ -171,3 +171,73 @@ def test_module_and_function_sizes(path: Path) -> None:
                                                      for name in KERNEL_DECORATORS):
                 long.append(f"{node.name} ({size} lines)")
     assert not long, f"functions over {MAX_FUNCTION_LINES} lines: {long}"
+
+
+def test_gngdt_core_keeps_its_top_small() -> None:
+    """gngdt_core is split by concern: at most `MAX_CORE_TOP` modules and subpackages at its
+    top, each subpackage saying in its docstring what it owns."""
+    top = sorted(path.name for path in (ROOT / "gngdt_core").iterdir()
+                 if (path.suffix == ".py" and path.name != "__init__.py")
+                 or (path / "__init__.py").exists())
+    assert len(top) <= MAX_CORE_TOP, f"{len(top)} modules at gngdt_core's top: {top}"
+    for package in (ROOT / "gngdt_core").glob("*/__init__.py"):
+        assert ast.get_docstring(ast.parse(package.read_text())), f"{package}: say what it owns"
+
+
+#: the clusterings' and topologies' names, spelled only in their registry
+#: (`gngdt.core.clustering`): everything else refers to its constants
+REGISTERED_NAMES = {"pos", "col", "nor", "cvx", "col+nor"}
+CLUSTERING_REGISTRY = "gngdt.core.clustering"
+#: the wire's keys are spelled only in `gngdt.schemas.wire` (by the product: benchmarks and tests
+#: are its outside clients)
+WIRE = "gngdt.schemas.wire"
+
+
+def _code_strings(tree: ast.AST) -> list[tuple[int, str]]:
+    """The strings of a module's code (docstrings left out), with their lines; an f-string as
+    one string, ``{}`` for each of its values."""
+    docstrings = {id(node.body[0].value) for node in ast.walk(tree)
+                  if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef
+                                | ast.AsyncFunctionDef)
+                  and node.body and isinstance(node.body[0], ast.Expr)
+                  and isinstance(node.body[0].value, ast.Constant)}
+    parts = {id(value) for node in ast.walk(tree) if isinstance(node, ast.JoinedStr)
+             for value in node.values}
+    strings = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.JoinedStr):
+            strings.append((node.lineno, "".join(
+                value.value if isinstance(value, ast.Constant) else "{}"
+                for value in node.values)))
+        elif (isinstance(node, ast.Constant) and isinstance(node.value, str)
+              and id(node) not in docstrings and id(node) not in parts):
+            strings.append((node.lineno, node.value))
+    return strings
+
+
+def spelled_contract_names(module: str, source: str) -> list[str]:
+    """Where ``module`` spells a clustering or topology name (`REGISTERED_NAMES`), or a zenoh
+    key of gngdt's (``gngdt/...``), outside its registry."""
+    found = []
+    for line, text in _code_strings(ast.parse(source)):
+        if text in REGISTERED_NAMES and module != CLUSTERING_REGISTRY:
+            found.append(f"{module}:{line}: {text!r} (use gngdt.core.clustering's constants)")
+        if text.startswith("gngdt/") and module != WIRE:
+            found.append(f"{module}:{line}: {text!r} (use gngdt.schemas.wire's keys)")
+    return found
+
+
+def test_registry_names_and_wire_keys_are_spelled_once() -> None:
+    spelled = [found for module, path in MODULES.items() if module.startswith("gngdt.")
+               for found in spelled_contract_names(module, path.read_text())]
+    assert not spelled, "\n".join(spelled)
+
+
+def test_the_spelling_check_finds_literals_and_keys() -> None:
+    """The check above can fail: a literal clustering name and a hand-spelled liveliness key
+    are found; docstrings and the registries themselves are not."""
+    source = ('"""Clusters by "pos"."""\nx = edges("pos")\ny = "col+nor"\n'
+              'key = f"gngdt/{cam}/learner/alive"\n')
+    assert len(spelled_contract_names("gngdt.io.example", source)) == 3, source
+    assert spelled_contract_names(CLUSTERING_REGISTRY, 'x = "pos"\n') == []
+    assert spelled_contract_names(WIRE, 'x = "gngdt/logger/alive"\n') == []

@@ -52,12 +52,12 @@ def test_every_sample_dataset_imports(rgbd: Path, folder: str) -> None:
         assert frame.color.shape == (camera["height"], camera["width"], 3)
         assert frame.color.dtype == np.uint8 and frame.depth.dtype == np.uint16
         assert (frame.intrinsics.fx, frame.intrinsics.cy) == (camera["fx"], camera["cy"])
-        raw_depth = cv2.imread(frame.extras["depth_path"], cv2.IMREAD_UNCHANGED)
+        raw_depth = cv2.imread(str(frame.depth_path), cv2.IMREAD_UNCHANGED)
         expected_mm = np.rint(raw_depth * (1000.0 / camera["depth_scale"])).astype(np.uint16)
         np.testing.assert_array_equal(frame.depth, expected_mm)
         valid = frame.depth[frame.depth > 0]
         assert 300 < np.median(valid) < 5000  # indoor scenes: metres, not TUM units
-        bgr = cv2.imread(frame.extras["color_path"], cv2.IMREAD_COLOR)
+        bgr = cv2.imread(str(frame.color_path), cv2.IMREAD_COLOR)
         np.testing.assert_array_equal(frame.color, bgr[..., ::-1])
     stamps = [frame.timestamp_ns for frame in frames]
     assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)

@@ -44,7 +44,7 @@ def test_transforms_beyond_the_limit_are_not_read_and_later_frames_say_so(
     assert "more than 150 transform samples (--max-transforms)" in caplog.text
     assert [frame.pose is not None for frame in read] == [True, True, False, False]
     np.testing.assert_allclose(read[1].pose.matrix, _moving_camera(200 * MS), atol=1e-9)
-    assert "no transform 'world' -> 'camera' at 0.300 s" in read[2].extras["pose_error"]
+    assert "no transform 'world' -> 'camera' at 0.300 s" in read[2].pose_error
     # and with the default limit, every frame has its pose
     assert all(frame.pose is not None for frame in read_frames(path))
 
