@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from gngdt.core.clustering import COL, POS, SEGMENTS
-from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig, PoseRejectedError
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
 from gngdt.core.sensor.geometry import apply_pose
 from gngdt.eval.dynamics import (
     CameraView,
@@ -189,6 +189,10 @@ def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intr
     return carried[:, 0].astype(np.int64) | (carried[:, 1].astype(np.int64) << 8)
 
 
+class FrameNotLearned(ValueError):
+    """The learner did not learn a frame (its pose was refused, its camera not tracked)."""
+
+
 class MethodReplay:
     """One method learning a recording frame by frame. GNG-DT learns through the learner's own
     per-frame policy (`FrameLearner`, as ``gngdt learn`` does: its defaults, its clusterings
@@ -215,8 +219,10 @@ class MethodReplay:
             return {"+".join(props): np.asarray(self.model.clusters(
                 *props, min_size=settings.min_cluster_size))
                 for props in clusterings_of(self.method, 3)}
-        self.learner.learn(points.camera_positions, points.colors, points.frame_id, points.pose,
-                           points.timestamp_ns)
+        result = self.learner.learn(points.camera_positions, points.colors, points.frame_id,
+                                    points.pose, points.timestamp_ns)
+        if not result.learned:  # counted by the learner, as live
+            raise FrameNotLearned(result.problem)
         self.model = self.learner.model
         return self.learner.learned_frame().labels
 
@@ -264,7 +270,7 @@ def replay(path: Path, method: str, trial: int, settings: RecordingSettings) -> 
         started = time.perf_counter()
         try:
             labels = run.learn(points)
-        except PoseRejectedError as error:  # counted by the learner, as live
+        except FrameNotLearned as error:
             log.warning("%s: frame %d not learned: %s", path, points.index, error)
             continue
         record = _frame_record(run.model, points, labels, identity,

@@ -5,19 +5,21 @@ The same class runs inside the learner process (`gngdt.services.learner`, which 
 messages and checkpoints) and in `gngdt eval recording` (which replays a recording through it), so
 what is evaluated is what is deployed. Pure computation: clouds in, network and labels out.
 
-The network lives in the frame of the first cloud it learns (its ``frame_id``): a cloud whose
-pose places it in a fixed frame (``world``, ``map``) is learned there, pose applied, so a moving
-camera builds one map; a cloud without a pose is learned in the camera frame as it is, or, with
-``track``, placed by aligning it to the map (`gngdt.core.odometry.camera_tracking`, frame ``odom``;
-a cloud whose alignment fails is not learned). A later cloud in another frame raises
-`OtherFrameError` (counted). A posed cloud is learned only when its pose passes
+The network lives in the frame of the first cloud it learns (its ``frame_id``): a cloud whose pose
+places it in a fixed frame (``world``, ``map``) is learned there, pose applied, so a moving camera
+builds one map; a cloud without a pose is learned in the camera frame as it is, or, with ``track``,
+placed by aligning it to the map (`gngdt.core.odometry.camera_tracking`, frame ``odom``; a cloud
+whose alignment fails is not learned). A later cloud in another frame is not learned
+(`Outcome.OTHER_FRAME`, counted). A posed cloud is learned only when its pose passes
 `gngdt.core.odometry.pose_checks` (within the workspace, moving as a camera can, agreeing with the
-depth of an earlier frame); else `PoseRejectedError` (counted). A map in a fixed frame grows with
+depth of an earlier frame); else not (`Outcome.POSE_REJECTED`, counted). `learn` says what became
+of each cloud (`FrameResult`); `publication` gives everything the services publish after a learned
+frame (`Publication`), `figures` the learner's running figures. A map in a fixed frame grows with
 the world: unless the profile says otherwise it has one node per ``resolution_m`` cell of surface
 seen (`LEARNER_WORLD_DEFAULTS`); a camera-frame map keeps the node budget ``max_nodes``. With a
 frame schedule (a sensor profile's ``[frames]`` table) frames go through `StreamLearner`
-(attention, scene cuts, a first frame learned longer); without one, ``samples_per_frame`` steps
-of `GNGDT.partial_fit` each (or the steps the caller's time budget gives,
+(attention, scene cuts, a first frame learned longer); without one, ``samples_per_frame`` steps of
+`GNGDT.partial_fit` each (or the steps the caller's time budget gives,
 `gngdt.core.learner.frame_budget`).
 """
 
@@ -32,6 +34,15 @@ import numpy as np
 
 from gngdt.core.clustering import CLUSTERINGS, CONVEXITY, EDGE_PROPERTIES, POS, SEGMENTS
 from gngdt.core.gas.model import GNGDT
+from gngdt.core.learner.results import (
+    Counters,
+    FrameResult,
+    Ghosts,
+    LearnedFrame,
+    LearnerFigures,
+    Outcome,
+    Publication,
+)
 from gngdt.core.learner.stream_learner import FrameSchedule, StreamLearner
 from gngdt.core.metrics import ghost_nodes
 from gngdt.core.objects.object_set import ObjectFinder, ObjectSet
@@ -56,11 +67,6 @@ LEARNER_WORLD_DEFAULTS: dict[str, Any] = {"resolution_m": 0.1, "max_nodes": 20_0
 #: position error below which the network counts as settled
 SETTLE_CHUNK = 20_000
 SETTLED_CHANGE = 0.01
-#: counters saturate here (the status message's uint64 fields, the checkpoint's int64)
-MAX_COUNTER = 2**63 - 1
-#: frames one can drop between two received frames: a year at 30 fps; a larger jump in the
-#: sequence is a new stream (a restarted or foreign capture), not frames lost
-MAX_SEQUENCE_GAP = 30 * 3600 * 24 * 365
 #: largest cloud a learner accepts by default (the wire's own limit, schemas' MAX_CLOUD_POINTS)
 DEFAULT_MAX_POINTS = 2_000_000
 
@@ -168,73 +174,6 @@ class LearnerConfig:
             object.__setattr__(self, "schedule", replace(self.schedule, steps_per_frame=steps))
 
 
-@dataclass
-class Counters:
-    """What the learner has seen, published in every status (and kept in checkpoints)."""
-
-    frames_received: int = 0
-    frames_used: int = 0
-    frames_dropped: int = 0
-    malformed_messages: int = 0
-    #: clouds skipped because their frame is not the one the network is learned in
-    frames_other_frame: int = 0
-    #: posed clouds skipped because their pose was out of bounds or contradicted their depth
-    frames_pose_rejected: int = 0
-    #: clouds not learned because their camera could not be tracked (``track``)
-    frames_lost_tracking: int = 0
-    learning_seconds: float = 0.0
-    #: learning steps run in ``learning_seconds`` (frames differ: a new scene learns longer)
-    learning_steps: int = 0
-    last_sequence: int = -1
-
-    def note_sequence(self, sequence: int) -> None:
-        """Count the frames skipped since the last one; a lower sequence, or a jump no camera
-        could make (``MAX_SEQUENCE_GAP``), is a new stream, not dropped frames."""
-        gap = sequence - self.last_sequence - 1
-        if self.last_sequence >= 0 and 0 < gap <= MAX_SEQUENCE_GAP:
-            self.frames_dropped = min(self.frames_dropped + gap, MAX_COUNTER)
-        elif self.last_sequence >= 0 and gap > MAX_SEQUENCE_GAP:
-            log.warning("frame sequence jumped from %d to %d; taken as a new stream",
-                        self.last_sequence, sequence)
-        self.last_sequence = sequence
-
-    def add_learning(self, seconds: float, steps: int) -> None:
-        self.learning_seconds += seconds
-        self.learning_steps = min(self.learning_steps + steps, MAX_COUNTER)
-
-
-class OtherFrameError(ValueError):
-    """A cloud is in another frame than the one the network is learned in."""
-
-
-class PoseRejectedError(ValueError):
-    """A cloud's pose is out of bounds or contradicts its depth
-    (`gngdt.core.odometry.pose_checks`)."""
-
-
-@dataclass
-class Ghosts:
-    """The ghost measure of the last learned frame (see `gngdt.core.metrics.ghost_nodes`)."""
-
-    seen_nodes: int = 0
-    ghost_share: float = 0.0
-
-
-@dataclass
-class LearnedFrame:
-    """What one learned frame shows: edges (E, 2) int64 per topology, cluster labels (N,) int32
-    per clustering, and per label of each clustering its persistent id (K,) int64 and whether
-    its track is confirmed (K,) bool (`ClusterIds.confirmed_`); ``segment_roles``: (K,) int8
-    role of each segment (`gngdt.core.segmentation.supports`), judged when the objects are
-    segments."""
-
-    edges: dict[str, np.ndarray]
-    labels: dict[str, np.ndarray]
-    cluster_ids: dict[str, np.ndarray]
-    confirmed: dict[str, np.ndarray]
-    segment_roles: np.ndarray | None = None
-
-
 class FrameLearner:
     """One GNG-DT network fed frame by frame, and what each learned frame shows.
 
@@ -285,30 +224,34 @@ class FrameLearner:
 
     def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
               pose: np.ndarray | None = None, stamp_ns: int | None = None,
-              steps: int | None = None, camera: CameraIntrinsics | None = None) -> bool:
+              steps: int | None = None, camera: CameraIntrinsics | None = None) -> FrameResult:
         """Learn one cloud: (N, 3) f32 m, (N, 3) u8, in its own (camera) frame; ``pose``
         (4, 4) maps it into ``frame_id``; ``stamp_ns`` its capture time. ``steps``: learning
         steps of this frame (default ``samples_per_frame``; a frame learned from scratch takes
         its own). ``camera``: the intrinsics the cloud was deprojected with (tracking needs
-        them). Returns whether the cloud was learned: False when its camera could not be
-        tracked (counted; see ``tracking.problem``). Raises `OtherFrameError` for a cloud in
-        another frame than the network's and `PoseRejectedError` for a pose the checks refuse
-        (both counted); a tracked pose is the tracker's to judge."""
+        them). Returns what became of it: learned, or not (its camera could not be tracked, its
+        pose was refused, or it is in another frame than the network's: each counted); a
+        tracked pose is the tracker's to judge."""
         tracked = self.tracking is not None and pose is None
         if tracked:
             located = self.tracking.locate(self.model, positions, colors, camera, stamp_ns)
             if located.pose is None:
-                self.counters.frames_lost_tracking = min(
-                    self.counters.frames_lost_tracking + 1, MAX_COUNTER)
-                return False
+                return self._not_learned(Outcome.LOST_TRACKING, self.tracking.problem)
             pose, frame_id = located.pose, TRACKED_FRAME
-        self._check_frame(frame_id or self.camera, pose)
+        frame_id = frame_id or self.camera
+        if self.frame_id is not None and frame_id != self.frame_id:
+            return self._not_learned(Outcome.OTHER_FRAME, (
+                f"cloud in frame {frame_id!r}, but this network is learned in {self.frame_id!r} "
+                f"(a capture without poses, or with another fixed frame, than the first one; "
+                f"start the learner afresh to learn in {frame_id!r})"))
         if pose is not None and not tracked:
             verdict = self.poses.check(positions, pose, stamp_ns)
             if not verdict.accepted:
-                self.counters.frames_pose_rejected = min(
-                    self.counters.frames_pose_rejected + 1, MAX_COUNTER)
-                raise PoseRejectedError(verdict.problem)
+                return self._not_learned(Outcome.POSE_REJECTED, verdict.problem)
+        if self.frame_id is None:
+            log.info("learning in frame %r%s", frame_id,
+                     " (clouds carry camera poses)" if pose is not None else "")
+            self.frame_id = frame_id
         if self._choose_model(pose is not None):
             steps = self.options.first_frame_steps
         self.last_pose = pose
@@ -323,7 +266,11 @@ class FrameLearner:
         self.counters.frames_used += 1
         self.last_steps = steps
         self.ghosts = self.measure_ghosts(positions, pose)
-        return True
+        return FrameResult(Outcome.LEARNED, pose, frame_id, tracked, "", steps)
+
+    def _not_learned(self, outcome: Outcome, problem: str) -> FrameResult:
+        self.counters.count(outcome)
+        return FrameResult(outcome, problem=problem)
 
     def _choose_model(self, fixed_frame: bool) -> bool:
         """Before the first frame: a map in a fixed frame grows with the world
@@ -340,18 +287,6 @@ class FrameLearner:
             return False
         self._model = GNGDT(**{"random_state": self.options.seed, **params})
         return True
-
-    def _check_frame(self, frame_id: str, pose: np.ndarray | None) -> None:
-        if self.frame_id is None:
-            log.info("learning in frame %r%s", frame_id,
-                     " (clouds carry camera poses)" if pose is not None else "")
-            self.frame_id = frame_id
-        elif frame_id != self.frame_id:
-            self.counters.frames_other_frame += 1
-            raise OtherFrameError(
-                f"cloud in frame {frame_id!r}, but this network is learned in {self.frame_id!r} "
-                f"(a capture without poses, or with another fixed frame, than the first one; "
-                f"start the learner afresh to learn in {frame_id!r})")
 
     def _learn_scheduled(self, positions: np.ndarray, colors: np.ndarray | None,
                          pose: np.ndarray | None, steps: int) -> int:
@@ -427,6 +362,34 @@ class FrameLearner:
         return self._object_finders[name].objects(self.model, learned.labels[name],
                                             learned.cluster_ids[name], confirmed_only=not final,
                                             roles=learned.segment_roles)
+
+    def figures(self) -> LearnerFigures:
+        """The learner's figures now (what its status message carries)."""
+        model = self.model
+        steps, nodes = (int(model.n_steps_), int(model.n_nodes_)) if model is not None else (0, 0)
+        tracking = ""
+        if self.tracking is not None:
+            tracking = f"lost: {self.tracking.problem}" if self.tracking.problem else "tracked"
+        return LearnerFigures(
+            frame_id=self.camera, counters=replace(self.counters), steps=steps, nodes=nodes,
+            nodes_forgotten=int(getattr(model, "n_forgotten_", 0)), frame_steps=self.last_steps,
+            ghosts=self.ghosts, ghost_distance_m=self.options.ghost_distance_m,
+            pose_problem=self.poses.last_problem, tracking=tracking)
+
+    def publication(self, positions: np.ndarray, colors: np.ndarray | None,
+                    final: bool = False) -> Publication:
+        """Everything the services publish after the last learned frame (``positions``,
+        ``colors``: that cloud, in its own frame, for eq. 17's error); ``final``: the stream is
+        over (every cluster of the objects' clustering is an object, see `objects`)."""
+        model = self.model
+        learned = self.learned_frame()
+        return Publication(
+            frame_id=self.frame_id or self.camera, positions=model.positions_,
+            colors=model.colors_, normals=model.normals_, errors=model.errors_,
+            node_ids=model.node_ids_, steps=int(model.n_steps_), learned=learned,
+            objects=self.objects(learned, final=final),
+            quantization_error=self.quantization_error(positions, colors),
+            min_cluster_size=self.options.min_cluster_size, figures=self.figures())
 
     def settle(self, positions: np.ndarray, colors: np.ndarray | None) -> str:
         """Learn the stream's last frame on until the network is settled: the node budget

@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, ClassVar
 
 from gngdt.schemas.wire import FrameStamp, topic
@@ -26,10 +27,14 @@ from gngdt.schemas.wire import FrameStamp, topic
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
+
 
 @dataclass(frozen=True)
 class StreamSample:
-    """One sample of one camera's stream: ``gngdt/<camera>/<stream>``."""
+    """One sample of one camera's stream: ``gngdt/<camera>/<stream>``. The learner's status and
+    the end of stream are decoded once, when first read (ValueError when malformed), for the
+    logger's bookkeeping and every output alike."""
 
     camera: str
     #: ``color``, ``points``, ``learner/status``, ...
@@ -40,6 +45,20 @@ class StreamSample:
     @property
     def key(self) -> str:
         return topic(self.camera, self.stream)
+
+    @cached_property
+    def status(self) -> LearnerStatusInfo:
+        """The ``learner/status`` sample, decoded."""
+        from gngdt.schemas.status import decode_status
+
+        return decode_status(self.payload)
+
+    @cached_property
+    def stream_end(self) -> StreamEndInfo:
+        """The ``eos`` sample, decoded."""
+        from gngdt.schemas.status import decode_stream_end
+
+        return decode_stream_end(self.payload)
 
 
 def split_bind(address: str, default_port: int) -> tuple[str, int]:

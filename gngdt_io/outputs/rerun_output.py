@@ -280,7 +280,6 @@ class RerunOutput(Output):
     def write(self, sample: StreamSample) -> None:
         from gngdt.schemas.images import calibration_to_intrinsics, raw_to_image
         from gngdt.schemas.scene import decode_object_boxes
-        from gngdt.schemas.status import decode_status, decode_stream_end
         from gngdt.schemas.topology import decode_topology
 
         rerun_log, paths, payload = self.rerun_log, EntityPaths(sample.camera), sample.payload
@@ -305,10 +304,9 @@ class RerunOutput(Output):
         elif stream == "objects":
             rerun_log.objects(paths, decode_object_boxes(payload))
         elif stream == "learner/status":
-            rerun_log.status(paths, decode_status(payload))
+            rerun_log.status(paths, sample.status)
         elif stream == "eos":
-            self._last_sequence[sample.camera] = decode_stream_end(
-                payload).last_frame_sequence
+            self._last_sequence[sample.camera] = sample.stream_end.last_frame_sequence
 
     def _points(self, camera: str, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud

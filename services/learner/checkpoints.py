@@ -13,7 +13,8 @@ from typing import Any
 
 from gngdt.core.clustering import POS
 from gngdt.core.gas.model import GNGDT
-from gngdt.core.learner.frame_learner import Counters, FrameLearner, LearnerConfig
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
+from gngdt.core.learner.results import Counters
 from gngdt.core.odometry.pose_checks import points_beyond_workspace
 from gngdt.io.checkpoints import (
     CheckpointError,

@@ -8,86 +8,83 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from gngdt.core.clustering import POS
+from gngdt.core.clustering import POS, cluster_count
 from gngdt.core.gas.sampling import finite_rows
 from gngdt.core.learner.frame_budget import Budget
-from gngdt.core.learner.frame_learner import DEFAULT_MAX_POINTS, FrameLearner, LearnedFrame
-from gngdt.core.objects.object_set import ObjectSet
+from gngdt.core.learner.frame_learner import DEFAULT_MAX_POINTS
+from gngdt.core.learner.results import LearnerFigures, Publication
 from gngdt.schemas.wire import FrameStamp
 
 
-def topology_message(learner: FrameLearner, stamp: FrameStamp,
-                     quantization_error: dict[str, float], learned: LearnedFrame) -> Any:
-    """The current ``gngdt.Topology``."""
+def topology_message(published: Publication, stamp: FrameStamp) -> Any:
+    """The ``gngdt.Topology`` of a learned frame."""
     from gngdt.schemas.topology import encode_topology
 
-    model = learner.model
+    learned = published.learned
     return encode_topology(
-        positions=model.positions_, colors=model.colors_, normals=model.normals_,
-        errors=model.errors_, edges=learned.edges, clusterings=learned.labels,
-        steps=int(model.n_steps_), frame_sequence=stamp.sequence,
-        timestamp_ns=stamp.capture_time_ns, frame_id=learner.frame_id or learner.camera,
-        quantization_error=quantization_error, node_ids=model.node_ids_,
+        positions=published.positions, colors=published.colors, normals=published.normals,
+        errors=published.errors, edges=learned.edges, clusterings=learned.labels,
+        steps=published.steps, frame_sequence=stamp.sequence,
+        timestamp_ns=stamp.capture_time_ns, frame_id=published.frame_id,
+        quantization_error=published.quantization_error, node_ids=published.node_ids,
         cluster_ids=learned.cluster_ids)
 
 
-def objects_message(learner: FrameLearner, stamp: FrameStamp, objects: ObjectSet) -> Any:
+def objects_message(published: Publication, stamp: FrameStamp) -> Any:
     """The objects as a ``foxglove.SceneUpdate``, coloured as the logger colours clusters."""
     from gngdt.core.segmentation.supports import ROLE_NAMES
     from gngdt.schemas.cluster_colors import id_colors
     from gngdt.schemas.scene import objects_to_scene_update
 
+    objects = published.objects
     return objects_to_scene_update(
         ids=objects.ids, centers=objects.centers, quaternions_xyzw=objects.quaternions_xyzw,
         sizes=objects.sizes, colors=id_colors(objects.ids), node_counts=objects.node_counts,
         centroids=objects.centroids, mean_colors=objects.colors, normals=objects.normals,
-        timestamp_ns=stamp.capture_time_ns, frame_id=learner.frame_id or learner.camera,
+        timestamp_ns=stamp.capture_time_ns, frame_id=published.frame_id,
         roles=[ROLE_NAMES[role] for role in objects.roles])
 
 
-def scene_message(learner: FrameLearner, stamp: FrameStamp, learned: LearnedFrame) -> Any:
+def scene_message(published: Publication, stamp: FrameStamp) -> Any:
     """Nodes in their learned colours and every clustering's edges coloured by cluster, as a
     ``foxglove.SceneUpdate``."""
     from gngdt.schemas.cluster_colors import clustering_edges, node_colors
     from gngdt.schemas.scene import topology_to_scene_update
 
-    model = learner.model
-    positions = model.positions_
+    learned = published.learned
+    positions = published.positions
     layers = {}
     for name, labels in learned.labels.items():
         pairs = clustering_edges(name, learned.edges, labels)
         layers[name] = (pairs, node_colors(labels, learned.cluster_ids[name],
-                                           learner.options.min_cluster_size))
+                                           published.min_cluster_size))
     pos_edges = learned.edges[POS]
     spacing = (float(np.median(np.linalg.norm(
         positions[pos_edges[:, 0]] - positions[pos_edges[:, 1]], axis=1)))
         if len(pos_edges) else 0.02)
     return topology_to_scene_update(
-        positions=positions, colors=np.clip(np.rint(model.colors_), 0, 255),
+        positions=positions, colors=np.clip(np.rint(published.colors), 0, 255),
         node_size=0.5 * spacing, edge_layers=layers, timestamp_ns=stamp.capture_time_ns,
-        frame_id=learner.frame_id or learner.camera)
+        frame_id=published.frame_id)
 
 
-def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
-                   latency_percentiles: tuple[float, float], topology: Any | None,
+def status_message(figures: LearnerFigures, stamp: FrameStamp, latency_ms: float,
+                   latency_percentiles: tuple[float, float], published: Publication | None,
                    settled: str = "", budget: Budget | None = None) -> Any:
-    """The ``gngdt.LearnerStatus`` after publishing ``topology`` (None: none published yet, or
-    after a frame that was not learned, e.g. its pose was rejected); ``latency_percentiles``:
-    p50 and p99 of the recent frames (ms); ``settled``: how learning on the stream's last frame
-    stopped; ``budget``: the last frame's time budget."""
+    """The ``gngdt.LearnerStatus`` of the learner's ``figures`` after the last publication
+    (None: nothing published yet); ``latency_percentiles``: p50 and p99 of the recent frames
+    (ms); ``settled``: how learning on the stream's last frame stopped; ``budget``: the last
+    frame's time budget."""
     from gngdt.schemas.status import encode_status
 
-    counters = learner.counters
-    seconds = counters.learning_seconds
-    model = learner.model
-    steps, nodes = (int(model.n_steps_), int(model.n_nodes_)) if model is not None else (0, 0)
+    counters = figures.counters
     return encode_status(
         timestamp_ns=stamp.capture_time_ns,
         frame_sequence=stamp.sequence,
-        frame_id=learner.camera,
-        steps=steps,
-        steps_per_second=counters.learning_steps / seconds if seconds > 0 else 0.0,
-        nodes=nodes,
+        frame_id=figures.frame_id,
+        steps=figures.steps,
+        steps_per_second=figures.steps_per_second,
+        nodes=figures.nodes,
         frames_received=counters.frames_received,
         frames_used=counters.frames_used,
         frames_dropped=counters.frames_dropped,
@@ -95,31 +92,23 @@ def status_message(learner: FrameLearner, stamp: FrameStamp, latency_ms: float,
         latency_ms=latency_ms,
         latency_p50_ms=latency_percentiles[0],
         latency_p99_ms=latency_percentiles[1],
-        quantization_error={} if topology is None else dict(topology.quantization_error),
-        cluster_counts={} if topology is None else {c.name: c.cluster_count
-                                                    for c in topology.clusterings},
-        seen_nodes=learner.ghosts.seen_nodes,
-        ghost_share=learner.ghosts.ghost_share,
-        ghost_distance_m=learner.options.ghost_distance_m,
-        nodes_forgotten=int(getattr(model, "n_forgotten_", 0)),
+        quantization_error={} if published is None else published.quantization_error,
+        cluster_counts={} if published is None else {
+            name: cluster_count(labels) for name, labels in published.learned.labels.items()},
+        seen_nodes=figures.ghosts.seen_nodes,
+        ghost_share=figures.ghosts.ghost_share,
+        ghost_distance_m=figures.ghost_distance_m,
+        nodes_forgotten=figures.nodes_forgotten,
         frames_other_frame=counters.frames_other_frame,
         frames_pose_rejected=counters.frames_pose_rejected,
-        pose_problem=learner.poses.last_problem,
+        pose_problem=figures.pose_problem,
         settle_reason=settled,
         settled=bool(settled),
         frame_budget_ms=0.0 if budget is None else budget.seconds * 1000.0,
-        frame_steps=learner.last_steps,
+        frame_steps=figures.frame_steps,
         frames_lost_tracking=counters.frames_lost_tracking,
-        tracking=tracking_state(learner),
+        tracking=figures.tracking,
     )
-
-
-def tracking_state(learner: FrameLearner) -> str:
-    """"" (not tracking), "tracked" or "lost: <why>" for the last cloud (status field)."""
-    if learner.tracking is None:
-        return ""
-    problem = learner.tracking.problem
-    return f"lost: {problem}" if problem else "tracked"
 
 
 class PointsMessage(NamedTuple):

@@ -25,12 +25,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from gngdt.core.learner.frame_budget import StepBudget
-from gngdt.core.learner.frame_learner import (
-    FrameLearner,
-    LearnerConfig,
-    OtherFrameError,
-    PoseRejectedError,
-)
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
+from gngdt.core.learner.results import Counters, FrameResult, Outcome, Publication
 from gngdt.schemas.wire import (
     ENCODING_FRAME_TRANSFORM,
     ENCODING_SCENE_UPDATE,
@@ -162,6 +158,13 @@ class LearnerInstances:
         self._token.undeclare()
 
 
+def result_count(counters: Counters, result: FrameResult) -> int:
+    """How many clouds have met ``result``'s outcome so far."""
+    return {Outcome.LOST_TRACKING: counters.frames_lost_tracking,
+            Outcome.POSE_REJECTED: counters.frames_pose_rejected,
+            Outcome.OTHER_FRAME: counters.frames_other_frame}[result.outcome]
+
+
 def payload_bytes(sample: zenoh.Sample, limit: int) -> bytes:
     """The sample's payload, refused (``MessageError``) before any copy when over ``limit``."""
     from gngdt.schemas.messages import MessageError
@@ -198,19 +201,18 @@ class LatestCalibration:
             log.warning("malformed calibration skipped: %s", error)
 
 
-def warn_lost(learner: FrameLearner) -> None:
-    """Warn about a cloud whose camera was not tracked: the first, then every 30th."""
-    count = learner.counters.frames_lost_tracking
-    if count == 1 or count % 30 == 0:
-        log.warning("camera not tracked, frame not learned (%d so far): %s", count,
-                    learner.tracking.problem)
+#: a cloud not learned is warned about the first time, then every this many of its kind
+WARN_EVERY = {Outcome.LOST_TRACKING: 30, Outcome.POSE_REJECTED: 100, Outcome.OTHER_FRAME: 100}
+WARNINGS = {Outcome.LOST_TRACKING: "camera not tracked, frame not learned",
+            Outcome.POSE_REJECTED: "points message skipped",
+            Outcome.OTHER_FRAME: "points message skipped"}
 
 
-def warn_sparingly(error: ValueError, count: int) -> None:
-    """Warn about skipped clouds of one kind (another frame, a rejected pose): the first, then
-    every 100th (each counted in the status)."""
-    if count == 1 or count % 100 == 0:
-        log.warning("points message skipped (%d so far): %s", count, error)
+def warn_not_learned(result: FrameResult, count: int) -> None:
+    """Warn about a cloud that was not learned (counted in the status): the first of its kind,
+    then every `WARN_EVERY`th."""
+    if count == 1 or count % WARN_EVERY[result.outcome] == 0:
+        log.warning("%s (%d so far): %s", WARNINGS[result.outcome], count, result.problem)
 
 
 class LearnerService:
@@ -254,7 +256,8 @@ class LearnerService:
                                            self.calibration.on_sample),
                 declare_publisher(session, topic(camera, "tf"), ENCODING_FRAME_TRANSFORM,
                                   latest_wins=False)]
-        self._last_topology = None
+        #: the last publication (its errors and cluster counts go into every status)
+        self._published: Publication | None = None
         self._max_cloud_bytes = self.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
         #: the last learned frame (stamp, positions, colours), kept to settle on at the end
         self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
@@ -284,26 +287,23 @@ class LearnerService:
         """Publish the topology after learning a frame, its objects, (every
         ``scene_every_frames`` frames, and the settled last one) the scene, then the status;
         the latency in ms."""
-        learner = self.learner
-        learned = learner.learned_frame()
-        topology = topology_message(learner, stamp,
-                                    learner.quantization_error(positions, colors), learned)
-        payload = topology.SerializeToString()
+        published = self.learner.publication(positions, colors, final=bool(settled))
+        payload = topology_message(published, stamp).SerializeToString()
         attachment = stamp.to_attachment()
         latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
         self._topology.put(payload, attachment=attachment)
         self.latest.set(payload, attachment)
-        objects = objects_message(learner, stamp, learner.objects(learned, final=bool(settled)))
-        self._objects.put(objects.SerializeToString(), attachment=attachment)
+        self._objects.put(objects_message(published, stamp).SerializeToString(),
+                          attachment=attachment)
         every = self.options.scene_every_frames
-        if every and (settled or learner.counters.frames_used % every == 1 % every):
-            scene = scene_message(learner, stamp, learned)
+        if every and (settled or published.figures.counters.frames_used % every == 1 % every):
+            scene = scene_message(published, stamp)
             self._scene.put(scene.SerializeToString(), attachment=attachment)
         # the status last: a consumer that ends on the settled status has everything before it
         percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
-        self._last_topology = topology
-        status = status_message(learner, stamp, latency_ms, percentiles, topology, settled,
-                                self.budget.last)
+        self._published = published
+        status = status_message(published.figures, stamp, latency_ms, percentiles, published,
+                                settled, self.budget.last)
         self._status.put(status.SerializeToString(), attachment=attachment)
         return latency_ms
 
@@ -323,26 +323,20 @@ class LearnerService:
             received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
             self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)
             learning_before = counters.learning_seconds
-            learned = learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns,
-                                    steps=self.budget.next().steps,
-                                    camera=self.calibration.intrinsics)
-        except OtherFrameError as error:  # counted by the learner, warned sparingly
-            warn_sparingly(error, counters.frames_other_frame)
-            return
-        except PoseRejectedError as error:  # counted by the learner; the status says so
-            warn_sparingly(error, counters.frames_pose_rejected)
-            self._publish_status(stamp)
-            return
+            result = learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns,
+                                   steps=self.budget.next().steps,
+                                   camera=self.calibration.intrinsics)
         except ValueError as error:  # MessageError is a ValueError
             counters.malformed_messages += 1
             log.warning("points message skipped: %s", error)
             return
-        if not learned:  # the camera was not tracked: nothing learned, the status says why
-            warn_lost(learner)
-            self._publish_status(stamp)
+        if not result.learned:  # counted by the learner; the status says why
+            warn_not_learned(result, result_count(counters, result))
+            if result.outcome is not Outcome.OTHER_FRAME:
+                self._publish_status(stamp)
             return
-        if learner.tracking is not None and pose is None:
-            self._publish_pose(stamp, frame_id)
+        if result.tracked:
+            self._publish_pose(stamp, frame_id, result)
         learned_at = time.perf_counter()
         self.budget.learned(learner.last_steps, counters.learning_seconds - learning_before,
                             learned_at - started)
@@ -365,20 +359,20 @@ class LearnerService:
         self._unpublished = False
         return latency_ms
 
-    def _publish_pose(self, stamp: FrameStamp, camera_frame: str) -> None:
+    def _publish_pose(self, stamp: FrameStamp, camera_frame: str, result: FrameResult) -> None:
         """The tracked camera's pose: ``odom`` -> the cloud's (camera) frame."""
         from gngdt.schemas.clouds import pose_to_transform
 
-        transform = pose_to_transform(self.learner.last_pose, self.learner.frame_id,
-                                      camera_frame, timestamp_ns=stamp.capture_time_ns)
+        transform = pose_to_transform(result.pose, result.frame_id, camera_frame,
+                                      timestamp_ns=stamp.capture_time_ns)
         self._tracking[1].put(transform.SerializeToString(), attachment=stamp.to_attachment())
 
     def _publish_status(self, stamp: FrameStamp) -> None:
         """A status without a new topology (a frame that was not learned)."""
         latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
         percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
-        status = status_message(self.learner, stamp, latency_ms, percentiles,
-                                self._last_topology, "", self.budget.last)
+        status = status_message(self.learner.figures(), stamp, latency_ms, percentiles,
+                                self._published, "", self.budget.last)
         self._status.put(status.SerializeToString(), attachment=stamp.to_attachment())
 
     def _checkpoint_if_due(self) -> None:
@@ -461,11 +455,13 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner
 def warm_up(config: LearnerConfig) -> None:
     """Compile (or load from numba's cache) every kernel the learner uses and encode each
     message once, before the first frame, logging each step (`gngdt run` shows them)."""
-    from gngdt.core.learner.warm_up import logged_progress, warm_up_learner
+    from gngdt.core.learner.warm_up import logged_progress, sample_frame, warm_up_learner
 
     learner = warm_up_learner(config, logged_progress(log))
-    learned = learner.learned_frame()
+    positions, colors, _ = sample_frame()
+    published = learner.publication(positions, colors)
     stamp = FrameStamp(0, 1)
-    topology_message(learner, stamp, {}, learned)
-    objects_message(learner, stamp, learner.objects(learned))
-    scene_message(learner, stamp, learned)
+    topology_message(published, stamp)
+    objects_message(published, stamp)
+    scene_message(published, stamp)
+    status_message(published.figures, stamp, 0.0, (0.0, 0.0), published)

@@ -13,6 +13,8 @@ from gngdt.schemas.wire import ANY_CAMERA, CAPTURE, alive_key, camera_of
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt.io.outputs import StreamSample
+
 log = logging.getLogger(__name__)
 
 DEFAULT_MAX_CAMERAS = 16
@@ -94,18 +96,18 @@ class Cameras:
     def add(self, camera: str) -> None:
         self.progress.setdefault(camera, CameraProgress())
 
-    def note(self, camera: str, stream: str, sequence: int, payload: bytes) -> None:
+    def note(self, sample: StreamSample) -> None:
         """Progress from one valid sample: topologies, the learner's settling, the end of
-        stream (decoded here: small messages; ValueError when malformed)."""
-        from gngdt.schemas.status import decode_status, decode_stream_end
-
-        progress = self.progress[camera]
+        stream (ValueError when one of these is malformed)."""
+        progress = self.progress[sample.camera]
+        camera, stream = sample.camera, sample.stream
         if stream == "topology":
-            progress.last_topology_sequence = max(progress.last_topology_sequence, sequence)
-        elif stream == "learner/status" and decode_status(payload).settled:
+            progress.last_topology_sequence = max(progress.last_topology_sequence,
+                                                  sample.stamp.sequence)
+        elif stream == "learner/status" and sample.status.settled:
             progress.settled = True
         elif stream == "eos":
-            end = decode_stream_end(payload)
+            end = sample.stream_end
             progress.eos_last_sequence = end.last_frame_sequence
             progress.eos_at = time.monotonic()
             progress.settled = False  # the learner settles on this stream's last frame after it

@@ -42,8 +42,8 @@ class Dispatcher:
             stamp.check_clock(time.time_ns())
             if new_camera:
                 self.cameras.add(camera)
-            self.cameras.note(camera, stream, stamp.sequence, payload)
             sample = StreamSample(camera, stream, stamp, payload)
+            self.cameras.note(sample)
             for output in self.outputs:
                 output.write(sample)
         except (ValueError, OverflowError) as error:  # MessageError is a ValueError

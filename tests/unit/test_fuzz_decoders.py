@@ -300,7 +300,7 @@ def test_a_capture_time_a_day_away_from_this_clock_is_refused_by_the_learner() -
 
 
 def test_learner_counters_saturate_and_always_encode() -> None:
-    from gngdt.core.learner.frame_learner import MAX_COUNTER, Counters
+    from gngdt.core.learner.results import MAX_COUNTER, Counters
     from gngdt.schemas.status import encode_status
 
     counters = Counters()

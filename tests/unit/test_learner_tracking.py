@@ -149,19 +149,19 @@ def test_a_frame_that_cannot_be_aligned_is_reported_and_not_learned(walk) -> Non
     elsewhere = next(iter(render_scene("data2", 1, width=320, height=240)))
     points, colors = Deprojector(0.3, 6.0)(elsewhere.depth, elsewhere.color,
                                           elsewhere.intrinsics)
-    assert not learner.learn(points, colors, "camera", None, camera=elsewhere.intrinsics)
+    assert not learner.learn(points, colors, "camera", None, camera=elsewhere.intrinsics).learned
     assert learner.tracking.problem in ("little overlap", "few inliers", "large residual",
                                         "degenerate", "implausible motion")
     assert learner.model.n_steps_ == steps and learner.last_pose is pose
     assert learner.counters.frames_lost_tracking == 1 and learner.counters.frames_used == 3
-    status = decode_status(status_message(learner, FrameStamp(3, time.time_ns()), 1.0,
-                                          (1.0, 1.0), None).SerializeToString())
+    status = decode_status(status_message(learner.figures(), FrameStamp(3, time.time_ns()),
+                                          1.0, (1.0, 1.0), None).SerializeToString())
     assert status.tracking == f"lost: {learner.tracking.problem}"
     assert status.frames_lost_tracking == 1 and status.frames_used == 3
     points, colors, frame = walk[3]
-    assert not learner.learn(points, colors, "camera", None, camera=None)
+    assert not learner.learn(points, colors, "camera", None, camera=None).learned
     assert learner.tracking.problem == "no calibration"
-    assert learner.learn(points, colors, "camera", None, camera=frame.intrinsics)  # back on
+    assert learner.learn(points, colors, "camera", None, camera=frame.intrinsics).learned
 
 
 def test_tracking_needs_a_profile_without_a_frame_schedule() -> None:

@@ -3,6 +3,7 @@ the fixed frame, says so, and skips (counts, names) clouds in another frame or w
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -10,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gngdt.core.learner.frame_learner import FrameLearner, Ghosts, LearnerConfig, OtherFrameError
+from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
+from gngdt.core.learner.results import Ghosts, Outcome
 from gngdt.schemas.clouds import cloud_to_msg
 from gngdt.schemas.messages import MessageError
 from gngdt.schemas.wire import FrameStamp
@@ -61,13 +63,15 @@ def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path:
     assert learner.quantization_error(*last)["pos"] < 0.2
     unposed = decode_points(posed_cloud(None, "camera"), attachment(3))
     assert unposed.pose is None and unposed.frame_id == "camera"
-    with pytest.raises(OtherFrameError, match=r"frame 'camera'.*learned in 'world'"):
-        learner.learn(unposed.positions, unposed.colors, unposed.frame_id, unposed.pose)
+    result = learner.learn(unposed.positions, unposed.colors, unposed.frame_id, unposed.pose)
+    assert result.outcome is Outcome.OTHER_FRAME
+    assert re.search(r"frame 'camera'.*learned in 'world'", result.problem)
     assert learner.counters.frames_other_frame == 1 and learner.counters.frames_used == 3
     stamp = FrameStamp(3, 1)
-    topology = topology_message(learner, stamp, {}, learner.learned_frame())
+    published = learner.publication(*last)
+    topology = topology_message(published, stamp)
     assert topology.frame_id == "world"
-    status = status_message(learner, stamp, 1.0, (0.0, 0.0), topology)
+    status = status_message(learner.figures(), stamp, 1.0, (0.0, 0.0), published)
     assert status.frames_other_frame == 1 and status.ghost_distance_m == 0.05
     assert 0 < status.seen_nodes <= status.nodes and 0.0 <= status.ghost_share <= 1.0
     # a checkpoint remembers the frame
