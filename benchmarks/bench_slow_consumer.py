@@ -30,8 +30,8 @@ from procstat import gngdt
 
 from gngdt.schemas.status import decode_status
 from gngdt.schemas.topology import decode_topology
+from gngdt.services.capture import DEFAULT_RUN_MAX_POINTS as DEFAULT_MAX_POINTS
 from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config
-from gngdt.services.run import DEFAULT_MAX_POINTS
 
 #: a client of the router subscribed to everything, whose callback never returns
 NEVER_READS = """

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 from gngdt.core.odometry.pose_checks import PoseAudit, PoseLimits
 from gngdt.core.sensor.depth import DepthRange
@@ -24,12 +25,15 @@ POSE_LIMIT_OPTIONS = {"workspace_m": "workspace_m", "max_speed": "max_speed_m_s"
                       "max_turn_rate": "max_turn_deg_s"}
 
 
-def add_pose_limit_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--workspace-m``, ``--max-speed`` and ``--max-turn-rate``: what a camera pose may be."""
+#: what the pose limits are for, to title their options
+POSE_LIMITS_TITLE = ("camera poses (a frame whose pose breaks these, or contradicts its own "
+                     "depth, is counted and not learned)")
+
+
+def add_pose_limit_arguments(group: Any) -> None:
+    """``--workspace-m``, ``--max-speed`` and ``--max-turn-rate``: what a camera pose may be
+    (into ``group``, a parser or an argument group)."""
     defaults = PoseLimits()
-    group = parser.add_argument_group(
-        "camera poses (a frame whose pose breaks these, or contradicts its own depth, is "
-        "counted and not learned)")
     group.add_argument("--workspace-m", type=float, metavar="M",
                        help="a camera farther than this from the fixed frame's origin has a "
                        f"wrong pose (default {defaults.workspace_m:g} m)")

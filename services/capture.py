@@ -26,7 +26,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -55,6 +55,7 @@ from gngdt.services.plumbing.session import (
     open_session,
     wait_for_subscribers,
 )
+from gngdt.services.plumbing.settings import OptionGroup, add_settings_argument
 
 if TYPE_CHECKING:
     import zenoh
@@ -78,13 +79,23 @@ EXAMPLES = """examples:
 
 #: longest wait between two frames at the recorded rate
 DEFAULT_MAX_GAP_S = 5.0
+#: capture's point cap under `gngdt run` (a uniform random subset, as the learner's own
+#: sampling): the learner samples 10,000 points a frame and the logger shows 50,000, so the cap
+#: changes neither, and on 2 cores at 30 fps it cut dropped frames from ~30 % to ~5 %
+DEFAULT_RUN_MAX_POINTS = 50_000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_source_arguments(parser)
-    _add_replay_arguments(parser)
-    add_cloud_arguments(parser)
-    _add_limit_arguments(parser)
+    for group in SETTINGS:
+        group.add_to(parser)
+    parser.add_argument("--loop", action="store_true", help="replay forever (no end-of-stream)")
+    parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
+    parser.add_argument(
+        "--wait-subscribers", type=float, default=10.0, metavar="SECONDS",
+        help="wait this long for a points subscriber before the first frame (default 10)")
+    add_sampling_seed_argument(parser)
+    add_settings_argument(parser)
     add_zenoh_arguments(parser)
 
 
@@ -109,37 +120,35 @@ def source_spec(args: argparse.Namespace) -> str:
     return str(args.recording) if args.realsense is None else live_spec(args.realsense)
 
 
-def _add_replay_arguments(parser: argparse.ArgumentParser) -> None:
-    speed = parser.add_mutually_exclusive_group()
+def add_reading_arguments(group: Any) -> None:
+    """How capture reads a source and makes its clouds (`READING`: `gngdt run` has these
+    options too)."""
+    speed = group.add_mutually_exclusive_group()
     speed.add_argument(
         "--rate", type=float, default=1.0, help="replay speed factor (default 1.0 = recorded rate)"
     )
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
-    parser.add_argument("--loop", action="store_true", help="replay forever (no end-of-stream)")
-    parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
-    parser.add_argument(
-        "--wait-subscribers", type=float, default=10.0, metavar="SECONDS",
-        help="wait this long for a points subscriber before the first frame (default 10)")
-    parser.add_argument(
+    group.add_argument(
         "--topics", metavar="PREFIX",
         help="read only the recording's topics under PREFIX (a bag with several cameras)")
-    parser.add_argument(
+    group.add_argument(
         "--fixed-frame", default="auto", metavar="FRAME",
         help="frame the camera poses are given in (e.g. map, odom); 'auto' (default): world, "
         "map or odom, whichever the recording's transforms connect to the images; 'none': "
         "ignore the poses, publish camera-frame clouds")
-    parser.add_argument(
+    group.add_argument(
         "--max-skew-ms", type=float, default=DEFAULT_MAX_SKEW_MS,
         help="largest stamp difference between a frame's colour and depth images "
         f"(default {DEFAULT_MAX_SKEW_MS:g})")
-    parser.add_argument(
+    group.add_argument(
         "--max-gap", type=float, default=DEFAULT_MAX_GAP_S, metavar="SECONDS",
         help="longest wait between two frames: a longer gap in the recorded stamps is "
         f"shortened to this, with a warning (default {DEFAULT_MAX_GAP_S:g})")
-    add_camera_arguments(parser)
+    add_camera_arguments(group)
+    add_cloud_arguments(group)
 
 
-def add_camera_arguments(parser: argparse.ArgumentParser) -> None:
+def add_camera_arguments(parser: Any) -> None:
     """--camera-json and --depth-scale, for every kind of source (shared with `gngdt run`)."""
     parser.add_argument("--camera-json", type=Path, metavar="FILE",
                         help="camera parameters, a JSON object with fx, fy, cx, cy (pixels) and "
@@ -152,27 +161,32 @@ def add_camera_arguments(parser: argparse.ArgumentParser) -> None:
                         "the source says")
 
 
-def add_cloud_arguments(parser: argparse.ArgumentParser) -> None:
+def add_cloud_arguments(parser: Any) -> None:
     """How a frame becomes a cloud (depth range, voxel, veil, point cap); see `frame_to_cloud`."""
     parser.add_argument("--min-depth", type=float, default=0.1, help="metres (default 0.1)")
     parser.add_argument("--max-depth", type=float, default=10.0, help="metres (default 10)")
     parser.add_argument(
         "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres")
     parser.add_argument(
-        "--drop-veil", type=float, default=0.0, metavar="RATIO",
+        "--drop-veil", type=float, metavar="RATIO",
         help="drop veil points: pixels whose depth jumps from a neighbour's by more than RATIO "
         "of the nearer depth (mixed pixels along depth edges; 0.03 for a Kinect, see "
-        "config/kinect.toml); default 0: keep every pixel")
+        "config/kinect.toml); default: keep every pixel (`gngdt run`: the sensor profile's)")
     parser.add_argument(
-        "--max-points", type=int, default=0,
-        help="publish a random subset of at most this many points per frame (default 0: all, "
-        f"up to {MAX_CLOUD_POINTS:,}, what a learner accepts and a zenoh message holds)")
+        "--max-points", type=int,
+        help="publish a random subset of at most this many points per frame (default: all, "
+        f"up to {MAX_CLOUD_POINTS:,}, what a learner accepts and a zenoh message holds; "
+        f"`gngdt run`: {DEFAULT_RUN_MAX_POINTS:,}, all with --track; 0: all)")
+
+
+def add_sampling_seed_argument(parser: Any) -> None:
+    """``--seed`` of the point cap (not in `READING`: `gngdt run`'s ``--seed`` is the
+    learner's)."""
     parser.add_argument("--seed", type=int, default=0, help="seed of the point-cap sampling")
 
 
-def _add_limit_arguments(parser: argparse.ArgumentParser) -> None:
-    limits = parser.add_argument_group(
-        "limits (a recording beyond them is refused, naming the file and the frame)")
+def add_limit_arguments(limits: Any) -> None:
+    """What a recording may hold (`LIMITS`)."""
     defaults = ReadLimits()
     limits.add_argument(
         "--max-frame-pixels", type=int, default=defaults.max_frame_pixels, metavar="N",
@@ -192,11 +206,20 @@ def _add_limit_arguments(parser: argparse.ArgumentParser) -> None:
         f"(default {defaults.max_transform_samples:,}); the rest are not read, with a warning")
 
 
+#: how capture reads a source and makes its clouds, declared once for `gngdt capture` and
+#: `gngdt run`
+READING = OptionGroup("reading and deprojecting (gngdt capture)", add_reading_arguments)
+LIMITS = OptionGroup("limits (a recording beyond them is refused, naming the file and the frame)",
+                     add_limit_arguments)
+#: the option groups a settings file (``--settings``) may hold
+SETTINGS = [READING, LIMITS]
+
+
 def frame_to_cloud(args: argparse.Namespace) -> FrameToCloud:
     """The frame-to-cloud conversion `add_cloud_arguments` describes (``ValueError`` for a wrong
     value)."""
     return FrameToCloud(CloudOptions(args.min_depth, args.max_depth, args.voxel,
-                                     args.max_points or None, args.drop_veil), args.seed)
+                                     args.max_points or None, args.drop_veil or 0.0), args.seed)
 
 
 def source_options(args: argparse.Namespace) -> SourceOptions:

@@ -112,6 +112,13 @@ def main(argv: list[str] | None = None) -> int:
             level=getattr(logging, args.log_level),
             format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         )
+        from gngdt.services.plumbing.settings import apply_settings
+
+        try:  # a service started by `gngdt run` reads its options from the run's file
+            apply_settings(args, getattr(args._module, "SETTINGS", []))
+        except ValueError as error:
+            logging.getLogger(__name__).error("%s", error)
+            return 2
         return int(args._module.main(args) or 0)
     except KeyboardInterrupt:
         return 130

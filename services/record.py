@@ -60,7 +60,7 @@ IMAGES_EXAMPLES = """examples:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the ``synth`` and ``images`` sub-subcommands."""
     from gngdt.io.images import FORMATS
-    from gngdt.io.import_checks import add_pose_limit_arguments
+    from gngdt.io.import_checks import POSE_LIMITS_TITLE, add_pose_limit_arguments
     from gngdt.io.mcap.writer import COLOR_FORMATS, COMPRESSIONS
     from gngdt.io.synth.render import SCENES
 
@@ -134,7 +134,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "against its depth as the learner checks it; when most contradict it, nothing is "
         "written and the likely cause is named (quaternion order, inverted transform, units)",
     )
-    add_pose_limit_arguments(images)
+    add_pose_limit_arguments(images.add_argument_group(POSE_LIMITS_TITLE))
     add_output_options(images)
     _add_realsense(kinds, add_output_options)
 

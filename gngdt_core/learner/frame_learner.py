@@ -67,8 +67,9 @@ LEARNER_WORLD_DEFAULTS: dict[str, Any] = {"resolution_m": 0.1, "max_nodes": 20_0
 #: position error below which the network counts as settled
 SETTLE_CHUNK = 20_000
 SETTLED_CHANGE = 0.01
-#: largest cloud a learner accepts by default (the wire's own limit, schemas' MAX_CLOUD_POINTS)
-DEFAULT_MAX_POINTS = 2_000_000
+#: largest cloud a learner accepts by default (the wire's own limit, schemas' MAX_CLOUD_POINTS);
+#: not capture's point cap (``--max-points``), which thins a frame's cloud
+DEFAULT_MAX_CLOUD_POINTS = 2_000_000
 
 
 def _pose_limit(name: str) -> Any:
@@ -93,7 +94,7 @@ class LearnerOptions:
                                             "... or every this many seconds")
     quantization_sample: int = param(2_000, Interval(int, 1),
                                      "points of each frame used for the quantization error")
-    max_points: int = param(DEFAULT_MAX_POINTS, Interval(int, 1),
+    max_cloud_points: int = param(DEFAULT_MAX_CLOUD_POINTS, Interval(int, 1),
                             "largest cloud accepted; a bigger one is refused (counted as "
                             "malformed) before anything is allocated")
     settle_max_steps: int = param(2_000_000, Interval(int, 0),

@@ -89,11 +89,14 @@ def add_serve_arguments(parser: argparse.ArgumentParser) -> None:
                        help=f"port of the web viewer (default {DEFAULT_WEB_PORT})")
 
 
-def add_rate_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options of `DisplayRates` (shared by ``gngdt log`` and ``gngdt run``)."""
+#: what the `DisplayRates` options are for, to title them
+RATES_TITLE = "what goes into the .rrd (metrics and objects: every frame)"
+
+
+def add_rate_arguments(rates: Any) -> None:
+    """Options of `DisplayRates` (``gngdt log``'s, and through its option group ``gngdt
+    run``'s), into ``rates`` (a parser or an argument group)."""
     defaults = DisplayRates()
-    rates = parser.add_argument_group(
-        "what goes into the .rrd (metrics and objects: every frame)")
     rates.add_argument("--image-every", type=int, default=defaults.image_every, metavar="N",
                        help="log the colour image of every Nth frame (default %(default)s)")
     rates.add_argument("--depth-every", type=int, default=defaults.depth_every, metavar="N",
@@ -118,16 +121,6 @@ def rates_from_args(args: argparse.Namespace) -> DisplayRates:
         return DisplayRates.everything()
     return DisplayRates(args.image_every, args.depth_every, args.topology_every,
                         args.cloud_every, args.max_cloud_points or None, args.jpeg_quality)
-
-
-def rate_arguments(args: argparse.Namespace) -> list[str]:
-    """The `DisplayRates` options of ``args`` as command-line arguments (for ``gngdt run``)."""
-    if args.keep_everything:
-        return ["--keep-everything"]
-    return ["--image-every", str(args.image_every), "--depth-every", str(args.depth_every),
-            "--topology-every", str(args.topology_every), "--cloud-every", str(args.cloud_every),
-            "--max-cloud-points", str(args.max_cloud_points),
-            "--jpeg-quality", str(args.jpeg_quality)]
 
 
 def default_rrd_path(name: str) -> Path:
@@ -242,7 +235,7 @@ class RerunOutput(Output):
     @classmethod
     def add_arguments(cls, parser: argparse.ArgumentParser) -> None:
         add_viewer_arguments(parser)
-        add_rate_arguments(parser)
+        add_rate_arguments(parser.add_argument_group(RATES_TITLE))
         add_serve_arguments(parser)
         limits = parser.add_argument_group("limits of the rerun output")
         limits.add_argument("--max-rrd-mb", type=int, default=DEFAULT_MAX_RRD_MB, metavar="MB",

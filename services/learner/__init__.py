@@ -22,12 +22,13 @@ import argparse
 import logging
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from gngdt.core.clustering import CLUSTERINGS
 from gngdt.io.import_checks import add_pose_limit_arguments, pose_limit_values
 from gngdt.schemas.wire import DEFAULT_CAMERA, topic
 from gngdt.services.plumbing.session import ZenohSetupError, add_zenoh_arguments, open_session
+from gngdt.services.plumbing.settings import OptionGroup, add_settings_argument
 
 if TYPE_CHECKING:
     from gngdt.io.profiles import Profile
@@ -44,43 +45,56 @@ EXAMPLES = """examples:
 """
 
 
+def add_learning_arguments(group: Any) -> None:
+    """How the learner learns (`LEARNING`: `gngdt run` has these options too)."""
+    group.add_argument("--params", type=Path, metavar="FILE.toml",
+                       help="GNG-DT parameters and learner options; config/learner.toml "
+                       "documents every key (installed with gngdt: `python -m gngdt.config` "
+                       "prints where)")
+    group.add_argument("--checkpoint", type=Path, metavar="PATH",
+                       help="checkpoint file (.npz): resumed from if present, saved periodically "
+                       "and on shutdown")
+    group.add_argument("--samples-per-frame", type=int,
+                       help="learning steps per frame (default 10000)")
+    group.add_argument("--max-nodes", type=int, help="node budget (default 1000)")
+    group.add_argument("--min-cluster-size", type=int,
+                       help="smallest component counted as a cluster (default 5)")
+    group.add_argument("--checkpoint-every", type=int, metavar="FRAMES",
+                       help="checkpoint every this many learned frames (default 30)")
+    group.add_argument("--seed", type=int, help="random seed of the model (default 0)")
+    group.add_argument("--objects-from", metavar="CLUSTERING",
+                       help="clustering published as objects on gngdt/<cam>/objects (default "
+                       f"segments; any of {', '.join(CLUSTERINGS)})")
+    group.add_argument("--object-confirm-frames", type=int, metavar="FRAMES",
+                       help="a cluster is published as an object once seen in this many "
+                       "learned frames in a row (default 5; 1: at once)")
+    group.add_argument("--scene-every", type=int, metavar="FRAMES",
+                       help="publish the foxglove scene on gngdt/<cam>/scene every this many "
+                       "learned frames (default 3; 0: never)")
+    add_pose_limit_arguments(group)
+    group.add_argument("--track", action="store_true", default=None,
+                       help="estimate the camera's pose of clouds that come without one by "
+                       "aligning each to the map; publish it on gngdt/<cam>/tf and learn in "
+                       "the fixed frame 'odom'; frames whose alignment fails are not learned "
+                       "(the status says why)")
+
+
+#: the learner's options, declared once for `gngdt learn` and `gngdt run`
+LEARNING = OptionGroup("learning (gngdt learn)", add_learning_arguments)
+#: the option groups a settings file (``--settings``) may hold
+SETTINGS = [LEARNING]
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
-    parser.add_argument("--params", type=Path, metavar="FILE.toml",
-                        help="GNG-DT parameters and learner options; config/learner.toml "
-                        "documents every key (installed with gngdt: `python -m gngdt.config` "
-                        "prints where)")
     parser.add_argument("--print-params", action="store_true",
                         help="print every effective parameter and where it came from (a "
                         "default, the --params file or an option), then exit")
-    parser.add_argument("--checkpoint", type=Path, metavar="PATH",
-                        help="checkpoint file (.npz): resumed from if present, saved periodically "
-                        "and on shutdown")
-    parser.add_argument("--samples-per-frame", type=int,
-                        help="learning steps per frame (default 10000)")
-    parser.add_argument("--max-nodes", type=int, help="node budget (default 1000)")
-    parser.add_argument("--min-cluster-size", type=int,
-                        help="smallest component counted as a cluster (default 5)")
-    parser.add_argument("--checkpoint-every", type=int, metavar="FRAMES",
-                        help="checkpoint every this many learned frames (default 30)")
-    parser.add_argument("--seed", type=int, help="random seed of the model (default 0)")
-    parser.add_argument("--objects-from", metavar="CLUSTERING",
-                        help="clustering published as objects on gngdt/<cam>/objects (default "
-                        f"segments; any of {', '.join(CLUSTERINGS)})")
-    parser.add_argument("--object-confirm-frames", type=int, metavar="FRAMES",
-                        help="a cluster is published as an object once seen in this many "
-                        "learned frames in a row (default 5; 1: at once)")
-    parser.add_argument("--scene-every", type=int, metavar="FRAMES",
-                        help="publish the foxglove scene on gngdt/<cam>/scene every this many "
-                        "learned frames (default 3; 0: never)")
-    add_pose_limit_arguments(parser)
-    parser.add_argument("--track", action="store_true", default=None,
-                        help="estimate the camera's pose of clouds that come without one by "
-                        "aligning each to the map; publish it on gngdt/<cam>/tf and learn in "
-                        "the fixed frame 'odom'; frames whose alignment fails are not learned "
-                        "(the status says why)")
+    for group in SETTINGS:
+        group.add_to(parser)
     parser.add_argument("--exit-on-eos", action="store_true",
                         help="exit after learning the last frame of a stream (used by `gngdt run`)")
+    add_settings_argument(parser)
     add_zenoh_arguments(parser)
 
 
@@ -93,11 +107,10 @@ def profile_from_args(args: argparse.Namespace) -> Profile:
              "checkpoint_every_frames": "checkpoint_every", "seed": "seed",
              "objects_from": "objects_from", "object_confirm_frames": "object_confirm_frames",
              "scene_every_frames": "scene_every", "track": "track"}
-    # `gngdt run` has some of these options (and passes them to its learner), not all
-    options = {name: getattr(args, flag, None) for name, flag in flags.items()}
+    options = {name: getattr(args, flag) for name, flag in flags.items()}
     options.update({f"pose_{name}": value for name, value in pose_limit_values(args).items()})
     return load_profile(args.params).with_overrides(
-        {"max_nodes": getattr(args, "max_nodes", None)}, options, "command line")
+        {"max_nodes": args.max_nodes}, options, "command line")
 
 
 def main(args: argparse.Namespace) -> int:

@@ -11,7 +11,7 @@ import numpy as np
 from gngdt.core.clustering import POS, cluster_count
 from gngdt.core.gas.sampling import finite_rows
 from gngdt.core.learner.frame_budget import Budget
-from gngdt.core.learner.frame_learner import DEFAULT_MAX_POINTS
+from gngdt.core.learner.frame_learner import DEFAULT_MAX_CLOUD_POINTS
 from gngdt.core.learner.results import LearnerFigures, Publication
 from gngdt.schemas.wire import FrameStamp
 
@@ -133,7 +133,8 @@ def finite_points(
     return positions[finite], None if colors is None else colors[finite]
 
 
-def decode_points(payload: bytes, attachment: bytes | None, max_points: int = DEFAULT_MAX_POINTS,
+def decode_points(payload: bytes, attachment: bytes | None,
+                  max_points: int = DEFAULT_MAX_CLOUD_POINTS,
                   now_ns: int | None = None) -> PointsMessage:
     """The learner's decode path for one ``points`` sample.
 

@@ -258,7 +258,7 @@ class LearnerService:
                                   latest_wins=False)]
         #: the last publication (its errors and cluster counts go into every status)
         self._published: Publication | None = None
-        self._max_cloud_bytes = self.options.max_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
+        self._max_cloud_bytes = self.options.max_cloud_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
         #: the last learned frame (stamp, positions, colours), kept to settle on at the end
         self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
         #: the last learned frame was not published yet (the budget put it off)
@@ -318,7 +318,7 @@ class LearnerService:
         try:
             stamp, positions, colors, frame_id, pose = decode_points(
                 payload_bytes(sample, self._max_cloud_bytes), attachment_bytes(sample),
-                self.options.max_points)
+                self.options.max_cloud_points)
             counters.note_sequence(stamp.sequence)
             received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
             self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)

@@ -16,11 +16,13 @@ import argparse
 import logging
 from typing import TYPE_CHECKING
 
+from gngdt.io.outputs.rerun_output import RATES_TITLE, add_rate_arguments
 from gngdt.services.logger.cameras import DEFAULT_MAX_CAMERAS
 from gngdt.services.logger.inbox import DEFAULT_QUEUE_MB
-
-__all__ = ["EXAMPLES", "add_arguments", "main"]
 from gngdt.services.plumbing.session import add_zenoh_arguments
+from gngdt.services.plumbing.settings import OptionGroup, add_settings_argument
+
+__all__ = ["DISPLAY", "EXAMPLES", "SETTINGS", "add_arguments", "main"]
 
 if TYPE_CHECKING:
     from gngdt.io.outputs import Output
@@ -36,6 +38,13 @@ EXAMPLES = """examples:
   gngdt log --foxglove                        # + live to Foxglove at ws://127.0.0.1:8765
   gngdt log --foxglove --bind 0.0.0.0:8765    # ... from other machines (no authentication)
 """
+
+#: what the logger puts into the .rrd, declared once (by the rerun output) for `gngdt log` and
+#: `gngdt run`
+DISPLAY = OptionGroup(RATES_TITLE, add_rate_arguments)
+#: the option groups a settings file (``--settings``) may hold
+SETTINGS = [DISPLAY]
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from gngdt.io.outputs import OUTPUTS
@@ -56,6 +65,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     limits.add_argument("--max-queue-mb", type=int, default=DEFAULT_QUEUE_MB, metavar="MB",
                         help="messages held while the logger is busy, in MB (default "
                         f"{DEFAULT_QUEUE_MB}); the oldest make room")
+    add_settings_argument(parser)
     add_zenoh_arguments(parser)
 
 

@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 from gngdt.io.mcap.limits import ReadLimits
 from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS
 from gngdt.schemas.wire import BRIDGE, CAPTURE, DEFAULT_CAMERA, alive_key, topic
-from gngdt.services.capture import add_cloud_arguments
+from gngdt.services.capture import add_cloud_arguments, add_sampling_seed_argument
 from gngdt.services.plumbing.session import add_zenoh_arguments
 
 if TYPE_CHECKING:
@@ -109,6 +109,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="MB", help="images held waiting for their partner (default "
                         f"{limits.max_held_bytes >> 20})")
     add_cloud_arguments(camera)
+    add_sampling_seed_argument(camera)
     add_zenoh_arguments(parser)
 
 

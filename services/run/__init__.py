@@ -26,14 +26,10 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, TYPE_CHECKING
+from typing import IO, TYPE_CHECKING, Any
 
 from gngdt.core.learner.warm_up import PROGRESS_PHRASE
-from gngdt.io.outputs.rerun_output import (
-    add_rate_arguments,
-    add_serve_arguments,
-    rate_arguments,
-)
+from gngdt.io.outputs.rerun_output import add_serve_arguments
 from gngdt.schemas.wire import (
     ALL_KEYS,
     BRIDGE,
@@ -43,10 +39,14 @@ from gngdt.schemas.wire import (
     alive_key,
     topic,
 )
-from gngdt.services.capture import add_camera_arguments, add_source_arguments
+from gngdt.services.capture import DEFAULT_RUN_MAX_POINTS, add_source_arguments
+from gngdt.services.capture import SETTINGS as CAPTURE_SETTINGS
+from gngdt.services.learner import SETTINGS as LEARNER_SETTINGS
+from gngdt.services.logger import SETTINGS as LOGGER_SETTINGS
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.roles import RunAccess
 from gngdt.services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
+from gngdt.services.plumbing.settings import OptionGroup, write_settings
 from gngdt.services.run.plan import RunPlan, drop_unwritten, plan_run
 from gngdt.services.run.summary import file_size, format_summary, mostly_rejected, recorded_frames
 
@@ -70,10 +70,11 @@ EXAMPLES = """examples:
   gngdt run walk.mcap --track                        # camera poses estimated, not read
 """
 
-#: capture's point cap under `gngdt run`: a uniform random subset, as the learner's own sampling
-DEFAULT_MAX_POINTS = 50_000
 #: where `--ros2` finds ROS 2 by default: rmw_zenohd listens there
 ROS2_ROUTER = "tcp/127.0.0.1:7447"
+#: each service's option groups: `gngdt run` has their options and hands each service its own
+CHILD_SETTINGS: dict[str, list[OptionGroup]] = {
+    "capture": CAPTURE_SETTINGS, "learn": LEARNER_SETTINGS, "log": LOGGER_SETTINGS}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -95,27 +96,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "port 8765 unless --bind names one)")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing --save or --mcap file (default: refused)")
-    speed = parser.add_mutually_exclusive_group()
-    speed.add_argument("--rate", type=float, default=1.0, help="replay speed factor (default 1)")
-    speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
-    parser.add_argument("--voxel", type=float, metavar="SIZE_M", help="capture voxel size, metres")
-    add_camera_arguments(parser)
-    parser.add_argument(
-        "--max-points", type=int,
-        help=f"capture's random point cap per frame (default {DEFAULT_MAX_POINTS}, with --track "
-        "0; 0: full clouds). The learner samples 10,000 points a frame by default and the logger "
-        "shows 50,000, so the cap changes neither; on 2 cores at 30 fps it cuts dropped frames "
-        "from ~30%% to ~5%%. Tracking aligns whole depth images: a capped cloud is too sparse")
-    parser.add_argument("--track", action="store_true",
-                        help="estimate the camera's poses by aligning each frame to the map "
-                        "(`gngdt learn --track`; a recording's own poses are ignored): the map "
-                        "is learned in the fixed frame 'odom'")
-    parser.add_argument("--params", type=Path, metavar="FILE.toml",
-                        help="learner parameters (see `gngdt learn --help`)")
-    parser.add_argument("--checkpoint", type=Path, metavar="PATH", help="learner checkpoint")
-    parser.add_argument("--samples-per-frame", type=int, help="learning steps per frame")
-    parser.add_argument("--max-nodes", type=int, help="learner node budget")
     parser.add_argument("--startup-timeout", type=float, default=60.0, metavar="SECONDS",
                         help="while the learner and logger come up (the first run on a machine "
                         "compiles kernels: 15-40 s, longer on a busy one), give up on one only "
@@ -124,10 +105,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--drain-timeout", type=float, default=30.0, metavar="SECONDS",
                         help="after the stream ends, how long learner and logger may take to "
                         "finish before they are interrupted (default 30)")
-    add_rate_arguments(parser)
     parser.add_argument("--ros2", nargs="?", const=ROS2_ROUTER, metavar="ENDPOINT",
                         help="also run `gngdt ros2 --no-input`: the results as ROS 2 topics on the "
                         f"ROS 2 router at ENDPOINT (default {ROS2_ROUTER}, rmw_zenohd's)")
+    # the services' own options, declared once by each (`gngdt.services.plumbing.settings`)
+    for group in CHILD_SETTINGS.values():
+        for options in group:
+            options.add_to(parser)
 
 
 @dataclass(eq=False)  # a process: equal only to itself (and hashable)
@@ -219,7 +203,13 @@ class Pipeline:
         self.children: list[Child] = []
         self.interrupted = False
 
-    def start(self, name: str, arguments: list[str]) -> Child:
+    def start(self, name: str, arguments: list[str],
+              settings: dict[str, Any] | None = None) -> Child:
+        """Start the service ``name`` with ``arguments`` and its ``settings`` (its options'
+        values: a file beside its log, `gngdt.services.plumbing.settings`)."""
+        if settings is not None:
+            path = write_settings(self.log_dir / f"{name}.settings.json", settings)
+            arguments = [*arguments, "--settings", str(path)]
         # -P: the user's current folder is not put first on the children's import path
         command = [sys.executable, "-P", "-m", "gngdt.services.cli", name, *arguments,
                    "--zenoh-config", str(self.access.client_file(name)),
@@ -322,31 +312,22 @@ def wait_for_startup(starting: dict[Child, str], observed: Observed, silence_s: 
     return None
 
 
-def learner_arguments(args: argparse.Namespace) -> list[str]:
-    arguments = ["--cam", args.cam, "--exit-on-eos"]
-    for flag, value in (("--params", args.params), ("--checkpoint", args.checkpoint),
-                        ("--samples-per-frame", args.samples_per_frame),
-                        ("--max-nodes", args.max_nodes)):
-        if value is not None:
-            arguments += [flag, str(value)]
-    return [*arguments, "--track"] if args.track else arguments
-
-
-def capture_arguments(args: argparse.Namespace, veil_ratio: float | None = None) -> list[str]:
-    """Capture's command line; ``veil_ratio`` from the sensor profile (`sensor_veil_ratio`)."""
-    arguments = [str(args.recording), "--cam", args.cam]
-    arguments += ["--fast"] if args.fast else ["--rate", str(args.rate)]
-    if args.track:  # the poses are estimated: a recording's own are not used
-        arguments += ["--fixed-frame", "none"]
-    max_points = args.max_points
-    if max_points is None:  # tracking aligns whole depth images
-        max_points = 0 if args.track else DEFAULT_MAX_POINTS
-    for flag, value in (("--voxel", args.voxel), ("--max-points", max_points),
-                        ("--drop-veil", veil_ratio), ("--camera-json", args.camera_json),
-                        ("--depth-scale", args.depth_scale)):
-        if value is not None:
-            arguments += [flag, str(value)]
-    return arguments
+def child_settings(args: argparse.Namespace, service: str, veil_ratio: float | None = None
+                   ) -> dict[str, Any]:
+    """The options ``service`` runs with: its option groups' values as the run parsed them,
+    and what the run decides for it (capture under ``--track``: the recording's poses ignored
+    and whole clouds, as tracking aligns whole depth images; otherwise clouds capped at
+    `DEFAULT_RUN_MAX_POINTS`, and veil pixels dropped as the sensor profile says)."""
+    values = {name: value for group in CHILD_SETTINGS[service]
+              for name, value in group.values(args).items()}
+    if service == "capture":
+        if args.track:
+            values["fixed_frame"] = "none"
+        if values["max_points"] is None:
+            values["max_points"] = 0 if args.track else DEFAULT_RUN_MAX_POINTS
+        if values["drop_veil"] is None:
+            values["drop_veil"] = veil_ratio
+    return values
 
 
 def ros2_arguments(args: argparse.Namespace) -> list[str]:
@@ -357,7 +338,8 @@ def ros2_arguments(args: argparse.Namespace) -> list[str]:
 
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
                      mcap_path: Path | None = None) -> list[str]:
-    arguments = [*rate_arguments(args), "--overwrite"]
+    """Where the logger writes and serves (the run reserved its paths: ``--overwrite``)."""
+    arguments = ["--overwrite"]
     if mcap_path is not None:
         arguments += ["--mcap", str(mcap_path)]
     if args.connect:
@@ -486,8 +468,10 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
     """Start the services and see the stream through; why it ended early, or ``""``."""
     log.info("starting the learner and the logger (the first run on a machine compiles the "
              "learning kernels: 15-40 s, longer on a busy machine; later runs take seconds)")
-    learner = pipeline.start("learn", learner_arguments(args))
-    logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path))
+    learner = pipeline.start("learn", ["--cam", args.cam, "--exit-on-eos"],
+                             child_settings(args, "learn"))
+    logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path),
+                            child_settings(args, "log"))
     starting = {learner: alive_key(args.cam, LEARNER), logger: LOGGER_ALIVE}
     if args.ros2:  # the results into ROS 2 as well (see `gngdt ros2`)
         bridge = pipeline.start("ros2", ros2_arguments(args))
@@ -505,7 +489,8 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
         raise StartupTimeout
     if ready:
         log.info("replaying %s", args.recording)
-        capture = pipeline.start("capture", capture_arguments(args, veil_ratio))
+        capture = pipeline.start("capture", [str(args.recording), "--cam", args.cam],
+                                 child_settings(args, "capture", veil_ratio))
         wait_until(lambda: capture.process.poll() is not None
                    or learner.process.poll() is not None or logger.process.poll() is not None,
                    float("inf"), stop, pipeline)
