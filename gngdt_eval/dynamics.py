@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from gngdt.core.clustering import POS
+from gngdt.core.learner.frame_learner import LearnerOptions
 
 #: a point of the world sample is seen through (and dropped) when the current frame measures a
 #: surface this fraction of the depth behind it (5 %: 10 cm at 2 m, well above Kinect noise)
@@ -151,8 +152,9 @@ def scene_changes(metadata: dict[str, dict[str, str]]) -> list[Change]:
 class DynamicsSettings:
     """What the metrics over time measure with."""
 
-    #: a node this far (metres) from every point of a frame is a ghost / stale
-    ghost_distance_m: float = 0.05
+    #: a node this far (metres) from every point of a frame is a ghost / stale, as the learner's
+    #: status measures it
+    ghost_distance_m: float = LearnerOptions.ghost_distance_m
     #: depth tolerance of "could have seen", as the model's default
     view_depth_margin: float = 0.05
     #: points kept in the world sample (half fit k-means, half score both)

@@ -13,6 +13,7 @@ import os
 from dataclasses import dataclass, field
 
 from gngdt.core.clustering import BY_COLOUR_AND_NORMAL, COL, NOR, POS
+from gngdt.core.learner.frame_learner import LearnerOptions
 
 METHODS = ("GNG", "GNG-W", "GNG-DT")
 #: command-line method names -> the paper's names
@@ -197,8 +198,9 @@ class PaperSettings:
     scales: tuple[float, ...] = SCALES
     datasets: tuple[str, ...] = DATASETS
     methods: tuple[str, ...] = METHODS
-    #: clusters with fewer nodes are not counted (the paper's isolated boundary nodes)
-    min_cluster_size: int = 5
+    #: clusters with fewer nodes are not counted (the paper's isolated boundary nodes), as the
+    #: learner counts them
+    min_cluster_size: int = LearnerOptions.min_cluster_size
     workers: int = field(default_factory=lambda: os.cpu_count() or 1)
     data_seed: int = 0
     frames: tuple[str, ...] = ()

@@ -38,6 +38,7 @@ from gngdt.eval.paper_common import METHOD_NAMES, PAPER_PARAMETERS
 from gngdt.eval.paper_methods import clusterings_of, make_model
 from gngdt.eval.recording_report import render_markdown, write_plots
 from gngdt.eval.report import mean_std, write_report
+from gngdt.io.deproject import CloudOptions, Deprojector
 
 log = logging.getLogger(__name__)
 
@@ -65,8 +66,8 @@ class RecordingSettings:
         default_factory=lambda: _learner_default("object_confirm_frames"))
     #: stop after this many frames (None = all)
     max_frames: int | None = None
-    min_depth_m: float = 0.1
-    max_depth_m: float = 10.0
+    min_depth_m: float = CloudOptions.min_depth_m
+    max_depth_m: float = CloudOptions.max_depth_m
     #: random subset of the last frame's points used to fit k-means and run DBSCAN
     reference_points: int = 20_000
     dbscan_min_samples: int = 10
@@ -150,7 +151,6 @@ class FramePoints:
 
 def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoints]:
     """Frames of the recording deprojected like the capture service does (labels with them)."""
-    from gngdt.io.deproject import Deprojector
     from gngdt.io.mcap.reader import read_frames
     from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS
 

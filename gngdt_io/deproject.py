@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gngdt.core.parameters import Interval, check_fields, param
 from gngdt.core.sensor.depth import veil_pixels
 from gngdt.io.frame import CameraIntrinsics, Frame
 from gngdt.schemas.clouds import MAX_CLOUD_POINTS
@@ -30,10 +31,35 @@ def ray_map(intrinsics: CameraIntrinsics) -> np.ndarray:
     return rays
 
 
+@dataclass(frozen=True)
+class CloudOptions:
+    """How a depth frame becomes the published point cloud (every default declared here, beside
+    its constraint; capture's options take theirs from these)."""
+
+    min_depth_m: float = param(0.1, Interval(float, 0.0), "nearest depth kept, metres")
+    max_depth_m: float = param(10.0, Interval(float, 0.0, closed="neither"),
+                               "farthest depth kept, metres")
+    voxel_size_m: float | None = param(
+        None, Interval(float, 0.0, closed="neither", optional=True),
+        "voxel-grid downsampling cell size, metres (None: none)")
+    max_points: int | None = param(None, Interval(int, 1, optional=True),
+                                   "random point cap per frame (None: every point)")
+    veil_ratio: float = param(0.0, Interval(float, 0.0),
+                              "drop pixels whose depth jumps by more than this share from a "
+                              "neighbour's (0: keep all)")
+
+    def __post_init__(self) -> None:
+        check_fields(self, "cloud option")
+        if self.max_depth_m <= self.min_depth_m:
+            raise ValueError(f"depth range: max_depth_m ({self.max_depth_m}) must exceed "
+                             f"min_depth_m ({self.min_depth_m})")
+
+
 class Deprojector:
     """Deprojects depth images, reusing the ray map while the intrinsics stay the same."""
 
-    def __init__(self, min_depth_m: float = 0.1, max_depth_m: float = 10.0) -> None:
+    def __init__(self, min_depth_m: float = CloudOptions.min_depth_m,
+                 max_depth_m: float = CloudOptions.max_depth_m) -> None:
         if not 0.0 <= min_depth_m < max_depth_m:
             raise ValueError(
                 f"depth range: need 0 <= min_depth < max_depth, got {min_depth_m}, {max_depth_m}"
@@ -185,30 +211,10 @@ def cap_points(
     return positions.take(keep, axis=0), None if colors is None else colors.take(keep, axis=0)
 
 
-@dataclass
-class CloudOptions:
-    """How a depth frame becomes the published point cloud."""
-
-    min_depth_m: float = 0.1
-    max_depth_m: float = 10.0
-    voxel_size_m: float | None = None
-    max_points: int | None = None
-    #: drop pixels whose depth jumps by more than this share from a neighbour's (0: keep all)
-    veil_ratio: float = 0.0
-
-
 class FrameToCloud:
     """Deprojection, optional voxel downsampling and point cap, with cached rays."""
 
     def __init__(self, options: CloudOptions, seed: int = 0) -> None:
-        if options.voxel_size_m is not None and options.voxel_size_m <= 0:
-            raise ValueError(f"--voxel must be positive, got {options.voxel_size_m}")
-        if not options.veil_ratio >= 0:
-            raise ValueError(f"--drop-veil must be >= 0, got {options.veil_ratio}")
-        if options.max_points is not None and options.max_points <= 0:
-            raise ValueError(
-                f"--max-points must be positive (0 for all points), got {options.max_points}"
-            )
         self.options = options
         self._max_points = min(options.max_points or MAX_CLOUD_POINTS, MAX_CLOUD_POINTS)
         self._deproject = Deprojector(options.min_depth_m, options.max_depth_m)

@@ -163,8 +163,10 @@ def add_camera_arguments(parser: Any) -> None:
 
 def add_cloud_arguments(parser: Any) -> None:
     """How a frame becomes a cloud (depth range, voxel, veil, point cap); see `frame_to_cloud`."""
-    parser.add_argument("--min-depth", type=float, default=0.1, help="metres (default 0.1)")
-    parser.add_argument("--max-depth", type=float, default=10.0, help="metres (default 10)")
+    parser.add_argument("--min-depth", type=float, default=CloudOptions.min_depth_m,
+                        help="nearest depth kept, metres (default %(default)s)")
+    parser.add_argument("--max-depth", type=float, default=CloudOptions.max_depth_m,
+                        help="farthest depth kept, metres (default %(default)s)")
     parser.add_argument(
         "--voxel", type=float, metavar="SIZE_M", help="voxel-grid downsampling cell size, metres")
     parser.add_argument(
