@@ -49,7 +49,6 @@ from gngdt.schemas.wire import (
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.session import (
     SharedMemoryPublisher,
-    ZenohSetupError,
     add_zenoh_arguments,
     declare_publisher,
     open_session,
@@ -396,11 +395,7 @@ def main(args: argparse.Namespace) -> int:
     except (ValueError, RecordingError) as error:
         log.error("%s", error)
         return 2
-    try:
-        session = open_session(args)
-    except ZenohSetupError as error:
-        log.error("%s", error)
-        return 1
+    session = open_session(args)  # ZenohSetupError: said by the command line, exit 1
     try:
         replay = capture(args, source, clock, to_cloud, session)
     finally:

@@ -112,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             level=getattr(logging, args.log_level),
             format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         )
+        from gngdt.services.plumbing.session import ZenohSetupError
         from gngdt.services.plumbing.settings import apply_settings
 
         try:  # a service started by `gngdt run` reads its options from the run's file
@@ -119,7 +120,11 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as error:
             logging.getLogger(__name__).error("%s", error)
             return 2
-        return int(args._module.main(args) or 0)
+        try:
+            return int(args._module.main(args) or 0)
+        except ZenohSetupError as error:  # a wrong zenoh configuration, no router: said, exit 1
+            logging.getLogger(__name__).error("%s", error)
+            return 1
     except KeyboardInterrupt:
         return 130
 

@@ -8,7 +8,6 @@ import logging
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.session import (
     DEFAULT_ENDPOINT,
-    ZenohSetupError,
     open_config,
     router_config,
     router_endpoints,
@@ -44,12 +43,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    try:
-        config = router_config(args.listen, args.zenoh_config)
-        session = open_config(config, what="router")
-    except ZenohSetupError as error:
-        log.error("%s", error)
-        return 1
+    config = router_config(args.listen, args.zenoh_config)
+    session = open_config(config, what="router")  # ZenohSetupError: said by the command line
     listen = router_endpoints(config)
     links = router_endpoints(config, "connect/endpoints")
     try:

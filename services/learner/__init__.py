@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 from gngdt.core.clustering import CLUSTERINGS
 from gngdt.io.import_checks import add_pose_limit_arguments, pose_limit_values
 from gngdt.schemas.wire import DEFAULT_CAMERA, topic
-from gngdt.services.plumbing.session import ZenohSetupError, add_zenoh_arguments, open_session
+from gngdt.services.plumbing.session import add_zenoh_arguments, open_session
 from gngdt.services.plumbing.settings import OptionGroup, add_settings_argument
 
 if TYPE_CHECKING:
@@ -140,11 +140,7 @@ def main(args: argparse.Namespace) -> int:
                  "with numba, 15-40 s; later runs load them from its cache in under a second)")
         warm_up(config)
         log.info("kernels ready in %.1f s", time.monotonic() - started)
-        try:
-            session = open_session(args)
-        except ZenohSetupError as error:
-            log.error("%s", error)
-            return 1
+        session = open_session(args)  # ZenohSetupError: said by the command line, exit 1
         try:
             return serve(args, config, learner, session)
         finally:

@@ -25,11 +25,10 @@ def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
     dispatcher = Dispatcher(outputs, Cameras(args.max_cameras))
     try:
         session = open_session(args)
-    except ZenohSetupError as error:
-        log.error("%s", error)
+    except ZenohSetupError:  # said by the command line, exit 1; the outputs close first
         for output in outputs:
             output.close()
-        return 1
+        raise
     declared = [session.declare_subscriber(ALL_KEYS, inbox.put)]
     declared += [session.declare_subscriber(ALL_KEYS, output.receive)
                  for output in outputs if output.raw]

@@ -169,11 +169,10 @@ def main(args: argparse.Namespace) -> int:
         sessions.append(open_session(args))
         if args.ros2_connect:
             sessions.append(open_ros2_session(args.ros2_connect, args.router_wait))
-    except ZenohSetupError as error:
-        log.error("%s", error)
+    except ZenohSetupError:  # said by the command line, exit 1; the sessions close first
         for session in sessions:
             session.close()
-        return 1
+        raise
     try:
         bridge(args, sessions[0], sessions[-1], domain, to_cloud)
     finally:
