@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass, field, fields
-from typing import Any, TypeVar
+from typing import Any, ClassVar, Self, TypeVar
 
 import numpy as np
 
@@ -190,6 +190,27 @@ def describe_fields(cls: type) -> dict[str, str]:
 
 
 SettingsT = TypeVar("SettingsT")
+
+
+class Settings:
+    """Base of a group of settings that is not an estimator: a frozen dataclass of `param`
+    fields, checked when made (`check`), made from a mapping such as a TOML table by
+    `from_dict`. ``WHAT`` names one of its keys in messages ("tracker parameter"); a subclass
+    with checks across fields extends `check`."""
+
+    WHAT: ClassVar[str] = "parameter"
+
+    def __post_init__(self) -> None:
+        self.check()
+
+    def check(self) -> None:
+        """ValueError naming the first field out of its constraint."""
+        check_fields(self, self.WHAT)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> Self:
+        """From a mapping (a TOML table); ValueError naming an unknown key."""
+        return from_mapping(cls, values, cls.WHAT)
 
 
 def from_mapping(cls: type[SettingsT], values: dict[str, Any], what: str) -> SettingsT:

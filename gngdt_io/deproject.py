@@ -7,10 +7,11 @@ Pure numpy, no I/O. Camera frame: x right, y down, z forward, metres.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
-from gngdt.core.parameters import Interval, check_fields, param
+from gngdt.core.parameters import Interval, Settings, param
 from gngdt.core.sensor.depth import veil_pixels
 from gngdt.io.frame import CameraIntrinsics, Frame
 from gngdt.schemas.clouds import MAX_CLOUD_POINTS
@@ -32,9 +33,11 @@ def ray_map(intrinsics: CameraIntrinsics) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class CloudOptions:
+class CloudOptions(Settings):
     """How a depth frame becomes the published point cloud (every default declared here, beside
     its constraint; capture's options take theirs from these)."""
+
+    WHAT: ClassVar[str] = "cloud option"
 
     min_depth_m: float = param(0.1, Interval(float, 0.0), "nearest depth kept, metres")
     max_depth_m: float = param(10.0, Interval(float, 0.0, closed="neither"),
@@ -48,8 +51,8 @@ class CloudOptions:
                               "drop pixels whose depth jumps by more than this share from a "
                               "neighbour's (0: keep all)")
 
-    def __post_init__(self) -> None:
-        check_fields(self, "cloud option")
+    def check(self) -> None:
+        super().check()
         if self.max_depth_m <= self.min_depth_m:
             raise ValueError(f"depth range: max_depth_m ({self.max_depth_m}) must exceed "
                              f"min_depth_m ({self.min_depth_m})")

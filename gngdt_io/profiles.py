@@ -29,7 +29,6 @@ from gngdt.core.learner.frame_learner import (
 )
 from gngdt.core.learner.stream_learner import FrameSchedule
 from gngdt.core.odometry.map_odometry import TrackerParams
-from gngdt.core.parameters import from_mapping
 from gngdt.core.segmentation.network import SegmentationParams
 
 #: the sensor profile `gngdt segment` uses without ``--params``, a file of the installed
@@ -137,7 +136,7 @@ def load_profile(path: Path | None, base_model: dict[str, Any] | None = None) ->
     tables = _tables(read_toml(path), path) if path is not None else {name: {} for name in TABLES}
     try:
         model = {**base, **tables["gngdt"]}
-        options = from_mapping(LearnerOptions, tables["learner"], "learner option")
+        options = LearnerOptions.from_dict(tables["learner"])
         segmentation = SegmentationParams.from_dict(tables["segmentation"])
         tracker = TrackerParams.from_dict(tables["tracker"])
         schedule = None

@@ -28,7 +28,7 @@ from __future__ import annotations
 import logging
 import time
 from dataclasses import dataclass, field, fields, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -49,7 +49,7 @@ from gngdt.core.objects.object_set import ObjectFinder, ObjectSet
 from gngdt.core.odometry.camera_tracking import TRACKED_FRAME, CameraTracking
 from gngdt.core.odometry.map_odometry import TrackerParams
 from gngdt.core.odometry.pose_checks import PoseChecker, PoseLimits
-from gngdt.core.parameters import Flag, Interval, OneOf, check_fields, param
+from gngdt.core.parameters import Flag, Interval, OneOf, Settings, param
 from gngdt.core.segmentation.network import SegmentationParams
 from gngdt.core.sensor.geometry import CameraIntrinsics, apply_pose
 
@@ -79,8 +79,10 @@ def _pose_limit(name: str) -> Any:
 
 
 @dataclass(frozen=True)
-class LearnerOptions:
+class LearnerOptions(Settings):
     """The learner's options that are not GNG-DT constructor arguments (``[learner]`` keys)."""
+
+    WHAT: ClassVar[str] = "learner option"
 
     samples_per_frame: int = param(10_000, Interval(int, 1),
                                    "learning steps per frame (with a frame schedule: per later "
@@ -142,9 +144,6 @@ class LearnerOptions:
                         "estimate the camera pose of clouds that come without one by aligning "
                         "each to the map (a [tracker] table tunes it); lost frames are not "
                         "learned")
-
-    def __post_init__(self) -> None:
-        check_fields(self, "learner option")
 
     def pose_limits(self) -> PoseLimits:
         """The `PoseLimits` of the ``pose_*`` options."""

@@ -19,12 +19,12 @@ in, network and segments out.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from gngdt.core.gas.model import GNGDT
-from gngdt.core.parameters import Interval, check_fields, from_mapping, param
+from gngdt.core.parameters import Interval, Settings, param
 from gngdt.core.segmentation.network import Segmentation, SegmentationParams
 from gngdt.core.sensor.view import SensorView
 
@@ -42,8 +42,10 @@ GAP_VIEW_STRIDE = 2
 
 
 @dataclass(frozen=True)
-class FrameSchedule:
+class FrameSchedule(Settings):
     """How frames are turned into learning: steps, points used, attention (validated)."""
+
+    WHAT: ClassVar[str] = "frame schedule key"
 
     steps_first_frame: int = param(200_000, Interval(int, 1),
                                    "learning steps for a frame learned from scratch "
@@ -76,16 +78,12 @@ class FrameSchedule:
     scene_change_share: float = param(0.015, Interval(float, 0.0, 1.0),
                                       "see scene_change_distance_m; 1.0 never cuts")
 
-    def __post_init__(self) -> None:
-        check_fields(self)
+    def check(self) -> None:
+        super().check()
         if self.max_depth_m <= self.min_depth_m:
             raise ValueError(f"max_depth_m ({self.max_depth_m}) must exceed min_depth_m "
                              f"({self.min_depth_m})")
 
-    @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> FrameSchedule:
-        """From a mapping (a TOML ``[frames]`` table); ValueError naming an unknown key."""
-        return from_mapping(cls, values, "frame schedule key")
 
 
 @dataclass(frozen=True)

@@ -46,14 +46,20 @@ import math
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, fields, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from gngdt.core.kernels import odometry as OK
 from gngdt.core.odometry.map_surface import MapSurface
 from gngdt.core.odometry.node_planes import PlaneMemory
-from gngdt.core.parameters import Flag, Interval, Numbers, check_fields, from_mapping, param
+from gngdt.core.parameters import (
+    Flag,
+    Interval,
+    Numbers,
+    Settings,
+    param,
+)
 from gngdt.core.sensor.geometry import rigid_inverse
 
 #: why a frame was not tracked (``TrackingResult.reason``)
@@ -75,9 +81,11 @@ _SHARE = Interval(float, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
-class TrackerParams:
+class TrackerParams(Settings):
     """The camera tracker's settings (a profile's ``[tracker]`` table). Defaults were measured
     on the virtual Kinect's walk (see benchmarks/bench_tracking.py)."""
+
+    WHAT: ClassVar[str] = "tracker parameter"
 
     strides: tuple[int, ...] = param((8, 4), Numbers(Interval(int, 1)),
                                      "per level, coarse to fine: every this many pixels of "
@@ -159,10 +167,10 @@ class TrackerParams:
     requery_m: float = param(0.002, _NON_NEGATIVE,
                              "nearest nodes are searched again once the points moved this far")
 
-    def __post_init__(self) -> None:
+    def check(self) -> None:
         for name in ("strides", "iterations", "gates_m"):  # TOML gives lists
             object.__setattr__(self, name, tuple(getattr(self, name)))
-        check_fields(self, "tracker")
+        super().check()
         if not len(self.strides) == len(self.iterations) == len(self.gates_m):
             raise ValueError("tracker strides, iterations and gates_m need one entry per level, "
                              f"got {len(self.strides)}, {len(self.iterations)}, "
@@ -171,10 +179,6 @@ class TrackerParams:
             raise ValueError(f"tracker max_depth_m ({self.max_depth_m}) must exceed "
                              f"min_depth_m ({self.min_depth_m})")
 
-    @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> TrackerParams:
-        """From a mapping (a TOML ``[tracker]`` table); ValueError naming an unknown key."""
-        return from_mapping(cls, values, "tracker parameter")
 
 
 @dataclass(frozen=True)

@@ -31,10 +31,11 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
-from gngdt.core.parameters import Interval, check_fields, param
+from gngdt.core.parameters import Interval, Settings, param
 from gngdt.core.sensor.geometry import apply_pose, matrix_to_pose, pose_to_matrix, rigid_inverse
 
 __all__ = [
@@ -72,8 +73,10 @@ MIN_POINTS = 50
 
 
 @dataclass(frozen=True)
-class PoseLimits:
+class PoseLimits(Settings):
     """What a camera pose may be (validated); every check of `PoseChecker` uses these."""
+
+    WHAT: ClassVar[str] = "pose limit"
 
     workspace_m: float = param(1000.0, Interval(float, 0.0, closed="neither"),
                                "a camera farther than this from the fixed frame's origin "
@@ -88,9 +91,6 @@ class PoseLimits:
                                 "a posed frame whose points lie farther than this share of "
                                 "their depth from an earlier frame's surfaces (median, point "
                                 "to plane; 0.01: 2 cm at 2 m) contradicts its depth")
-
-    def __post_init__(self) -> None:
-        check_fields(self, "pose limit")
 
 
 @dataclass(frozen=True)

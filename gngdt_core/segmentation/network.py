@@ -80,12 +80,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import ClassVar
 
 import numpy as np
 
 from gngdt.core.clustering import rank_by_size
 from gngdt.core.kernels import regions as RK
-from gngdt.core.parameters import Interval, check_fields, from_mapping, param
+from gngdt.core.parameters import Interval, Settings, param
 from gngdt.core.segmentation.gaps import GapRules, bridge_gaps
 from gngdt.core.segmentation.supports import OBJECT, SegmentRoles, find_supports, segment_roles
 from gngdt.core.sensor.view import SensorView
@@ -99,8 +100,10 @@ VIEW_EDGE_CELLS = 2
 
 
 @dataclass(frozen=True)
-class SegmentationParams:
+class SegmentationParams(Settings):
     """Parameters of `segment_network`, validated on construction (angles in degrees)."""
+
+    WHAT: ClassVar[str] = "segmentation parameter"
 
     smooth_angle_deg: float = param(8.0, Interval(float, 0.0, 90.0, closed="right"),
                                     "an edge is smooth (inside a patch) when both elevations "
@@ -155,13 +158,6 @@ class SegmentationParams:
                                 "wide join where the two sides meet convexly (step 6; needs the "
                                 "frame's view); 0: no bridging")
 
-    def __post_init__(self) -> None:
-        check_fields(self)
-
-    @classmethod
-    def from_dict(cls, values: dict) -> SegmentationParams:
-        """From a mapping (e.g. a TOML table); ValueError naming an unknown key."""
-        return from_mapping(cls, values, "segmentation parameter")
 
 
 @dataclass(frozen=True)
