@@ -48,11 +48,11 @@ import numpy as np
 from gngdt.core.learner.frame_learner import LEARNER_MODEL_DEFAULTS, LEARNER_WORLD_DEFAULTS
 from gngdt.eval.dynamics import DynamicsSettings, DynamicsTracker
 from gngdt.eval.recording_eval import RecordingSettings, frame_points, replay, summarise_over_time
+from gngdt.io.deproject import RUN_POINT_CAP as RUN_MAX_POINTS
 from gngdt.io.mcap.writer import RecordingWriter
 from gngdt.io.synth.render import SCENE_METADATA, render_scene, scene_metadata
 from gngdt.io.synth.scenes import build_scene
 from gngdt.schemas.wire import ALL_KEYS, DEFAULT_CAMERA, LEARNER, alive_key
-from gngdt.services.capture import DEFAULT_RUN_MAX_POINTS as RUN_MAX_POINTS
 
 #: scene -> frames rendered (the walk goes out and back: 240 frames at 30 fps)
 SCENES = {"tabletop_walk": 240, "tabletop_vanish": 150, "tabletop_move": 150}

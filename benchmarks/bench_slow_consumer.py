@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 from procstat import gngdt
 
+from gngdt.io.deproject import RUN_POINT_CAP as DEFAULT_MAX_POINTS
 from gngdt.schemas.status import decode_status
 from gngdt.schemas.topology import decode_topology
-from gngdt.services.capture import DEFAULT_RUN_MAX_POINTS as DEFAULT_MAX_POINTS
 from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config
 
 #: a client of the router subscribed to everything, whose callback never returns

@@ -31,8 +31,8 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 
 from procstat import status_mb, wait_until  # noqa: E402  (benchmarks/, beside this script)
 
+from gngdt.io.deproject import RUN_POINT_CAP as DEFAULT_MAX_POINTS  # noqa: E402
 from gngdt.schemas.status import LearnerStatusInfo, decode_status  # noqa: E402
-from gngdt.services.capture import DEFAULT_RUN_MAX_POINTS as DEFAULT_MAX_POINTS  # noqa: E402
 from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config  # noqa: E402
 
 

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from gngdt.eval.paper_common import METHOD_NAMES, METHODS, STOP_RULES, PaperSettings
+from gngdt.io.deproject import RUN_POINT_CAP
 
 log = logging.getLogger(__name__)
 
@@ -163,6 +164,10 @@ def _add_recording(sub: argparse._SubParsersAction) -> None:
                            "surface seen, one node per 0.1 m cell, up to 20,000)")
     recording.add_argument("--max-frames", type=_positive_int, default=None,
                            help="stop after this many frames")
+    recording.add_argument(
+        "--max-points", type=int, default=None, metavar="N",
+        help="each frame's cloud: a random subset of at most N points, drawn as `gngdt run` "
+        f"draws it, so both learn the same clouds (default {RUN_POINT_CAP:,}; 0: every point)")
     recording.add_argument(
         "--min-cluster-size", type=_positive_int, default=None,
         help="clusters with fewer nodes are not counted (default: the learner's)")
@@ -318,6 +323,7 @@ def _main_recording(args: argparse.Namespace) -> int:
             "min_cluster_size",
             "object_confirm_frames",
             "max_frames",
+            "max_points",
             "dbscan_eps",
         )
         if getattr(args, name) is not None

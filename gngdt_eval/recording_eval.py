@@ -38,7 +38,8 @@ from gngdt.eval.paper_common import METHOD_NAMES, PAPER_PARAMETERS
 from gngdt.eval.paper_methods import clusterings_of, make_model
 from gngdt.eval.recording_report import render_markdown, write_plots
 from gngdt.eval.report import mean_std, write_report
-from gngdt.io.deproject import CloudOptions, Deprojector
+from gngdt.io.deproject import RUN_POINT_CAP, CloudOptions, FrameToCloud
+from gngdt.schemas.clouds import wire_pose
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,9 @@ class RecordingSettings:
     max_frames: int | None = None
     min_depth_m: float = CloudOptions.min_depth_m
     max_depth_m: float = CloudOptions.max_depth_m
+    #: each frame's cloud is a uniform random subset of at most this many points, drawn as
+    #: `gngdt run`'s capture draws it (so both learn the same clouds); 0: every point
+    max_points: int = RUN_POINT_CAP
     #: random subset of the last frame's points used to fit k-means and run DBSCAN
     reference_points: int = 20_000
     dbscan_min_samples: int = 10
@@ -100,6 +104,8 @@ class RecordingSettings:
             raise ValueError(f"max_nodes must be >= 2, got {self.max_nodes}")
         if self.max_frames is not None and self.max_frames < 1:
             raise ValueError(f"max_frames must be >= 1, got {self.max_frames}")
+        if self.max_points < 0:
+            raise ValueError(f"max_points must be >= 0 (0: every point), got {self.max_points}")
         for method in self.methods:
             if method not in METHOD_NAMES.values():
                 raise ValueError(f"methods: unknown {method!r}")
@@ -154,21 +160,22 @@ def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoint
     from gngdt.io.mcap.reader import read_frames
     from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS
 
-    deproject = Deprojector(settings.min_depth_m, settings.max_depth_m)
+    to_cloud = FrameToCloud(CloudOptions(settings.min_depth_m, settings.max_depth_m,
+                                         max_points=settings.max_points or None))
     # colour and depth paired as capture pairs them, so a ROS 2 bag replays here as it does live
     frames = read_frames(path, max_skew_ns=round(DEFAULT_MAX_SKEW_MS * 1e6),
                          fixed_frame="auto" if settings.world_frame else None)
     for count, frame in enumerate(frames):
         if settings.max_frames is not None and count >= settings.max_frames:
             return
-        positions, colors = deproject(frame.depth, frame.color, frame.intrinsics)
-        labels = None
-        if frame.labels is not None:
-            labels = deproject_labels(deproject, frame.depth, frame.labels, frame.intrinsics)
+        positions, colors, pixels = to_cloud.with_pixels(frame)
+        labels = (None if frame.labels is None
+                  else frame.labels.reshape(-1).take(pixels).astype(np.int64))
         if frame.pose is None:
-            yield FramePoints(frame.index, positions, colors, labels, positions)
+            yield FramePoints(frame.index, positions, colors, labels, positions,
+                              timestamp_ns=frame.timestamp_ns)
             continue
-        pose = frame.pose.matrix
+        pose = wire_pose(frame.pose.matrix)  # as the learner reads it from the cloud
         k = frame.intrinsics
         view = CameraView(frame.depth / 1000.0, k.fx, k.fy, k.cx, k.cy, pose)
         yield FramePoints(frame.index, apply_pose(positions, pose), colors, labels, positions,
@@ -176,17 +183,10 @@ def frame_points(path: Path, settings: RecordingSettings) -> Iterator[FramePoint
 
 
 def deproject_labels(deproject: Any, depth: np.ndarray, labels: np.ndarray, intrinsics: Any):
-    """(N,) int64 per-point labels: the labels image through the deprojector's own pixel mask.
-
-    The deprojector carries colour as (H, W, 3) uint8, so the 16-bit label is split into two
-    bytes, carried through, and joined again — the same mask and pixel order as the points.
-    """
-    labels = np.asarray(labels, dtype=np.uint16)
-    packed = np.zeros((*labels.shape, 3), dtype=np.uint8)
-    packed[..., 0] = labels & 0xFF
-    packed[..., 1] = labels >> 8
-    _, carried = deproject(depth, packed, intrinsics)
-    return carried[:, 0].astype(np.int64) | (carried[:, 1].astype(np.int64) << 8)
+    """(N,) int64 per-point labels: the labels image at the pixels the deprojector keeps, in
+    its order (a `Deprojector` without a point cap: every valid pixel)."""
+    _, _, pixels = deproject.with_pixels(depth, None, intrinsics)
+    return np.asarray(labels).reshape(-1).take(pixels).astype(np.int64)
 
 
 class FrameNotLearned(ValueError):

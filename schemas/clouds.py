@@ -186,6 +186,14 @@ def _set_rigid(translation: Vector3, rotation: Quaternion, matrix: np.ndarray) -
     rotation.x, rotation.y, rotation.z, rotation.w = quaternion.tolist()
 
 
+def wire_pose(matrix: np.ndarray) -> np.ndarray:
+    """(4, 4) float64: a rigid ``matrix`` as a cloud's receiver reads it back (it travels as a
+    translation and a unit quaternion), for replays that must learn exactly what the learner
+    learns from the wire."""
+    offset, quaternion = matrix_to_pose(matrix)
+    return pose_to_matrix(offset.tolist(), quaternion.tolist())
+
+
 def cloud_pose(message: PointCloud | bytes) -> np.ndarray:
     """(4, 4) float64 pose of a PointCloud: maps its points into its ``frame_id``.
 

@@ -161,3 +161,15 @@ class StreamEnd(_message.Message):
     recording: str
     frame_id: str
     def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frames_sent: _Optional[int] = ..., last_frame_sequence: _Optional[int] = ..., recording: _Optional[str] = ..., frame_id: _Optional[str] = ...) -> None: ...
+
+class FrameAck(_message.Message):
+    __slots__ = ("timestamp", "frame_sequence", "outcome", "problem")
+    TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
+    FRAME_SEQUENCE_FIELD_NUMBER: _ClassVar[int]
+    OUTCOME_FIELD_NUMBER: _ClassVar[int]
+    PROBLEM_FIELD_NUMBER: _ClassVar[int]
+    timestamp: _timestamp_pb2.Timestamp
+    frame_sequence: int
+    outcome: str
+    problem: str
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., outcome: _Optional[str] = ..., problem: _Optional[str] = ...) -> None: ...

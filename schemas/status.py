@@ -1,5 +1,6 @@
-"""Learner status and end-of-stream notices: dataclasses <-> ``gngdt.LearnerStatus`` and
-``gngdt.StreamEnd``, field by field (``timestamp_ns`` for the message's stamp)."""
+"""Learner status, end-of-stream notices and frame acknowledgements: dataclasses <->
+``gngdt.LearnerStatus``, ``gngdt.StreamEnd`` and ``gngdt.FrameAck``, field by field
+(``timestamp_ns`` for the message's stamp)."""
 
 from __future__ import annotations
 
@@ -12,10 +13,13 @@ import gngdt.schemas.gngdt_pb2 as gngdt_pb2
 from gngdt.schemas.messages import MessageT, ns_to_timestamp, parse_message, timestamp_to_ns
 
 __all__ = [
+    "FrameAckInfo",
     "LearnerStatusInfo",
     "StreamEndInfo",
+    "decode_frame_ack",
     "decode_status",
     "decode_stream_end",
+    "encode_frame_ack",
     "encode_status",
     "encode_stream_end",
 ]
@@ -69,7 +73,18 @@ class StreamEndInfo:
     frame_id: str = ""
 
 
-_InfoT = TypeVar("_InfoT", LearnerStatusInfo, StreamEndInfo)
+@dataclass
+class FrameAckInfo:
+    """One ``gngdt.FrameAck``: the learner is done with one cloud (``outcome``: "learned", or
+    why not, with ``problem``)."""
+
+    timestamp_ns: int = 0
+    frame_sequence: int = 0
+    outcome: str = ""
+    problem: str = ""
+
+
+_InfoT = TypeVar("_InfoT", LearnerStatusInfo, StreamEndInfo, FrameAckInfo)
 
 
 def _info_to_message(
@@ -118,6 +133,16 @@ def encode_status(**fields_: Any) -> gngdt_pb2.LearnerStatus:
 def decode_status(message: gngdt_pb2.LearnerStatus | bytes) -> LearnerStatusInfo:
     """Decode a ``gngdt.LearnerStatus``."""
     return _message_to_info(LearnerStatusInfo, parse_message(gngdt_pb2.LearnerStatus, message))
+
+
+def encode_frame_ack(**fields_: Any) -> gngdt_pb2.FrameAck:
+    """``gngdt.FrameAck`` from keyword fields named as in :class:`FrameAckInfo`."""
+    return _info_to_message(FrameAckInfo, gngdt_pb2.FrameAck, fields_)
+
+
+def decode_frame_ack(message: gngdt_pb2.FrameAck | bytes) -> FrameAckInfo:
+    """Decode a ``gngdt.FrameAck``."""
+    return _message_to_info(FrameAckInfo, parse_message(gngdt_pb2.FrameAck, message))
 
 
 def encode_stream_end(**fields_: Any) -> gngdt_pb2.StreamEnd:

@@ -20,6 +20,7 @@ ENCODING_POINT_CLOUD = "application/protobuf;foxglove.PointCloud"
 ENCODING_TOPOLOGY = "application/protobuf;gngdt.Topology"
 ENCODING_STATUS = "application/protobuf;gngdt.LearnerStatus"
 ENCODING_STREAM_END = "application/protobuf;gngdt.StreamEnd"
+ENCODING_FRAME_ACK = "application/protobuf;gngdt.FrameAck"
 ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
 ENCODING_FRAME_TRANSFORM = "application/protobuf;foxglove.FrameTransform"
 
@@ -27,7 +28,7 @@ ENCODING_FRAME_TRANSFORM = "application/protobuf;foxglove.FrameTransform"
 CAPTURE_STREAMS = ("color", "depth", "calibration", "points", "tf", "eos")
 #: "tf" is the camera's pose: capture's from a recording's poses, the learner's when it tracks
 #: the camera (learn --track)
-LEARNER_STREAMS = ("topology", "objects", "scene", "learner/status", "tf")
+LEARNER_STREAMS = ("topology", "objects", "scene", "learner/status", "learner/ack", "tf")
 
 _ATTACHMENT = struct.Struct("<Qq")
 

@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from gngdt.io.deproject import CloudOptions, FrameToCloud
+from gngdt.io.deproject import RUN_POINT_CAP, CloudOptions, FrameToCloud
 from gngdt.io.mcap.limits import ReadLimits
 from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS, SourceOptions
 from gngdt.schemas.clouds import MAX_CLOUD_POINTS
@@ -46,6 +46,7 @@ from gngdt.schemas.wire import (
     alive_key,
     topic,
 )
+from gngdt.services.pacing import LearnerLost, LearnerPacing
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.session import (
     SharedMemoryPublisher,
@@ -78,10 +79,10 @@ EXAMPLES = """examples:
 
 #: longest wait between two frames at the recorded rate
 DEFAULT_MAX_GAP_S = 5.0
-#: capture's point cap under `gngdt run` (a uniform random subset, as the learner's own
-#: sampling): the learner samples 10,000 points a frame and the logger shows 50,000, so the cap
-#: changes neither, and on 2 cores at 30 fps it cut dropped frames from ~30 % to ~5 %
-DEFAULT_RUN_MAX_POINTS = 50_000
+#: a file read frame by frame: how long the learner may take a frame, and how long capture waits
+#: for a learner to appear before replaying without one
+DEFAULT_LEARNER_TIMEOUT_S = 60.0
+DEFAULT_WAIT_LEARNER_S = 60.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -92,7 +93,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
     parser.add_argument(
         "--wait-subscribers", type=float, default=10.0, metavar="SECONDS",
-        help="wait this long for a points subscriber before the first frame (default 10)")
+        help="real time: wait this long for a points subscriber before the first frame "
+        "(default 10)")
+    parser.add_argument(
+        "--wait-learner", type=float, default=DEFAULT_WAIT_LEARNER_S, metavar="SECONDS",
+        help="a file read frame by frame: wait this long for the camera's learner before the "
+        f"first frame, then replay without one, in real time (default {DEFAULT_WAIT_LEARNER_S:g})")
     add_sampling_seed_argument(parser)
     add_settings_argument(parser)
     add_zenoh_arguments(parser)
@@ -127,6 +133,16 @@ def add_reading_arguments(group: Any) -> None:
         "--rate", type=float, default=1.0, help="replay speed factor (default 1.0 = recorded rate)"
     )
     speed.add_argument("--fast", action="store_true", help="replay as fast as possible")
+    group.add_argument(
+        "--realtime", action="store_true",
+        help="a file as a live camera would send it: at the recorded pace (--rate), the learner "
+        "taking the latest frame and dropping what arrives while it learns. Default for a file: "
+        "every frame, each sent once the learner took the one before (a live camera is always "
+        "real time)")
+    group.add_argument(
+        "--learner-timeout", type=float, default=DEFAULT_LEARNER_TIMEOUT_S, metavar="SECONDS",
+        help="a file read frame by frame ends, naming the reason, when the learner takes no "
+        f"frame for this long (default {DEFAULT_LEARNER_TIMEOUT_S:g})")
     group.add_argument(
         "--topics", metavar="PREFIX",
         help="read only the recording's topics under PREFIX (a bag with several cameras)")
@@ -177,7 +193,7 @@ def add_cloud_arguments(parser: Any) -> None:
         "--max-points", type=int,
         help="publish a random subset of at most this many points per frame (default: all, "
         f"up to {MAX_CLOUD_POINTS:,}, what a learner accepts and a zenoh message holds; "
-        f"`gngdt run`: {DEFAULT_RUN_MAX_POINTS:,}, all with --track; 0: all)")
+        f"`gngdt run`: {RUN_POINT_CAP:,}, all with --track; 0: all)")
 
 
 def add_sampling_seed_argument(parser: Any) -> None:
@@ -239,7 +255,7 @@ def source_options(args: argparse.Namespace) -> SourceOptions:
 class CapturePublisher:
     """The capture's publishers, declared once; every put carries the frame's attachment."""
 
-    def __init__(self, session: zenoh.Session, camera: str) -> None:
+    def __init__(self, session: zenoh.Session, camera: str, paced: bool = False) -> None:
         def declare(name: str, encoding: str, latest_wins: bool) -> SharedMemoryPublisher:
             return declare_publisher(session, topic(camera, name), encoding, latest_wins)
 
@@ -247,7 +263,9 @@ class CapturePublisher:
         self.color = declare("color", ENCODING_RAW_IMAGE, latest_wins=True)
         self.depth = declare("depth", ENCODING_RAW_IMAGE, latest_wins=True)
         self.calibration = declare("calibration", ENCODING_CALIBRATION, latest_wins=False)
-        self.points = declare("points", ENCODING_POINT_CLOUD, latest_wins=True)
+        # paced (a file read frame by frame): every cloud must arrive, the learner waits for it
+        self.points = declare_publisher(session, topic(camera, "points"), ENCODING_POINT_CLOUD,
+                                        latest_wins=not paced, large=True)
         self.tf = declare("tf", ENCODING_FRAME_TRANSFORM, latest_wins=False)
         self.eos = declare("eos", ENCODING_STREAM_END, latest_wins=False)
         self._last_intrinsics: CameraIntrinsics | None = None
@@ -326,6 +344,8 @@ class Replay:
         self.stop = stop
         self.error: Exception | None = None
         self.frames_read = 0
+        #: why the learner stopped taking frames of a paced file ("": it did not)
+        self.learner_lost = ""
 
     def __iter__(self) -> Iterator[Frame]:
         from gngdt.io.errors import RecordingError
@@ -403,24 +423,33 @@ def main(args: argparse.Namespace) -> int:
     if replay.frames_read == 0 and replay.error is not None:
         log.error("%s", replay.error)
         return 2
+    if replay.learner_lost:
+        return 1
     return 1 if source.live and replay.error is not None else 0  # a camera lost mid-stream
 
 
 def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
             to_cloud: FrameToCloud, session: zenoh.Session) -> Replay:
     """Publish the source's frames on ``session`` until it ends or a stop signal, then the end
-    of stream; the replay (what was read, what went wrong)."""
-    publisher = CapturePublisher(session, args.cam)
+    of stream; the replay (what was read, what went wrong). A file is paced by its learner
+    (`gngdt.services.pacing`) unless ``--realtime``."""
+    paced = not source.live and not args.realtime
+    publisher = CapturePublisher(session, args.cam, paced)
     token = session.liveliness().declare_token(alive_key(args.cam, CAPTURE))
     with lifecycle.graceful() as stop:
         replay = Replay(source, args.loop, stop)
-        if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
-            log.warning("no subscriber on %s after %.1f s; publishing anyway",
-                        topic(args.cam, "points"), args.wait_subscribers)
+        pacing = wait_for_consumers(args, session, publisher, paced, stop)
         speed = ("live" if source.live else "as fast as possible" if clock.rate is None
                  else f"at {clock.rate:g}x the recorded rate")
-        log.info("replaying %s %s%s", source.describe(), speed, ", looping" if args.loop else "")
-        frames_sent = publish(args, replay, clock, to_cloud, publisher, stop)
+        mode = (", every frame once the learner took the one before" if pacing is not None
+                else "" if source.live else ", in real time (the learner takes the latest frame)")
+        log.info("replaying %s %s%s%s", source.describe(), speed, mode,
+                 ", looping" if args.loop else "")
+        try:
+            frames_sent = publish(args, replay, clock, to_cloud, publisher, stop, pacing)
+        finally:
+            if pacing is not None:
+                pacing.close()
         if not stop.is_set() or not args.loop:
             # with nothing sent, frame 0 is named and frames_sent = 0 says it never came
             publisher.publish_end(frames_sent, max(frames_sent - 1, 0), source.path.name)
@@ -432,16 +461,43 @@ def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
     return replay
 
 
+def wait_for_consumers(args: argparse.Namespace, session: zenoh.Session,
+                       publisher: CapturePublisher, paced: bool,
+                       stop: threading.Event) -> LearnerPacing | None:
+    """Before the first frame: a file waits for the camera's learner (its pacing, None: the
+    file goes in real time, as it does when no learner came within ``--wait-learner``); real
+    time waits for any points subscriber."""
+    if paced:
+        pacing = LearnerPacing(session, args.cam, args.learner_timeout)
+        if pacing.wait_for_learner(args.wait_learner, stop):
+            wait_for_subscribers(publisher.points, args.wait_subscribers, stop)
+            return pacing
+        pacing.close()
+        if not stop.is_set():
+            log.warning("no learner of camera %r after %.0f s (--wait-learner): replaying in "
+                        "real time, frames are not waited for", args.cam, args.wait_learner)
+        return None
+    if not wait_for_subscribers(publisher.points, args.wait_subscribers, stop):
+        log.warning("no subscriber on %s after %.1f s; publishing anyway",
+                    topic(args.cam, "points"), args.wait_subscribers)
+    return None
+
+
 def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_cloud: FrameToCloud,
-            publisher: CapturePublisher, stop: threading.Event) -> int:
-    """Publish every frame of the replay at the clock's pace; the number of frames sent."""
+            publisher: CapturePublisher, stop: threading.Event,
+            pacing: LearnerPacing | None = None) -> int:
+    """Publish every frame of the replay at the clock's pace (and, with ``pacing``, each cloud
+    once the learner took the one before, the next frame read meanwhile); the number of frames
+    sent."""
     frames_sent = 0  # also the next frame's sequence: only published frames are numbered
     without_pose = 0
+    last_cloud = -1  # the sequence of the last cloud sent
+    stamps = RecordedClock() if pacing is not None else None
     for frame in replay:
         clock.wait_for(frame.timestamp_ns, stop, frame.index)
         if stop.is_set():
             break
-        capture_time_ns = time.time_ns()
+        capture_time_ns = time.time_ns() if stamps is None else stamps.stamp(frame.timestamp_ns)
         try:
             positions, colors = to_cloud(frame)
         except ValueError as error:
@@ -450,11 +506,50 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         if frame.pose_error:  # the reader warned; the cloud would not fit the map
             positions = colors = None
             without_pose += 1
+        if pacing is not None and not wait_taken(pacing, last_cloud, replay, stop):
+            break
         publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
                                 positions, colors)
         log.debug("frame %d: %d points", frames_sent, 0 if positions is None else len(positions))
+        last_cloud = frames_sent if positions is not None else last_cloud
         frames_sent += 1
+    if pacing is not None:  # the end of stream after the last frame's learning
+        wait_taken(pacing, last_cloud, replay, stop)
     if without_pose:
         log.warning("%d frames had no camera pose: their clouds were not published",
                     without_pose)
     return frames_sent
+
+
+class RecordedClock:
+    """Stamps of a file read frame by frame: the time the replay started plus each frame's
+    recorded time since the first frame, so that the learner's motion and pose checks see the
+    recording's own timing whatever the load (a frame's latency then includes the time it
+    waited for the learner)."""
+
+    def __init__(self) -> None:
+        self._start_ns = time.time_ns()
+        self._first_ns: int | None = None
+        self._last_ns = 0
+
+    def stamp(self, recorded_ns: int) -> int:
+        if self._first_ns is None or recorded_ns < self._first_ns:  # first, or a loop restarted
+            self._start_ns = max(time.time_ns(), self._last_ns + 1)
+            self._first_ns = recorded_ns
+        self._last_ns = self._start_ns + recorded_ns - self._first_ns
+        return self._last_ns
+
+
+def wait_taken(pacing: LearnerPacing, sequence: int, replay: Replay,
+               stop: threading.Event) -> bool:
+    """Wait for the learner to take cloud ``sequence`` (-1: none sent yet); False when it
+    stopped taking frames (said, and kept in ``replay``)."""
+    if sequence < 0:
+        return True
+    try:
+        pacing.wait_taken(sequence, stop)
+    except LearnerLost as error:
+        log.error("%s; ending the stream", error)
+        replay.learner_lost = str(error)
+        return False
+    return not stop.is_set()

@@ -28,6 +28,7 @@ from gngdt.core.learner.frame_budget import StepBudget
 from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
 from gngdt.core.learner.results import Counters, FrameResult, Outcome, Publication
 from gngdt.schemas.wire import (
+    ENCODING_FRAME_ACK,
     ENCODING_FRAME_TRANSFORM,
     ENCODING_SCENE_UPDATE,
     ENCODING_STATUS,
@@ -60,6 +61,10 @@ MAX_EOS_BYTES = 64 * 1024
 MAX_POINT_STRIDE_BYTES = 64
 #: bytes a calibration message may take (a real one is under 500)
 MAX_CALIBRATION_BYTES = 64 * 1024
+#: the outcome a malformed cloud is acknowledged with
+MALFORMED = "malformed"
+#: why a cloud was not learned, as much as an acknowledgement carries
+MAX_PROBLEM_CHARS = 500
 
 
 class LatencyWindow:
@@ -237,6 +242,8 @@ class LearnerService:
                                            ENCODING_TOPOLOGY, latest_wins=True)
         self._status = declare_publisher(session, topic(camera, "learner/status"),
                                          ENCODING_STATUS, latest_wins=False)
+        self._ack = declare_publisher(session, topic(camera, "learner/ack"), ENCODING_FRAME_ACK,
+                                      latest_wins=False)
         # latest-wins views: a consumer that never reads must not hold the learner back
         self._objects = declare_publisher(session, topic(camera, "objects"),
                                           ENCODING_SCENE_UPDATE, latest_wins=True)
@@ -265,6 +272,8 @@ class LearnerService:
         self._unpublished = False
         self.learned_sequence = -1
         self._settled_end = 0.0  # the end of stream (its arrival time) already settled on
+        #: when the last points sample arrived (time.time_ns)
+        self._received_ns = 0
         self._frames_since_checkpoint = 0
         self._last_checkpoint = time.monotonic()
         #: clouds whose payload arrived through shared memory (a diagnostic, logged at the end)
@@ -290,7 +299,7 @@ class LearnerService:
         published = self.learner.publication(positions, colors, final=bool(settled))
         payload = topology_message(published, stamp).SerializeToString()
         attachment = stamp.to_attachment()
-        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        latency_ms = self._latency_ms(stamp)
         self._topology.put(payload, attachment=attachment)
         self.latest.set(payload, attachment)
         self._objects.put(objects_message(published, stamp).SerializeToString(),
@@ -308,33 +317,43 @@ class LearnerService:
         return latency_ms
 
     def handle(self, sample: zenoh.Sample, waited: bool = False) -> None:
-        """Decode, learn and (when due) publish one points sample; a bad one is counted and
+        """Decode, learn and (when due) publish one points sample, then acknowledge it (a
+        capture reading a file waits for that before its next frame); a bad one is counted and
         skipped. ``waited``: the learner was idle until it came (it keeps up)."""
+        self.learner.counters.frames_received += 1
+        self.clouds_shared += through_shared_memory(sample)
+        self._received_ns = time.time_ns()
+        stamp = None
+        try:
+            stamp = FrameStamp.from_attachment(attachment_bytes(sample))
+            outcome, problem = self._learn(sample, waited)
+        except ValueError as error:  # MessageError is a ValueError
+            self.learner.counters.malformed_messages += 1
+            log.warning("points message skipped: %s", error)
+            outcome, problem = MALFORMED, str(error)
+        if stamp is not None:
+            self._acknowledge(stamp, outcome, problem)
+
+    def _learn(self, sample: zenoh.Sample, waited: bool) -> tuple[str, str]:
+        """Learn one points sample (ValueError when it is malformed) and publish what was
+        learned when due; its outcome and, when not learned, why."""
         started = time.perf_counter()
         learner = self.learner
         counters = learner.counters
-        counters.frames_received += 1
-        self.clouds_shared += through_shared_memory(sample)
-        try:
-            stamp, positions, colors, frame_id, pose = decode_points(
-                payload_bytes(sample, self._max_cloud_bytes), attachment_bytes(sample),
-                self.options.max_cloud_points)
-            counters.note_sequence(stamp.sequence)
-            received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-            self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)
-            learning_before = counters.learning_seconds
-            result = learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns,
-                                   steps=self.budget.next().steps,
-                                   camera=self.calibration.intrinsics)
-        except ValueError as error:  # MessageError is a ValueError
-            counters.malformed_messages += 1
-            log.warning("points message skipped: %s", error)
-            return
+        stamp, positions, colors, frame_id, pose = decode_points(
+            payload_bytes(sample, self._max_cloud_bytes), attachment_bytes(sample),
+            self.options.max_cloud_points)
+        counters.note_sequence(stamp.sequence)
+        received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)
+        learning_before = counters.learning_seconds
+        result = learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns,
+                               steps=self.budget.next().steps, camera=self.calibration.intrinsics)
         if not result.learned:  # counted by the learner; the status says why
             warn_not_learned(result, result_count(counters, result))
             if result.outcome is not Outcome.OTHER_FRAME:
                 self._publish_status(stamp)
-            return
+            return result.outcome, result.problem
         if result.tracked:
             self._publish_pose(stamp, frame_id, result)
         learned_at = time.perf_counter()
@@ -348,6 +367,19 @@ class LearnerService:
             log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                       stamp.sequence, len(positions), received_ms, latency_ms)
         self._checkpoint_if_due()
+        return result.outcome, ""
+
+    def _latency_ms(self, stamp: FrameStamp) -> float:
+        """From the frame's capture to now, ms; from its arrival for a frame stamped ahead of
+        this clock (a file read faster than it was recorded: its stamps are the recording's)."""
+        return (time.time_ns() - min(stamp.capture_time_ns, self._received_ns)) * 1e-6
+
+    def _acknowledge(self, stamp: FrameStamp, outcome: str, problem: str) -> None:
+        from gngdt.schemas.status import encode_frame_ack
+
+        ack = encode_frame_ack(timestamp_ns=time.time_ns(), frame_sequence=stamp.sequence,
+                               outcome=outcome, problem=problem[:MAX_PROBLEM_CHARS])
+        self._ack.put(ack.SerializeToString(), attachment=stamp.to_attachment())
 
     def publish_learned(self, now: float | None = None) -> float:
         """Publish the last learned frame (learned at ``now``, `time.perf_counter`; default
@@ -369,7 +401,7 @@ class LearnerService:
 
     def _publish_status(self, stamp: FrameStamp) -> None:
         """A status without a new topology (a frame that was not learned)."""
-        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
+        latency_ms = self._latency_ms(stamp)
         percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
         status = status_message(self.learner.figures(), stamp, latency_ms, percentiles,
                                 self._published, "", self.budget.last)
@@ -427,7 +459,7 @@ class LearnerService:
         self._token.undeclare()
         self.instances.close()
         for entity in (self._queryable, self._eos, self.points, self._topology, self._status,
-                       self._objects, self._scene, *self._tracking):
+                       self._ack, self._objects, self._scene, *self._tracking):
             entity.undeclare()
         if self.learner.counters.frames_received:
             log.info("%d of %d clouds arrived through shared memory", self.clouds_shared,

@@ -318,19 +318,22 @@ def open_session(args: argparse.Namespace) -> zenoh.Session:
 
 
 def declare_publisher(session: zenoh.Session, key: str, encoding: str,
-                      latest_wins: bool) -> SharedMemoryPublisher:
+                      latest_wins: bool, large: bool | None = None) -> SharedMemoryPublisher:
     """The one place congestion and transport are decided. ``latest_wins`` (images, clouds,
     topologies: a newer one supersedes it): ``DROP``, so that a consumer that does not keep up
     loses stale samples instead of stalling the publisher and everyone else; large payloads go
     through zenoh shared memory when the link allows (:class:`SharedMemoryPublisher`).
     Otherwise (calibration, status, end of stream: what must arrive): ``BLOCK``, a consumer that
     stops reading altogether then being cut off by zenoh after ``transport/link/tx/queue/
-    congestion_control/block/wait_before_close``."""
+    congestion_control/block/wait_before_close``. ``large`` (default: ``latest_wins``): its
+    payloads are large, and go through shared memory too (a capture's clouds paced by the
+    learner: every one must arrive)."""
     import zenoh
 
     control = zenoh.CongestionControl.DROP if latest_wins else zenoh.CongestionControl.BLOCK
     publisher = session.declare_publisher(key, encoding=encoding, congestion_control=control)
-    return SharedMemoryPublisher(session, publisher, shared_memory=latest_wins)
+    return SharedMemoryPublisher(session, publisher,
+                                 shared_memory=latest_wins if large is None else large)
 
 
 #: payloads at least this large go through gngdt's shared-memory pool when the link allows

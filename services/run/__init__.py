@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
 
 from gngdt.core.learner.warm_up import PROGRESS_PHRASE
+from gngdt.io.deproject import RUN_POINT_CAP
 from gngdt.io.outputs.rerun_output import add_serve_arguments
 from gngdt.schemas.wire import (
     ALL_KEYS,
@@ -39,8 +40,8 @@ from gngdt.schemas.wire import (
     alive_key,
     topic,
 )
-from gngdt.services.capture import DEFAULT_RUN_MAX_POINTS, add_source_arguments
 from gngdt.services.capture import SETTINGS as CAPTURE_SETTINGS
+from gngdt.services.capture import add_source_arguments
 from gngdt.services.learner import SETTINGS as LEARNER_SETTINGS
 from gngdt.services.logger import SETTINGS as LOGGER_SETTINGS
 from gngdt.services.plumbing import lifecycle
@@ -317,14 +318,14 @@ def child_settings(args: argparse.Namespace, service: str, veil_ratio: float | N
     """The options ``service`` runs with: its option groups' values as the run parsed them,
     and what the run decides for it (capture under ``--track``: the recording's poses ignored
     and whole clouds, as tracking aligns whole depth images; otherwise clouds capped at
-    `DEFAULT_RUN_MAX_POINTS`, and veil pixels dropped as the sensor profile says)."""
+    `RUN_POINT_CAP`, and veil pixels dropped as the sensor profile says)."""
     values = {name: value for group in CHILD_SETTINGS[service]
               for name, value in group.values(args).items()}
     if service == "capture":
         if args.track:
             values["fixed_frame"] = "none"
         if values["max_points"] is None:
-            values["max_points"] = 0 if args.track else DEFAULT_RUN_MAX_POINTS
+            values["max_points"] = 0 if args.track else RUN_POINT_CAP
         if values["drop_veil"] is None:
             values["drop_veil"] = veil_ratio
     return values
@@ -412,7 +413,7 @@ def report(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome) -> None
     try:  # after a SIGHUP the terminal may be gone: nothing more to say then
         print(format_summary(outcome.status, outcome.end, plan.destination,
                              recorded_frames(args.recording), outcome.early_end, outputs,
-                             plan.profile.model_value("max_nodes")),
+                             plan.profile.model_value("max_nodes"), plan.mode),
               flush=True)
         if failure is not None:
             print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"

@@ -19,6 +19,13 @@ if TYPE_CHECKING:
     from gngdt.io.profiles import Profile
 
 
+#: how a source goes to the learner (the summary says which ran)
+PACED = ("every frame, each sent once the learner took the one before (a file; --realtime: at "
+         "the recorded pace, the latest frame wins)")
+REALTIME = "real time (--realtime): the recorded pace, the learner takes the latest frame"
+LIVE = "a live camera: real time, the learner takes the latest frame"
+
+
 def run_name(spec: str) -> str:
     """The name a run's files take from its source: a file's stem, or a spec without its
     colons (``realsense:123`` -> ``realsense-123``)."""
@@ -36,6 +43,8 @@ class RunPlan:
     profile: Profile
     rrd_path: Path | None
     mcap_path: Path | None
+    #: how the source goes to the learner: `PACED`, `REALTIME` or `LIVE`
+    mode: str = ""
 
     @property
     def veil_ratio(self) -> float | None:
@@ -56,7 +65,9 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     args.recording = source_spec(args)
     options = SourceOptions(camera_json=args.camera_json, depth_scale=args.depth_scale)
     # as capture will open it: RecordingError says why it cannot
-    open_source(args.recording, options=options).close()
+    source = open_source(args.recording, options=options)
+    source.close()
+    mode = LIVE if source.live else REALTIME if args.realtime else PACED
     if args.url and not args.connect:
         raise ValueError("--url needs --connect")
     from gngdt.io.outputs.foxglove import FoxgloveOutput
@@ -66,7 +77,7 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     profile = profile_from_args(args)  # a wrong params file: said before anything starts
     topic(args.cam, "points")  # validates the camera name
     rates = rates_from_args(args)
-    return RunPlan(rates, profile, *plan_outputs(args))
+    return RunPlan(rates, profile, *plan_outputs(args), mode=mode)
 
 
 # --- issue 24.4: runs that never collide -------------------------------------------------------

@@ -20,13 +20,14 @@ def file_size(path: Path | None) -> str:
 def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
                    destination: str, recorded_frames: int | None = None,
                    early_end: str = "", outputs: list[str] | None = None,
-                   node_budget: int | None = None) -> str:
+                   node_budget: int | None = None, mode: str = "") -> str:
     """The lines ``run`` prints at the end; ``early_end`` says why the stream ended before the
-    recording did; ``node_budget``: the learner's, to say when the network stayed small."""
+    recording did; ``node_budget``: the learner's, to say when the network stayed small;
+    ``mode``: how the source went to the learner."""
     sent = str(end.frames_sent) if end else "no end of stream"
     if end and recorded_frames is not None:
         sent += f" of {recorded_frames} in the recording"
-    lines = [f"frames sent:        {sent}"]
+    lines = [*([f"mode:               {mode}"] if mode else []), f"frames sent:        {sent}"]
     if early_end:
         lines.append(f"ended early:        {early_end}")
     if status is None:

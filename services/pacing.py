@@ -1,0 +1,115 @@
+"""Flow control between a capture reading a file and the camera's learner.
+
+A file is read completely and repeatably: capture sends frame n+1 only once the learner has
+acknowledged frame n (``gngdt/<cam>/learner/ack``, `gngdt.FrameAck`: learned, or not and why),
+so every frame reaches the learner in order whatever the machine's load, and the same file with
+the same seed gives the same network. Waits are bounded: the learner's liveliness token going
+away, or no acknowledgement for ``stall_s`` seconds, ends the replay with the reason
+(`LearnerLost`). A live camera, or ``--realtime``, is not paced: frames leave at their own pace
+and the learner takes the latest (docs/contracts.md "Flow control").
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import Counter
+from typing import TYPE_CHECKING
+
+from gngdt.schemas.wire import LEARNER, FrameStamp, alive_key, topic
+
+if TYPE_CHECKING:
+    import zenoh
+
+log = logging.getLogger(__name__)
+
+#: how often a wait says what it waits for
+PROGRESS_EVERY_S = 10.0
+
+
+class LearnerLost(RuntimeError):
+    """The learner stopped taking frames: it left, or took none for too long."""
+
+
+class LearnerPacing:
+    """The acknowledgements and liveliness of one camera's learner, heard on ``session``."""
+
+    def __init__(self, session: zenoh.Session, camera: str, stall_s: float) -> None:
+        if not stall_s > 0:
+            raise ValueError(f"--learner-timeout must be positive, got {stall_s}")
+        self.camera = camera
+        self.stall_s = stall_s
+        self._changed = threading.Condition()
+        #: the highest frame sequence acknowledged so far (-1: none)
+        self.acknowledged = -1
+        #: acknowledgements by outcome ("learned", "pose rejected", ...)
+        self.outcomes: Counter[str] = Counter()
+        self.learner_up = False
+        self._left = False
+        self._subscribers = [
+            session.declare_subscriber(topic(camera, "learner/ack"), self._on_ack),
+            session.liveliness().declare_subscriber(alive_key(camera, LEARNER), self._on_token,
+                                                    history=True),
+        ]
+
+    def _on_ack(self, sample: zenoh.Sample) -> None:
+        from gngdt.schemas.status import decode_frame_ack
+
+        try:
+            stamp = FrameStamp.from_attachment(
+                None if sample.attachment is None else sample.attachment.to_bytes())
+            outcome = decode_frame_ack(sample.payload.to_bytes()).outcome
+        except ValueError as error:  # MessageError is a ValueError
+            log.warning("malformed acknowledgement skipped: %s", error)
+            return
+        with self._changed:
+            self.acknowledged = max(self.acknowledged, stamp.sequence)
+            self.outcomes[outcome] += 1
+            self._changed.notify_all()
+
+    def _on_token(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        with self._changed:
+            self.learner_up = sample.kind == zenoh.SampleKind.PUT
+            self._left = self._left or not self.learner_up
+            self._changed.notify_all()
+
+    def wait_for_learner(self, timeout_s: float, stop: threading.Event) -> bool:
+        """Wait up to ``timeout_s`` for the camera's learner to be up (its liveliness token);
+        whether it is."""
+        deadline = time.monotonic() + timeout_s
+        said = time.monotonic()
+        with self._changed:
+            while not self.learner_up and not stop.is_set():
+                now = time.monotonic()
+                if now >= deadline:
+                    break
+                if now - said >= PROGRESS_EVERY_S:
+                    log.info("waiting for a learner of camera %r (`gngdt learn --cam %s`), "
+                             "%.0f s more", self.camera, self.camera, deadline - now)
+                    said = now
+                self._changed.wait(min(0.5, deadline - now))
+            return self.learner_up
+
+    def wait_taken(self, sequence: int, stop: threading.Event) -> None:
+        """Wait until the learner acknowledged frame ``sequence`` (or a stop signal); raises
+        `LearnerLost` when it left, or acknowledged nothing for ``stall_s``."""
+        started = time.monotonic()
+        with self._changed:
+            while self.acknowledged < sequence and not stop.is_set():
+                if self._left and not self.learner_up:
+                    raise LearnerLost(
+                        f"the learner of camera {self.camera!r} left (its liveliness token is "
+                        f"gone) before it took frame {sequence}")
+                waited = time.monotonic() - started
+                if waited >= self.stall_s:
+                    raise LearnerLost(
+                        f"the learner of camera {self.camera!r} took no frame for "
+                        f"{waited:.0f} s (frame {sequence} was sent; --learner-timeout)")
+                self._changed.wait(min(0.5, self.stall_s - waited))
+
+    def close(self) -> None:
+        for subscriber in self._subscribers:
+            subscriber.undeclare()
