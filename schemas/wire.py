@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 DEFAULT_CAMERA = "camera"
 
-#: zenoh encodings, one per message type (DESIGN.md "Topics").
+#: zenoh encodings, one per message type (docs/contracts.md "Topics").
 ENCODING_RAW_IMAGE = "application/protobuf;foxglove.RawImage"
 ENCODING_CALIBRATION = "application/protobuf;foxglove.CameraCalibration"
 ENCODING_POINT_CLOUD = "application/protobuf;foxglove.PointCloud"
@@ -24,7 +24,8 @@ ENCODING_FRAME_ACK = "application/protobuf;gngdt.FrameAck"
 ENCODING_SCENE_UPDATE = "application/protobuf;foxglove.SceneUpdate"
 ENCODING_FRAME_TRANSFORM = "application/protobuf;foxglove.FrameTransform"
 
-#: every stream of a camera (``gngdt/<cam>/<stream>``), by who publishes it (DESIGN.md "Topics")
+#: every stream of a camera (``gngdt/<cam>/<stream>``), by who publishes it (docs/contracts.md
+#: "Topics")
 CAPTURE_STREAMS = ("color", "depth", "calibration", "points", "tf", "eos")
 #: "tf" is the camera's pose: capture's from a recording's poses, the learner's when it tracks
 #: the camera (learn --track)

@@ -1,4 +1,4 @@
-"""Write RGB-D frames to an MCAP recording in gngdt's foxglove-protobuf layout (DESIGN.md).
+"""Write RGB-D frames to an MCAP recording in gngdt's foxglove-protobuf layout (docs/contracts.md).
 
 Per frame, in this order and all with ``log_time`` = the frame's capture time:
 ``/tf`` (foxglove.FrameTransform from the fixed frame to the images' ``frame_id``, frames with a

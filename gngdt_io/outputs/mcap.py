@@ -6,8 +6,8 @@ protobuf schema its zenoh encoding names (``application/protobuf;foxglove.SceneU
 schemas for images, calibration, clouds, scene and objects, gngdt's own for topology, status and
 end of stream; the camera poses (``gngdt/<cam>/tf``) go to ``/tf``, as in a recording.
 ``log_time`` is the frame's capture time (from the sample's attachment),
-``publish_time`` the time it arrived. Camera streams keep DESIGN's recording layout, so the file
-also replays with ``gngdt capture``.
+``publish_time`` the time it arrived. Camera streams keep the contract's recording layout, so
+the file also replays with ``gngdt capture``.
 
 Zenoh's callback only queues the bytes; a writer thread compresses (lz4) and writes them, so a
 slow disk never blocks a subscriber. Bounded as the logger's ``.rrd`` is: the queue holds at
@@ -73,7 +73,7 @@ def message_classes() -> dict[str, Any]:
 
 def channel_topic(key: str) -> str | None:
     """MCAP topic of a zenoh key: ``gngdt/<cam>/<stream>`` -> ``/<cam>/<stream>``, and every
-    camera's pose ``gngdt/<cam>/tf`` -> ``/tf`` (DESIGN's recording layout: the transforms say
+    camera's pose ``gngdt/<cam>/tf`` -> ``/tf`` (the contract's recording layout: the transforms say
     which camera by their child frame)."""
     parts = key.split("/")
     if len(parts) < 3 or parts[0] != "gngdt":

@@ -1,6 +1,6 @@
 """How the logger's rerun recording is laid out: entity paths per camera and the blueprint.
 
-Entities (DESIGN.md "Rerun") for the default camera ``camera``: ``world/camera`` (Pinhole),
+Entities (docs/contracts.md "Rerun") for the default camera ``camera``: ``world/camera`` (Pinhole),
 ``world/camera/image/rgb`` (JPEG), ``world/camera/image/depth``, ``world/points``,
 ``world/gng/nodes`` (positions once, in their learned colours, with each clustering's node
 colours beside them as ``gngdt.clusters.<clustering>:colors``), ``world/gng/edges/<clustering>``,
@@ -28,7 +28,8 @@ OBJECTS_VIEW = SEGMENTS.name
 
 @dataclass(frozen=True)
 class EntityPaths:
-    """Entity paths of one camera: DESIGN's paths for the default camera, else under ``<cam>``."""
+    """Entity paths of one camera: the contract's paths for the default camera, else under
+    ``<cam>``."""
 
     camera: str
 

@@ -141,7 +141,7 @@ def decode_points(payload: bytes, attachment: bytes | None,
     positions: N >= 1 finite points. Raises ``ValueError`` (``MessageError`` for the payload)
     for a missing/malformed attachment, a capture time more than a day from ``now_ns``
     (default: this clock), an undecodable or oversized cloud (``max_points``, checked before
-    allocation), a cloud without colour fields (DESIGN's points carry red, green, blue: a
+    allocation), a cloud without colour fields (the contract's points carry red, green, blue: a
     colourless model could learn nothing else) or without a single finite point, and a pose
     that is not a rigid transform (non-unit quaternion, NaN), naming the frame.
     """

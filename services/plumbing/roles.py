@@ -1,5 +1,5 @@
 """Who may say what on gngdt's keys: one role per kind of service, each allowed to publish only
-the streams DESIGN's topics table gives it, enforced by the router's zenoh access control.
+the streams the contract's topics table gives it, enforced by the router's zenoh access control.
 
 - capture: puts ``gngdt/<cam>/{color,depth,calibration,points,tf,eos}``, token
   ``gngdt/<cam>/capture/alive``;

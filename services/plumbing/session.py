@@ -1,6 +1,6 @@
 """Zenoh configuration and session opening shared by every service.
 
-Secure defaults (DESIGN.md "Rendezvous"): services are zenoh *clients* of a router on
+Secure defaults (docs/contracts.md "Rendezvous"): services are zenoh *clients* of a router on
 ``tcp/127.0.0.1:7447``; they listen nowhere and multicast/gossip scouting is off, so nothing is
 exposed beyond loopback. ``--zenoh-config FILE.json5`` replaces these defaults entirely (remote
 routers, TLS, access control); ``--zenoh-connect ENDPOINT`` only changes where to connect.

@@ -1,5 +1,5 @@
 """gngdt -> ROS 2: a camera's clouds, learned nodes, graph, objects, camera pose and status as
-ROS 2 topics (DESIGN.md "ROS 2").
+ROS 2 topics (docs/contracts.md "ROS 2").
 
 Clouds are translated on their own thread (latest wins: a cloud waiting is replaced by a newer
 one), everything the learner publishes on another, so the slow graph never delays a cloud. A

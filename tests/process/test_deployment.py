@@ -43,7 +43,7 @@ def client_config_file(directory: Path, endpoint: str) -> Path:
 
 
 def camera_entities(camera: str) -> set[str]:
-    """DESIGN's entity paths as the logger writes them for a non-default camera."""
+    """the contract's entity paths as the logger writes them for a non-default camera."""
     return {re.sub(r"^/(world|metrics)/", rf"/\g<1>/{camera}/", path) for path in DESIGN_ENTITIES}
 
 

@@ -22,7 +22,7 @@ from gngdt.services.plumbing.session import client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
-#: what `gngdt run` must write (DESIGN.md "Rerun"), for the default camera
+#: what `gngdt run` must write (docs/contracts.md "Rerun"), for the default camera
 DESIGN_ENTITIES = {
     "/world/camera",
     "/world/camera/image/rgb",
