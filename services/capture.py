@@ -232,11 +232,24 @@ LIMITS = OptionGroup("limits (a recording beyond them is refused, naming the fil
 SETTINGS = [READING, LIMITS]
 
 
+#: each `CloudOptions` field's command-line option
+CLOUD_OPTION_FLAGS = {"min_depth_m": "--min-depth", "max_depth_m": "--max-depth",
+                      "voxel_size_m": "--voxel", "max_points": "--max-points",
+                      "veil_ratio": "--drop-veil"}
+
+
 def frame_to_cloud(args: argparse.Namespace) -> FrameToCloud:
-    """The frame-to-cloud conversion `add_cloud_arguments` describes (``ValueError`` for a wrong
-    value)."""
-    return FrameToCloud(CloudOptions(args.min_depth, args.max_depth, args.voxel,
-                                     args.max_points or None, args.drop_veil or 0.0), args.seed)
+    """The frame-to-cloud conversion `add_cloud_arguments` describes (``ValueError`` naming the
+    option for a wrong value)."""
+    try:
+        options = CloudOptions(args.min_depth, args.max_depth, args.voxel,
+                               args.max_points or None, args.drop_veil or 0.0)
+    except ValueError as error:
+        message = str(error).replace(f"{CloudOptions.WHAT} ", "")
+        for field, flag in CLOUD_OPTION_FLAGS.items():
+            message = message.replace(field, flag)
+        raise ValueError(message) from None
+    return FrameToCloud(options, args.seed)
 
 
 def source_options(args: argparse.Namespace) -> SourceOptions:
@@ -278,10 +291,12 @@ class CapturePublisher:
 
     def publish_frame(
         self, frame: Frame, stamp: FrameStamp, positions: np.ndarray | None,
-        colors: np.ndarray | None
+        colors: np.ndarray | None, sensor_time_ns: int | None = None
     ) -> None:
         """Calibration (when new), colour, depth, the camera's pose (posed frames) and the
-        cloud unless ``positions`` is None."""
+        cloud unless ``positions`` is None; the cloud's own timestamp is ``sensor_time_ns``
+        (default the stamp's capture time): when the camera took it, which the learner's motion
+        and pose checks use."""
         from gngdt.schemas.clouds import cloud_to_wire, pose_to_transform
         from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
 
@@ -305,7 +320,8 @@ class CapturePublisher:
                                           timestamp_ns=time_ns)
             self.tf.put(transform.SerializeToString(), attachment=attachment)
         # serialised straight into one buffer: megabytes copied once more, into shared memory
-        cloud = cloud_to_wire(positions, colors, timestamp_ns=time_ns,
+        sensor_time_ns = time_ns if sensor_time_ns is None else sensor_time_ns
+        cloud = cloud_to_wire(positions, colors, timestamp_ns=sensor_time_ns,
                               frame_id=self.camera if pose is None else pose.frame_id,
                               pose=None if pose is None else pose.matrix)
         self.points.put(cloud, attachment=attachment)
@@ -492,12 +508,14 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
     frames_sent = 0  # also the next frame's sequence: only published frames are numbered
     without_pose = 0
     last_cloud = -1  # the sequence of the last cloud sent
-    stamps = RecordedClock() if pacing is not None else None
+    sensor_clock = RecordedClock() if pacing is not None else None
     for frame in replay:
         clock.wait_for(frame.timestamp_ns, stop, frame.index)
         if stop.is_set():
             break
-        capture_time_ns = time.time_ns() if stamps is None else stamps.stamp(frame.timestamp_ns)
+        capture_time_ns = time.time_ns()
+        sensor_time_ns = (None if sensor_clock is None
+                          else sensor_clock.stamp(frame.timestamp_ns))
         try:
             positions, colors = to_cloud(frame)
         except ValueError as error:
@@ -509,7 +527,7 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         if pacing is not None and not wait_taken(pacing, last_cloud, replay, stop):
             break
         publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
-                                positions, colors)
+                                positions, colors, sensor_time_ns)
         log.debug("frame %d: %d points", frames_sent, 0 if positions is None else len(positions))
         last_cloud = frames_sent if positions is not None else last_cloud
         frames_sent += 1
@@ -522,10 +540,10 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
 
 
 class RecordedClock:
-    """Stamps of a file read frame by frame: the time the replay started plus each frame's
-    recorded time since the first frame, so that the learner's motion and pose checks see the
-    recording's own timing whatever the load (a frame's latency then includes the time it
-    waited for the learner)."""
+    """Sensor times of a file read frame by frame: the time the replay started plus each
+    frame's recorded time since the first frame, so that the learner's motion and pose checks
+    see the recording's own timing whatever the load (the attachments keep the time each frame
+    was sent: latency is measured from there)."""
 
     def __init__(self) -> None:
         self._start_ns = time.time_ns()

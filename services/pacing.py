@@ -1,12 +1,14 @@
 """Flow control between a capture reading a file and the camera's learner.
 
 A file is read completely and repeatably: capture sends frame n+1 only once the learner has
-acknowledged frame n (``gngdt/<cam>/learner/ack``, `gngdt.FrameAck`: learned, or not and why),
-so every frame reaches the learner in order whatever the machine's load, and the same file with
-the same seed gives the same network. Waits are bounded: the learner's liveliness token going
-away, or no acknowledgement for ``stall_s`` seconds, ends the replay with the reason
-(`LearnerLost`). A live camera, or ``--realtime``, is not paced: frames leave at their own pace
-and the learner takes the latest (docs/contracts.md "Flow control").
+acknowledged frame n (``gngdt/<cam>/learner/ack``, `gngdt.FrameAck`: learned, or not and why), so
+every frame reaches the learner in order whatever the machine's load, and the same file with the
+same seed gives the same network. Waits are bounded: no acknowledgement for ``stall_s`` seconds, or
+the learner's liveliness token gone for that long, ends the replay with the reason (`LearnerLost`).
+A learner that comes back (restarted, or a router between them restarted) takes the replay on from
+the next frame; the frame it had when it went is counted lost. A live camera, or ``--realtime``, is
+not paced: frames leave at their own pace and the learner takes the latest (docs/contracts.md "Flow
+control").
 """
 
 from __future__ import annotations
@@ -46,7 +48,9 @@ class LearnerPacing:
         #: acknowledgements by outcome ("learned", "pose rejected", ...)
         self.outcomes: Counter[str] = Counter()
         self.learner_up = False
-        self._left = False
+        #: learners that went away while they had a frame, so the frame went with them
+        self.frames_lost = 0
+        self._comings = 0  # how many times the learner's token appeared
         self._subscribers = [
             session.declare_subscriber(topic(camera, "learner/ack"), self._on_ack),
             session.liveliness().declare_subscriber(alive_key(camera, LEARNER), self._on_token,
@@ -73,7 +77,7 @@ class LearnerPacing:
 
         with self._changed:
             self.learner_up = sample.kind == zenoh.SampleKind.PUT
-            self._left = self._left or not self.learner_up
+            self._comings += self.learner_up
             self._changed.notify_all()
 
     def wait_for_learner(self, timeout_s: float, stop: threading.Event) -> bool:
@@ -94,21 +98,30 @@ class LearnerPacing:
             return self.learner_up
 
     def wait_taken(self, sequence: int, stop: threading.Event) -> None:
-        """Wait until the learner acknowledged frame ``sequence`` (or a stop signal); raises
-        `LearnerLost` when it left, or acknowledged nothing for ``stall_s``."""
+        """Wait until the learner acknowledged frame ``sequence`` (or a stop signal), or came
+        back after going away with it (the frame is counted lost); raises `LearnerLost` when
+        it acknowledged nothing for ``stall_s``, gone or not."""
         started = time.monotonic()
+        comings = self._comings
         with self._changed:
             while self.acknowledged < sequence and not stop.is_set():
-                if self._left and not self.learner_up:
-                    raise LearnerLost(
-                        f"the learner of camera {self.camera!r} left (its liveliness token is "
-                        f"gone) before it took frame {sequence}")
+                if self._comings > comings and self.learner_up:
+                    self.frames_lost += 1
+                    log.warning("the learner of camera %r came back; frame %d went with the "
+                                "one before it", self.camera, sequence)
+                    return
                 waited = time.monotonic() - started
                 if waited >= self.stall_s:
-                    raise LearnerLost(
-                        f"the learner of camera {self.camera!r} took no frame for "
-                        f"{waited:.0f} s (frame {sequence} was sent; --learner-timeout)")
+                    raise LearnerLost(self._stalled(sequence, waited))
                 self._changed.wait(min(0.5, self.stall_s - waited))
+
+    def _stalled(self, sequence: int, waited: float) -> str:
+        if not self.learner_up:
+            return (f"the learner of camera {self.camera!r} left (its liveliness token is gone) "
+                    f"and did not come back within {waited:.0f} s (frame {sequence} went with "
+                    "it; --learner-timeout)")
+        return (f"the learner of camera {self.camera!r} took no frame for {waited:.0f} s "
+                f"(frame {sequence} was sent; --learner-timeout)")
 
     def close(self) -> None:
         for subscriber in self._subscribers:

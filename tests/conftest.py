@@ -120,9 +120,9 @@ class CaptureOutput:
 
 @pytest.fixture
 def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureOutput]:
-    """``run_capture(RECORDING, *OPTIONS)`` runs `gngdt capture RECORDING --fast OPTIONS` to its
-    end against ``router_endpoint`` (expecting exit status ``exit_code``) and returns what it
-    published on the default camera."""
+    """``run_capture(RECORDING, *OPTIONS)`` runs `gngdt capture RECORDING --fast --realtime
+    OPTIONS` to its end against ``router_endpoint`` (expecting exit status ``exit_code``) and
+    returns what it published on the default camera (no learner listens: real time)."""
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
     from gngdt.schemas.clouds import cloud_pose, msg_to_cloud
@@ -141,7 +141,7 @@ def run_capture(router_endpoint: str, spawn: Callable) -> Callable[..., CaptureO
         session.declare_subscriber("gngdt/camera/eos", lambda sample: output.ends.append(
             decode_stream_end(sample.payload.to_bytes())))
         try:
-            capture = spawn("capture", str(recording), "--fast",
+            capture = spawn("capture", str(recording), "--fast", "--realtime",
                             "--zenoh-connect", router_endpoint, *options)
             assert capture.wait(60) == exit_code, Path(capture.log_path).read_text()
             deadline = time.monotonic() + 10

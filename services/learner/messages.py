@@ -121,6 +121,9 @@ class PointsMessage(NamedTuple):
     colors: np.ndarray
     frame_id: str
     pose: np.ndarray | None
+    #: when the camera took it (the cloud's own timestamp, ns; the stamp's capture time when
+    #: it has none): the learner's motion and pose checks use it
+    sensor_ns: int
 
 
 def finite_points(
@@ -148,7 +151,7 @@ def decode_points(payload: bytes, attachment: bytes | None,
     from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 
     from gngdt.schemas.clouds import cloud_pose, msg_to_cloud
-    from gngdt.schemas.messages import MessageError, parse_message
+    from gngdt.schemas.messages import MessageError, parse_message, timestamp_to_ns
 
     stamp = FrameStamp.from_attachment(attachment)
     stamp.check_clock(time.time_ns() if now_ns is None else now_ns)
@@ -161,5 +164,6 @@ def decode_points(payload: bytes, attachment: bytes | None,
     if len(positions) == 0:
         raise MessageError("no finite points in the cloud")
     pose = cloud_pose(message)
+    sensor_ns = timestamp_to_ns(message.timestamp) or stamp.capture_time_ns
     return PointsMessage(stamp, positions, colors, message.frame_id,
-                         None if np.array_equal(pose, np.eye(4)) else pose)
+                         None if np.array_equal(pose, np.eye(4)) else pose, sensor_ns)

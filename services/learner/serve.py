@@ -272,8 +272,6 @@ class LearnerService:
         self._unpublished = False
         self.learned_sequence = -1
         self._settled_end = 0.0  # the end of stream (its arrival time) already settled on
-        #: when the last points sample arrived (time.time_ns)
-        self._received_ns = 0
         self._frames_since_checkpoint = 0
         self._last_checkpoint = time.monotonic()
         #: clouds whose payload arrived through shared memory (a diagnostic, logged at the end)
@@ -299,7 +297,7 @@ class LearnerService:
         published = self.learner.publication(positions, colors, final=bool(settled))
         payload = topology_message(published, stamp).SerializeToString()
         attachment = stamp.to_attachment()
-        latency_ms = self._latency_ms(stamp)
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
         self._topology.put(payload, attachment=attachment)
         self.latest.set(payload, attachment)
         self._objects.put(objects_message(published, stamp).SerializeToString(),
@@ -322,7 +320,6 @@ class LearnerService:
         skipped. ``waited``: the learner was idle until it came (it keeps up)."""
         self.learner.counters.frames_received += 1
         self.clouds_shared += through_shared_memory(sample)
-        self._received_ns = time.time_ns()
         stamp = None
         try:
             stamp = FrameStamp.from_attachment(attachment_bytes(sample))
@@ -340,14 +337,14 @@ class LearnerService:
         started = time.perf_counter()
         learner = self.learner
         counters = learner.counters
-        stamp, positions, colors, frame_id, pose = decode_points(
+        stamp, positions, colors, frame_id, pose, sensor_ns = decode_points(
             payload_bytes(sample, self._max_cloud_bytes), attachment_bytes(sample),
             self.options.max_cloud_points)
         counters.note_sequence(stamp.sequence)
         received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
         self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)
         learning_before = counters.learning_seconds
-        result = learner.learn(positions, colors, frame_id, pose, stamp.capture_time_ns,
+        result = learner.learn(positions, colors, frame_id, pose, sensor_ns,
                                steps=self.budget.next().steps, camera=self.calibration.intrinsics)
         if not result.learned:  # counted by the learner; the status says why
             warn_not_learned(result, result_count(counters, result))
@@ -368,11 +365,6 @@ class LearnerService:
                       stamp.sequence, len(positions), received_ms, latency_ms)
         self._checkpoint_if_due()
         return result.outcome, ""
-
-    def _latency_ms(self, stamp: FrameStamp) -> float:
-        """From the frame's capture to now, ms; from its arrival for a frame stamped ahead of
-        this clock (a file read faster than it was recorded: its stamps are the recording's)."""
-        return (time.time_ns() - min(stamp.capture_time_ns, self._received_ns)) * 1e-6
 
     def _acknowledge(self, stamp: FrameStamp, outcome: str, problem: str) -> None:
         from gngdt.schemas.status import encode_frame_ack
@@ -401,7 +393,7 @@ class LearnerService:
 
     def _publish_status(self, stamp: FrameStamp) -> None:
         """A status without a new topology (a frame that was not learned)."""
-        latency_ms = self._latency_ms(stamp)
+        latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
         percentiles = (self.latencies.percentile(50), self.latencies.percentile(99))
         status = status_message(self.learner.figures(), stamp, latency_ms, percentiles,
                                 self._published, "", self.budget.last)

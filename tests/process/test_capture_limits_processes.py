@@ -35,7 +35,7 @@ def test_a_jump_in_the_stamps_is_shortened_and_said(
         writer.write_frame(first)
         writer.write_frame(second)  # stamped 11.6 days later
     started = time.monotonic()
-    capture = spawn("capture", str(path), "--rate", "1", "--max-gap", "0.5",
+    capture = spawn("capture", str(path), "--rate", "1", "--max-gap", "0.5", "--realtime",
                     "--wait-subscribers", "0", "--zenoh-connect", router_endpoint)
     assert capture.wait(60) == 0, _log(capture)
     assert time.monotonic() - started < 50
@@ -52,7 +52,8 @@ def _capture(router_endpoint: str, path: Path, *options: str) -> tuple[int, str,
 
     completed = subprocess.run(
         with_peak_rss([sys.executable, "-m", "gngdt.services.cli", "capture", str(path), "--fast",
-                       "--wait-subscribers", "0", "--zenoh-connect", router_endpoint, *options]),
+                       "--realtime", "--wait-subscribers", "0", "--zenoh-connect",
+                       router_endpoint, *options]),
         cwd=Path(__file__).resolve().parents[2], capture_output=True, text=True, timeout=120)
     output = completed.stdout + completed.stderr
     return completed.returncode, output, peak_rss_mb(output)

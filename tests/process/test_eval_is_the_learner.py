@@ -48,15 +48,16 @@ def test_eval_recording_and_the_learner_agree_node_for_node(
         frames = list(read_frames(tabletop_recording, fixed_frame="auto"))[:FRAMES]
         for sequence, frame in enumerate(frames):
             positions, colors = to_cloud(frame)
+            # taken when it was recorded, as evaluation replays it
             publisher.publish_frame(frame, FrameStamp(sequence, time.time_ns()), positions,
-                                    colors)
+                                    colors, sensor_time_ns=frame.timestamp_ns)
             with arrived:  # one frame at a time: the learner drops none
                 assert arrived.wait_for(lambda s=sequence: s in topologies, timeout=60), \
                     Path(learner.log_path).read_text()
         deployed = decode_topology(topologies[FRAMES - 1])
     finally:
         session.close()
-    settings = RecordingSettings(methods=("GNG-DT",), max_frames=FRAMES)
+    settings = RecordingSettings(methods=("GNG-DT",), max_frames=FRAMES, max_points=0)
     evaluated = replay(tabletop_recording, "GNG-DT", 0, settings)["model"]
     assert deployed.node_count == evaluated.n_nodes_ > 50  # 2 + 40,000 steps / lambda 500
     np.testing.assert_array_equal(deployed.node_ids, evaluated.node_ids_)

@@ -124,7 +124,8 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
     connect = ("--zenoh-connect", router_endpoint)
     logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
     wait_for(lambda: "logging to" in log_text(logger), 60, "the logger")
-    spawn("capture", str(tabletop_recording), "--rate", "0.5", "--loop", *connect)
+    # no learner: the recording goes in real time
+    spawn("capture", str(tabletop_recording), "--rate", "0.5", "--loop", "--realtime", *connect)
     # frames on disk: the logger flushes every RRD_FLUSH_SECONDS (its blueprint alone is ~200 kB)
     wait_for(lambda: _rgb_on_disk(rrd_path), RRD_FLUSH_SECONDS + 60, "logged frames on disk")
     logger.send_signal(signal.SIGKILL)

@@ -152,7 +152,7 @@ def test_a_damaged_recording_fails_capture_and_run(
     damaged = tmp_path / "damaged.mcap"
     magic = tabletop_recording.read_bytes()[:8]
     damaged.write_bytes(magic + os.urandom(4000))
-    capture = spawn("capture", str(damaged), "--fast", "--wait-subscribers", "0",
+    capture = spawn("capture", str(damaged), "--fast", "--realtime", "--wait-subscribers", "0",
                     "--zenoh-connect", router_endpoint)
     assert capture.wait(60) == 2, log_text(capture)
     assert "damaged.mcap" in log_text(capture) and "Traceback" not in log_text(capture)

@@ -21,7 +21,7 @@ def wheel(tmp_path_factory: pytest.TempPathFactory) -> zipfile.ZipFile:
     # from a clean copy: setuptools reuses a checkout's build/ folder, stale files and all
     source = tmp_path_factory.mktemp("source") / "gngdt"
     shutil.copytree(REPO, source, ignore=shutil.ignore_patterns(
-        ".git", ".venv", "build", "*.egg-info", "__pycache__", "recordings", "runs", "out",
+        ".git", ".venv*", "build", "*.egg-info", "__pycache__", "recordings", "runs", "out",
         "report", ".hypothesis", ".*_cache"))
     out = tmp_path_factory.mktemp("wheel")
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",

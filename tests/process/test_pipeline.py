@@ -440,7 +440,7 @@ def test_capture_sends_the_good_frames_of_a_damaged_recording(
         "gngdt/camera/eos",
         lambda sample: ends.append(decode_stream_end(sample.payload.to_bytes())))
     try:
-        capture = spawn("capture", str(damaged), "--fast", "--wait-subscribers", "0",
+        capture = spawn("capture", str(damaged), "--fast", "--realtime", "--wait-subscribers", "0",
                         "--zenoh-connect", router_endpoint)
         assert wait_exit(capture, 60) == 0, log_text(capture)
         deadline = time.monotonic() + 10

@@ -124,8 +124,8 @@ def test_a_learner_that_leaves_or_stalls_ends_a_paced_capture_with_the_reason(
         rest, _ = capture.communicate(timeout=120)
         text = "".join(capture_lines) + rest
         assert capture.returncode == 1, text
-        expected = "left (its liveliness token is gone)" if how == "killed" else \
-            "took no frame for 5 s"
+        expected = {"killed": "left (its liveliness token is gone) and did not come back",
+                    "stalled": "took no frame for 5 s"}[how]
         assert expected in text and "ending the stream" in text, text
         assert re.search(r"sent [1-7] frames of", text), text
         assert "Traceback" not in text

@@ -116,7 +116,7 @@ def any_payload() -> st.SearchStrategy[bytes]:
 @given(payload=st.one_of(st.binary(max_size=300), hostile_clouds()), attachment=attachments)
 def test_learner_decode_path_raises_only_value_error(payload: bytes, attachment) -> None:
     try:
-        stamp, positions, colors, frame_id, pose = decode_points(payload, attachment)
+        stamp, positions, colors, frame_id, pose, _ = decode_points(payload, attachment)
     except ValueError:
         return
     assert isinstance(frame_id, str)
