@@ -75,7 +75,7 @@ class Topology(_message.Message):
     def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., steps: _Optional[int] = ..., frame_id: _Optional[str] = ..., positions: _Optional[_Union[PackedArray, _Mapping]] = ..., colors: _Optional[_Union[PackedArray, _Mapping]] = ..., normals: _Optional[_Union[PackedArray, _Mapping]] = ..., errors: _Optional[_Union[PackedArray, _Mapping]] = ..., edges: _Optional[_Iterable[_Union[EdgeSet, _Mapping]]] = ..., clusterings: _Optional[_Iterable[_Union[Clustering, _Mapping]]] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., node_ids: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
 
 class LearnerStatus(_message.Message):
-    __slots__ = ("timestamp", "frame_sequence", "frame_id", "steps", "steps_per_second", "nodes", "frames_received", "frames_used", "frames_dropped", "malformed_messages", "latency_ms", "latency_p50_ms", "latency_p99_ms", "quantization_error", "cluster_counts", "settle_reason", "seen_nodes", "ghost_share", "ghost_distance_m", "nodes_forgotten", "frames_other_frame", "frames_pose_rejected", "pose_problem", "frame_budget_ms", "frame_steps", "frames_lost_tracking", "tracking", "settled")
+    __slots__ = ("timestamp", "frame_sequence", "frame_id", "steps", "steps_per_second", "nodes", "frames_received", "frames_used", "frames_dropped", "malformed_messages", "latency_ms", "latency_p50_ms", "latency_p99_ms", "quantization_error", "cluster_counts", "settle_reason", "seen_nodes", "ghost_share", "ghost_distance_m", "nodes_forgotten", "frames_other_frame", "frames_pose_rejected", "pose_problem", "frame_budget_ms", "frame_steps", "frames_lost_tracking", "tracking", "settled", "frames_posed", "frames_lost_by_reason")
     class QuantizationErrorEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -84,6 +84,13 @@ class LearnerStatus(_message.Message):
         value: float
         def __init__(self, key: _Optional[str] = ..., value: _Optional[float] = ...) -> None: ...
     class ClusterCountsEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: int
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[int] = ...) -> None: ...
+    class FramesLostByReasonEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
         VALUE_FIELD_NUMBER: _ClassVar[int]
@@ -118,6 +125,8 @@ class LearnerStatus(_message.Message):
     FRAMES_LOST_TRACKING_FIELD_NUMBER: _ClassVar[int]
     TRACKING_FIELD_NUMBER: _ClassVar[int]
     SETTLED_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_POSED_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_LOST_BY_REASON_FIELD_NUMBER: _ClassVar[int]
     timestamp: _timestamp_pb2.Timestamp
     frame_sequence: int
     frame_id: str
@@ -146,7 +155,9 @@ class LearnerStatus(_message.Message):
     frames_lost_tracking: int
     tracking: str
     settled: bool
-    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., frame_id: _Optional[str] = ..., steps: _Optional[int] = ..., steps_per_second: _Optional[float] = ..., nodes: _Optional[int] = ..., frames_received: _Optional[int] = ..., frames_used: _Optional[int] = ..., frames_dropped: _Optional[int] = ..., malformed_messages: _Optional[int] = ..., latency_ms: _Optional[float] = ..., latency_p50_ms: _Optional[float] = ..., latency_p99_ms: _Optional[float] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., cluster_counts: _Optional[_Mapping[str, int]] = ..., settle_reason: _Optional[str] = ..., seen_nodes: _Optional[int] = ..., ghost_share: _Optional[float] = ..., ghost_distance_m: _Optional[float] = ..., nodes_forgotten: _Optional[int] = ..., frames_other_frame: _Optional[int] = ..., frames_pose_rejected: _Optional[int] = ..., pose_problem: _Optional[str] = ..., frame_budget_ms: _Optional[float] = ..., frame_steps: _Optional[int] = ..., frames_lost_tracking: _Optional[int] = ..., tracking: _Optional[str] = ..., settled: _Optional[bool] = ...) -> None: ...
+    frames_posed: int
+    frames_lost_by_reason: _containers.ScalarMap[str, int]
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., frame_id: _Optional[str] = ..., steps: _Optional[int] = ..., steps_per_second: _Optional[float] = ..., nodes: _Optional[int] = ..., frames_received: _Optional[int] = ..., frames_used: _Optional[int] = ..., frames_dropped: _Optional[int] = ..., malformed_messages: _Optional[int] = ..., latency_ms: _Optional[float] = ..., latency_p50_ms: _Optional[float] = ..., latency_p99_ms: _Optional[float] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., cluster_counts: _Optional[_Mapping[str, int]] = ..., settle_reason: _Optional[str] = ..., seen_nodes: _Optional[int] = ..., ghost_share: _Optional[float] = ..., ghost_distance_m: _Optional[float] = ..., nodes_forgotten: _Optional[int] = ..., frames_other_frame: _Optional[int] = ..., frames_pose_rejected: _Optional[int] = ..., pose_problem: _Optional[str] = ..., frame_budget_ms: _Optional[float] = ..., frame_steps: _Optional[int] = ..., frames_lost_tracking: _Optional[int] = ..., tracking: _Optional[str] = ..., settled: _Optional[bool] = ..., frames_posed: _Optional[int] = ..., frames_lost_by_reason: _Optional[_Mapping[str, int]] = ...) -> None: ...
 
 class StreamEnd(_message.Message):
     __slots__ = ("timestamp", "frames_sent", "last_frame_sequence", "recording", "frame_id")

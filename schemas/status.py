@@ -60,6 +60,9 @@ class LearnerStatusInfo:
     tracking: str = ""
     #: the stream ended and the learner settled on its last frame: nothing more will come
     settled: bool = False
+    #: camera tracking: clouds whose camera was tracked (learned or not), those lost by why
+    frames_posed: int = 0
+    frames_lost_by_reason: dict[str, int] = field(default_factory=dict)
 
 
 @dataclass
@@ -84,6 +87,9 @@ class FrameAckInfo:
     problem: str = ""
 
 
+#: the messages' map fields (set and read as dicts)
+MAP_FIELDS = ("quantization_error", "cluster_counts", "frames_lost_by_reason")
+
 _InfoT = TypeVar("_InfoT", LearnerStatusInfo, StreamEndInfo, FrameAckInfo)
 
 
@@ -100,7 +106,7 @@ def _info_to_message(
     timestamp_ns = values.pop("timestamp_ns", 0)
     maps = {
         name: values.pop(name)
-        for name in ("quantization_error", "cluster_counts")
+        for name in MAP_FIELDS
         if name in values
     }
     try:
@@ -118,7 +124,7 @@ def _message_to_info(info_type: type[_InfoT], message: Message) -> _InfoT:
     for item in fields(info_type):
         if item.name == "timestamp_ns":
             values[item.name] = timestamp_to_ns(message.timestamp)
-        elif item.name in ("quantization_error", "cluster_counts"):
+        elif item.name in MAP_FIELDS:
             values[item.name] = dict(getattr(message, item.name))
         else:
             values[item.name] = getattr(message, item.name)

@@ -352,11 +352,9 @@ class GrowingGas:
 
     @property
     def node_ids_(self) -> np.ndarray:
-        """(n_nodes,) int64 persistent node ids, row for row with the other node arrays.
-
-        A node keeps its id for its whole life although its index changes (a deletion moves the
-        last node into the hole); every new node gets an id never used before in this model.
-        """
+        """(n_nodes,) int64 persistent node ids, row for row with the other node arrays: a node
+        keeps its id although its index changes (a deletion moves the last node into the hole);
+        a new node gets an id never used before in this model."""
         if not self._arrays:
             return np.zeros(0, dtype=np.int64)
         return self._arrays["ids"][: self.n_nodes_].copy()
@@ -401,17 +399,19 @@ class GrowingGas:
 
     def predict(self, positions: Any, return_distance: bool = False) -> Any:
         """(N,) int64 index of the winner node (nearest by position) of each row; with
-        ``return_distance``, also (N,) float64 the distance to it (input units).
-
-        Rows in scan order (a depth image's pixels row by row) are fastest: each search starts
-        from the previous row's winner in the learner's own spatial grid.
-        """
+        ``return_distance``, also (N,) float64 the distance to it (input units). Rows in scan
+        order (a depth image's pixels row by row) are fastest: each search starts from the
+        previous row's winner in the learner's own spatial grid."""
         if self.n_nodes_ == 0:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
         query = queries.checked_query(positions, self._dim)
         use_grid = self._dim == 3 and self._MODE == K.MODE_GNGDT
         winners, distances = queries.nearest_winners(query, self._grid_arrays(), use_grid)
         return (winners, distances) if return_distance else winners
+
+    def frozen_predict(self) -> queries.Predict:
+        """`predict` with distances over a copy of the network now (it may learn on meanwhile)."""
+        return queries.frozen_predict(self._grid_arrays(), self._dim, self._MODE == K.MODE_GNGDT)
 
     def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
         """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1; 0 where the

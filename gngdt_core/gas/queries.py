@@ -81,6 +81,26 @@ def nearest_winners(query: np.ndarray, grid: NodeGrid, use_grid: bool
     return np.asarray(winners, dtype=np.int64), np.asarray(distances, dtype=np.float64)
 
 
+#: a nearest-node search: (N, D) points -> (N,) int64 winners and (N,) float64 distances
+Predict = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def frozen_predict(grid: NodeGrid, dim: int, gngdt: bool) -> Predict:
+    """Winners and distances (as `nearest_winners`) of (N, dim) points, over a copy of ``grid``
+    as it is now (a network that learns on meanwhile does not change it; searched from another
+    thread, the search releases the GIL); ``gngdt``: a GNG-DT network (its grid is searched in
+    3-D)."""
+    positions, n, head, following, active, cell = grid
+    if n == 0:
+        raise ValueError("the model has no nodes yet: call fit or partial_fit first")
+    frozen = (positions[:n].copy(), n, head.copy(), following[:n].copy(), active, cell)
+
+    def predict(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return nearest_winners(checked_query(points, dim), frozen, gngdt and dim == 3)
+
+    return predict
+
+
 def label_pixels(points: np.ndarray, node_labels: np.ndarray, grid: NodeGrid) -> np.ndarray:
     """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1, 0 where the pixel
     has no point or its node has label -1 (see `GNGDT.label_pixels`).

@@ -72,7 +72,7 @@ from gngdt.core.kernels.normals import _interpolate_normal, compute_normal, prop
 ERROR_SCALE_FLOOR = 1e-60
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # the tracker thread tracks meanwhile
 def learn(samples, sample_colors, order,
           pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
           ghead, gnext, gprev, gbucket, gcell,

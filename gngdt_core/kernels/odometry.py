@@ -170,7 +170,7 @@ def add_residual(q0, q1, q2, d0, d1, d2, w, r, jac, hessian, gradient):
             hessian[i, j] += wi * jac[j]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def normal_equations(points, anchors, directions, offsets, weights, centre, huber, hessian,
                      gradient):
     """Add one residual family's Gauss-Newton system to ``hessian`` (6, 6) and ``gradient`` (6,).
@@ -227,7 +227,7 @@ def constrained_step(hessian: np.ndarray, gradient: np.ndarray, scale: float,
     return step / s, float(values[0])
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def point_to_plane(points, normals, sigma, rotation, translation, node, gated, anchors,
                    node_normals, node_trust, cos_min, huber_sigma, inlier_sigma, node_robust,
                    map_noise, inverse_variance, world, residual, weight, inlier, hessian,
@@ -319,7 +319,7 @@ def point_to_plane(points, normals, sigma, rotation, translation, node, gated, a
     return centre, math.sqrt(spread / used), total, used
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def organize_points(points, colors, fx, fy, cx, cy, organized, image):
     """Put deprojected ``points`` (N, 3) camera frame back on their pixels: ``organized``
     (H, W, 3) float32 (NaN-filled by the caller) gets each point at the pixel nearest its

@@ -15,14 +15,14 @@ from gngdt.core.kernels.grid import BOUND_SLACK, _axis_gap, _bucket, _sq_dist
 from gngdt.core.kernels.normals import compute_normal, property_bits
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def refresh_normals(n, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
     """Eq. 16 for every node ``0..n-1`` from the current positions, written to ``nor``."""
     for i in range(n):
         compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def refresh_property_bits(n, col, nor, nbr, emask, rev, deg, has_col, has_nor, tau_col, tau_nor):
     """Eqs. 4/9 for every edge of nodes ``0..n-1`` from the current colours and normals."""
     for i in range(n):

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
+from collections import Counter
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, ClassVar
 
@@ -213,6 +214,10 @@ class FrameLearner:
                           for name in CLUSTERINGS}
         #: the camera tracking of unposed clouds (``track``; None: off)
         self.tracking = CameraTracking(config.tracker) if config.options.track else None
+        #: frames the tracker lost, by why
+        self.lost_reasons: Counter[str] = Counter()
+        if self.tracking is not None and model is not None and model.n_nodes_ > 0:
+            self.tracking.update_map(model, None)  # resumed: track against its map
         #: the steps the last learned frame got
         self.last_steps = 0
 
@@ -224,19 +229,21 @@ class FrameLearner:
 
     def learn(self, positions: np.ndarray, colors: np.ndarray | None, frame_id: str = "",
               pose: np.ndarray | None = None, stamp_ns: int | None = None,
-              steps: int | None = None, camera: CameraIntrinsics | None = None) -> FrameResult:
+              steps: int | None = None, camera: CameraIntrinsics | None = None,
+              located: FrameResult | None = None) -> FrameResult:
         """Learn one cloud: (N, 3) f32 m, (N, 3) u8, in its own (camera) frame; ``pose``
         (4, 4) maps it into ``frame_id``; ``stamp_ns`` its capture time. ``steps``: learning
         steps of this frame (default ``samples_per_frame``; a frame learned from scratch takes
         its own). ``camera``: the intrinsics the cloud was deprojected with (tracking needs
-        them). Returns what became of it: learned, or not (its camera could not be tracked, its
-        pose was refused, or it is in another frame than the network's: each counted); a
-        tracked pose is the tracker's to judge."""
+        them); ``located``: where `locate` found it already (tracked elsewhere, e.g. in the
+        tracker's thread). Returns what became of it: learned, or not (its camera could not be
+        tracked, its pose was refused, or it is in another frame than the network's: each
+        counted); a tracked pose is the tracker's to judge."""
         tracked = self.tracking is not None and pose is None
         if tracked:
-            located = self.tracking.locate(self.model, positions, colors, camera, stamp_ns)
-            if located.pose is None:
-                return self._not_learned(Outcome.LOST_TRACKING, self.tracking.problem)
+            located = located or self.locate(positions, colors, camera, stamp_ns)
+            if not located.posed:
+                return located
             pose, frame_id = located.pose, TRACKED_FRAME
         frame_id = frame_id or self.camera
         if self.frame_id is not None and frame_id != self.frame_id:
@@ -266,7 +273,24 @@ class FrameLearner:
         self.counters.frames_used += 1
         self.last_steps = steps
         self.ghosts = self.measure_ghosts(positions, pose)
-        return FrameResult(Outcome.LEARNED, pose, frame_id, tracked, "", steps)
+        if tracked:  # the tracker aligns the next frames to the map as it is now
+            self.tracking.update_map(self.model, pose)
+        return FrameResult(Outcome.LEARNED, pose, frame_id, tracked, "", steps,
+                           located.novelty if tracked else 0.0)
+
+    def locate(self, positions: np.ndarray, colors: np.ndarray | None,
+               camera: CameraIntrinsics | None, stamp_ns: int | None = None) -> FrameResult:
+        """Where the camera of an unposed cloud was (``track``), against the map as it was
+        after the last learned frame (so it may run in another thread while the map learns):
+        `Outcome.POSED` with the pose in ``odom``, or `Outcome.LOST_TRACKING` and why (each
+        counted). `learn` takes the result (``located``)."""
+        located = self.tracking.locate(positions, colors, camera, stamp_ns)
+        if located.pose is None:
+            self.lost_reasons[located.problem] += 1
+            return self._not_learned(Outcome.LOST_TRACKING, located.problem)
+        self.counters.count(Outcome.POSED)
+        novelty = 1.0 if located.result is None else 1.0 - located.result.overlap
+        return FrameResult(Outcome.POSED, located.pose, TRACKED_FRAME, True, novelty=novelty)
 
     def _not_learned(self, outcome: Outcome, problem: str) -> FrameResult:
         self.counters.count(outcome)
@@ -374,7 +398,8 @@ class FrameLearner:
             frame_id=self.camera, counters=replace(self.counters), steps=steps, nodes=nodes,
             nodes_forgotten=int(getattr(model, "n_forgotten_", 0)), frame_steps=self.last_steps,
             ghosts=self.ghosts, ghost_distance_m=self.options.ghost_distance_m,
-            pose_problem=self.poses.last_problem, tracking=tracking)
+            pose_problem=self.poses.last_problem, tracking=tracking,
+            lost_reasons=dict(self.lost_reasons))
 
     def publication(self, positions: np.ndarray, colors: np.ndarray | None,
                     final: bool = False) -> Publication:

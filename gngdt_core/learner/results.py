@@ -28,6 +28,8 @@ class Outcome(StrEnum):
     """What became of one cloud given to `FrameLearner.learn`."""
 
     LEARNED = "learned"
+    #: its camera was tracked (``track``), but the frame was not learned (another was)
+    POSED = "posed"
     #: its camera could not be tracked (``track``): not learned
     LOST_TRACKING = "lost tracking"
     #: its pose is out of bounds or contradicts its depth (`gngdt.core.odometry.pose_checks`)
@@ -41,7 +43,8 @@ class FrameResult:
     """One cloud's fate: ``outcome``; ``pose`` (4, 4) the camera-to-``frame_id`` pose it was
     placed with (given, or the tracker's estimate when ``tracked``; None: learned in the
     network's frame as it is, or not placed); ``problem`` why it was not learned ("" when it
-    was); ``steps`` the learning steps it got."""
+    was); ``steps`` the learning steps it got; ``novelty``: of a tracked frame, the share of
+    its view the map did not cover (1 - the alignment's overlap)."""
 
     outcome: Outcome
     pose: np.ndarray | None = None
@@ -49,10 +52,16 @@ class FrameResult:
     tracked: bool = False
     problem: str = ""
     steps: int = 0
+    novelty: float = 0.0
 
     @property
     def learned(self) -> bool:
         return self.outcome is Outcome.LEARNED
+
+    @property
+    def posed(self) -> bool:
+        """It has a pose to be learned at (learned, or tracked and not learned yet)."""
+        return self.outcome in (Outcome.LEARNED, Outcome.POSED)
 
 
 @dataclass
@@ -69,6 +78,8 @@ class Counters:
     frames_pose_rejected: int = 0
     #: clouds not learned because their camera could not be tracked (``track``)
     frames_lost_tracking: int = 0
+    #: clouds whose camera was tracked (``track``), learned or not
+    frames_posed: int = 0
     learning_seconds: float = 0.0
     #: learning steps run in ``learning_seconds`` (frames differ: a new scene learns longer)
     learning_steps: int = 0
@@ -90,10 +101,11 @@ class Counters:
         self.learning_steps = min(self.learning_steps + steps, MAX_COUNTER)
 
     def count(self, outcome: Outcome) -> None:
-        """Count one cloud that was not learned, by why."""
+        """Count one cloud that was not learned, by why (a posed one: tracked)."""
         name = {Outcome.OTHER_FRAME: "frames_other_frame",
                 Outcome.POSE_REJECTED: "frames_pose_rejected",
-                Outcome.LOST_TRACKING: "frames_lost_tracking"}[outcome]
+                Outcome.LOST_TRACKING: "frames_lost_tracking",
+                Outcome.POSED: "frames_posed"}[outcome]
         setattr(self, name, min(getattr(self, name) + 1, MAX_COUNTER))
 
 
@@ -122,6 +134,8 @@ class LearnerFigures:
     ghost_distance_m: float
     pose_problem: str
     tracking: str
+    #: frames lost by the tracker, by why ("little overlap", "no calibration", ...)
+    lost_reasons: dict[str, int]
 
     @property
     def steps_per_second(self) -> float:

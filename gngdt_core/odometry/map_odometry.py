@@ -30,21 +30,18 @@ The prediction is the last tracked pose moved on by the last motion between trac
 (constant velocity), continued over the time since the last tracked frame when frames carry
 stamps: frames a busy learner dropped, or frames lost, do not leave it behind (for at most
 ``coast_s``). When the alignment from the prediction fails it is tried from the last
-tracked pose (the camera may have stopped), then from a searched start: the prediction moved by
-up to ``search_steps`` coarse gates along each camera axis or turned by up to ``search_steps``
-times ``search_turn_deg`` about its x and y axes, the one whose coarse alignment keeps the most
-points agreeing with the map (`SEARCH_MARGIN`; the camera may be farther on, or turned). The
-map's second frame, with no motion to go by (the camera may have moved far while the first was
-learned), starts from the searched start. Parameters: `TrackerParams` (a profile's
-``[tracker]`` table). Kernels: `gngdt.core.kernels.odometry`.
+tracked pose, from a start searched around the prediction, then from starts over the whole map
+(`gngdt.core.odometry.relocalise`: the motion continued over the whole gap, the poses the map
+was learned from, ``keyframes``). The map's second frame, with no motion to go by (the camera
+may have moved far while the first was learned), starts from the searched start. Parameters:
+`TrackerParams` (a profile's ``[tracker]`` table). Kernels: `gngdt.core.kernels.odometry`.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 import time
-from collections.abc import Iterator
+from collections import deque
 from dataclasses import dataclass, fields, replace
 from typing import Any, ClassVar
 
@@ -53,6 +50,7 @@ import numpy as np
 from gngdt.core.kernels import odometry as OK
 from gngdt.core.odometry.map_surface import MapSurface
 from gngdt.core.odometry.node_planes import PlaneMemory
+from gngdt.core.odometry.relocalise import retry_starts, searched_start
 from gngdt.core.parameters import (
     Flag,
     Interval,
@@ -66,14 +64,11 @@ from gngdt.core.sensor.geometry import rigid_inverse
 LOST_REASONS = ("no map", "too few points", "little overlap", "few inliers", "large residual",
                 "degenerate", "implausible motion")
 
-#: a searched start replaces the prediction when its coarse alignment agrees with this much
-#: more of the frame (overlap times inlier share): a repetitive scene's near-tie keeps the
-#: prediction
-SEARCH_MARGIN = 0.05
-
-#: Gauss-Newton steps of a searched start's coarse alignment at most (the level's own: 8):
-#: enough to tell the starts apart, at half the cost
-SEARCH_ITERATIONS = 4
+#: poses the map was learned from, kept for relocalisation (the latest, each at least
+#: `KEYFRAME_SPACING_M` or `KEYFRAME_SPACING_DEG` from the one before)
+KEYFRAMES = 32
+KEYFRAME_SPACING_M = 0.1
+KEYFRAME_SPACING_DEG = 10.0
 
 _POSITIVE = Interval(float, 0.0, closed="neither")
 _NON_NEGATIVE = Interval(float, 0.0)
@@ -142,6 +137,10 @@ class TrackerParams(Settings):
     search_turn_deg: float = param(8.0, Interval(float, 0.0, 60.0),
                                    "... and turned by 1..search_steps times this about the "
                                    "camera's x and y axes, degrees (0: no turns)")
+    relocalise: bool = param(True, Flag(),
+                             "a frame lost from there too is looked for over the whole map: the "
+                             "motion continued over the gap and to a few distances, and the "
+                             "poses the map was learned from")
     coast_s: float = param(1.0, _NON_NEGATIVE,
                            "the last motion is continued over the time since the last tracked "
                            "frame (dropped or lost frames between), for at most this long or "
@@ -245,7 +244,17 @@ class MapOdometry:
         self.n_lost_ = 0
         self.last_: TrackingResult | None = None
         self.planes = PlaneMemory(self.params.plane_memory, self.params.plane_reset_m)
+        #: (4, 4) poses the map was learned from, spread over it (`remember_keyframe`)
+        self.keyframes: deque[np.ndarray] = deque(maxlen=KEYFRAMES)
         return self
+
+    def remember_keyframe(self, pose: np.ndarray) -> None:
+        """A pose the map was learned from (kept when it is far enough from the last kept)."""
+        if self.keyframes:
+            moved, turned = OK.motion_size(self.keyframes[-1], pose)
+            if moved < KEYFRAME_SPACING_M and turned < KEYFRAME_SPACING_DEG:
+                return
+        self.keyframes.append(np.array(pose, dtype=np.float64))
 
     def get_state(self) -> dict[str, np.ndarray]:
         """The fitted state as numpy arrays only (np.savez-safe, beside a model checkpoint)."""
@@ -256,6 +265,7 @@ class MapOdometry:
                                  dtype=np.int64),
             "motion_span_s": np.array([self.motion_span_s_]),
             "counters": np.array([self.n_tracked_, self.n_lost_], dtype=np.int64),
+            "keyframes": np.array(list(self.keyframes)).reshape(-1, 4, 4),
             **self.planes.get_state(),
         }
 
@@ -275,6 +285,11 @@ class MapOdometry:
             if not math.isfinite(span) or span < 0:
                 raise ValueError("tracker state: motion_span_s must be a duration")
             self.stamp_ns_, self.motion_span_s_ = (None if stamp < 0 else stamp), span
+            keyframes = np.asarray(state.get("keyframes", np.zeros((0, 4, 4))), dtype=np.float64)
+            if keyframes.ndim != 3 or keyframes.shape[1:] != (4, 4):
+                raise ValueError("tracker state: keyframes must be (K, 4, 4) poses")
+            self.keyframes = deque((_checked_pose(pose) for pose in keyframes[-KEYFRAMES:]),
+                                   maxlen=KEYFRAMES)
         except KeyError as error:
             raise ValueError(f"tracker state: no {error.args[0]!r}") from None
         self.n_tracked_, self.n_lost_ = int(counters[0]), int(counters[1])
@@ -293,10 +308,10 @@ class MapOdometry:
         (one when either stamp is unknown), the time capped by ``coast_s``."""
         if stamp_ns is None or self.stamp_ns_ is None or self.motion_span_s_ <= 0:
             return 1.0
-        elapsed = self._seconds_since(stamp_ns)
+        elapsed = self.seconds_since(stamp_ns)
         return min(elapsed, max(self.params.coast_s, self.motion_span_s_)) / self.motion_span_s_
 
-    def _seconds_since(self, stamp_ns: int | None) -> float:
+    def seconds_since(self, stamp_ns: int | None) -> float:
         """Seconds from the last tracked frame's stamp to ``stamp_ns`` (0 when either is
         unknown, or it is not later)."""
         if stamp_ns is None or self.stamp_ns_ is None:
@@ -327,11 +342,12 @@ class MapOdometry:
             return self._finish(prediction, prediction, "no map", started, {}, stamp_ns)
         levels = [self._level_points(points, colors, stride) for stride in self.params.strides]
         searched = initial_pose is None and self.n_tracked_ == 0 and self.params.search_steps
-        start = self._search(levels[0], surface, prediction) if searched else prediction
-        pose, reason, stats = self._align(levels, surface, start)
+        start = searched_start(self, levels[0], surface, prediction) if searched else prediction
+        pose, reason, stats = self.align(levels, surface, start)
         if reason and reason != "too few points" and initial_pose is None:
-            for retry_start in self._retry_starts(levels[0], surface, prediction, searched):
-                retry = self._align(levels, surface, retry_start)
+            for retry_start in retry_starts(self, levels[0], surface, prediction, searched,
+                                            stamp_ns):
+                retry = self.align(levels, surface, retry_start)
                 if not retry[1]:
                     pose, reason, stats = retry
                     break
@@ -341,45 +357,7 @@ class MapOdometry:
                                  stats["inlier_residuals"], stats["inlier_sigmas"])
         return self._finish(prediction, pose, reason, started, stats, stamp_ns)
 
-    def _retry_starts(self, coarse: tuple, surface: MapSurface, prediction: np.ndarray,
-                      searched: bool) -> Iterator[np.ndarray]:
-        """Where to align a frame from when the prediction failed: the last tracked pose (the
-        camera may have stopped), then the searched start (it may be farther on, or turned)."""
-        if self.pose_ is not None and not np.array_equal(prediction, self.pose_):
-            yield self.pose_
-        if not searched and self.params.search_steps:
-            start = self._search(coarse, surface, prediction)
-            if start is not prediction:
-                yield start
-
-    def _search(self, coarse: tuple, surface: MapSurface, prediction: np.ndarray
-                ) -> np.ndarray:
-        """Where to start aligning a frame whose prediction is in doubt (no motion known yet,
-        or the alignment from it failed): ``prediction`` (4, 4), or the pose it moved by
-        1..``search_steps`` coarse gates along a camera axis (or turned about its x or y axis)
-        whose alignment on the ``coarse`` level agrees with ``SEARCH_MARGIN`` more of the
-        frame."""
-        p = self.params
-        starts = [prediction]
-        for axis, sign, k in itertools.product(range(3), (-1.0, 1.0),
-                                               range(1, p.search_steps + 1)):
-            shift = np.eye(4)
-            shift[axis, 3] = sign * k * p.gates_m[0]
-            starts.append(prediction @ shift)
-            if axis < 2 and p.search_turn_deg:  # turned about the camera's x and y axes
-                turn = np.eye(4)
-                turn[:3, :3] = OK.so3_exp(np.radians(sign * k * p.search_turn_deg)
-                                          * np.eye(3)[1 - axis])
-                starts.append(prediction @ turn)
-        agreement = []
-        for start in starts:
-            _, reason, stats = self._align([coarse], surface, start, SEARCH_ITERATIONS)
-            agreement.append(-1.0 if reason in ("too few points", "implausible motion")
-                             else stats["overlap"] * stats["inlier_share"])
-        best = int(np.argmax(agreement))
-        return starts[best] if agreement[best] > agreement[0] + SEARCH_MARGIN else prediction
-
-    def _align(self, levels: list[tuple], surface: MapSurface, start: np.ndarray,
+    def align(self, levels: list[tuple], surface: MapSurface, start: np.ndarray,
                max_steps: int | None = None) -> tuple[np.ndarray, str, dict[str, Any]]:
         """Coarse-to-fine ICP from ``start`` (4, 4) over ``levels`` (`_level_points`' each,
         coarse first; fewer than the parameters' levels: the first ones only), each with at
@@ -561,7 +539,7 @@ class MapOdometry:
             pose = OK.orthonormalised(pose)
             if self.pose_ is not None:
                 self.velocity_ = rigid_inverse(self.pose_) @ pose
-                self.motion_span_s_ = self._seconds_since(stamp_ns)
+                self.motion_span_s_ = self.seconds_since(stamp_ns)
             self.pose_, self.stamp_ns_ = pose, stamp_ns
             self.n_tracked_ += 1
         result = TrackingResult(

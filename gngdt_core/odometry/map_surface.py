@@ -86,20 +86,23 @@ class MapSurface:
         return cls(positions[keep], unit, intensity, gradients, spacing, tree, weights, ids)
 
     @classmethod
-    def from_model(cls, model: Any) -> MapSurface:
+    def from_model(cls, model: Any, frozen: bool = False) -> MapSurface:
         """The surface of a fitted 3-D `GNGDT` (fresh normals, colours, position edges). The
         nearest-node search goes through the model's own grid (`GNGDT.predict`; on scan-ordered
         points about 4x faster than a cKDTree), so the model must not learn while the surface
-        is in use."""
+        is in use, unless ``frozen``: then through a copy of the grid (`GNGDT.frozen_predict`),
+        and the model may learn on (in another thread)."""
         colors = model.colors_ if COL in model.properties_ else None
         normals = model.fresh_normals()
         surface = cls.from_arrays(model.positions_, normals, colors, model.edges(POS),
                                   ids=model.node_ids_)
         row_of = np.full(model.n_nodes_ + 1, -1, dtype=np.int64)  # the last: "no node"
         row_of[np.flatnonzero(np.linalg.norm(normals, axis=1) > 0.5)] = np.arange(len(surface))
+        predict = (model.frozen_predict() if frozen
+                   else lambda points: model.predict(points, return_distance=True))
 
         def search(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            winners, distance = model.predict(points, return_distance=True)
+            winners, distance = predict(points)
             return row_of[winners], distance
 
         return cls(surface.positions, surface.normals, surface.intensity, surface.gradients,

@@ -108,6 +108,8 @@ def status_message(figures: LearnerFigures, stamp: FrameStamp, latency_ms: float
         frame_steps=figures.frame_steps,
         frames_lost_tracking=counters.frames_lost_tracking,
         tracking=figures.tracking,
+        frames_posed=counters.frames_posed,
+        frames_lost_by_reason=figures.lost_reasons,
     )
 
 

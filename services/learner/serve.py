@@ -1,15 +1,18 @@
 """The learner on zenoh: subscribe to a camera's clouds, learn each through the `FrameLearner`,
 publish what it learned, answer late joiners, checkpoint, stop at the stream's end when asked.
 
-Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of
-size 1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and
-memory stays bounded. With ``frame_time_share`` > 0 (off by default) each frame gets the
-learning steps that fit in that share of the time between frames, and what was learned is
-published less often when publishing would not fit (`gngdt.core.learner.frame_budget`; the status
-reports the budget). Objects and
-scene are published latest-wins (congestion control DROP): a consumer that cannot keep up misses
-updates, and never slows the learner down. With ``--track`` the learner also reads the camera's
-calibration, and publishes each tracked cloud's camera pose on ``gngdt/<cam>/tf``.
+Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of size
+1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and memory
+stays bounded; a capture reading a file sends one frame at a time, each once the learner
+acknowledged the one before (``learner/ack``). With ``--track`` every frame is posed as it arrives,
+in the tracker's own thread (`gngdt.services.learner.tracking`), and the learner learns the frames
+that add most to the map. With ``frame_time_share`` > 0 (off by default) each frame gets the
+learning steps that fit in that share of the time between frames, and what was learned is published
+less often when publishing would not fit (`gngdt.core.learner.frame_budget`; the status reports the
+budget). Objects and scene are published latest-wins (congestion control DROP): a consumer that
+cannot keep up misses updates, and never slows the learner down. With ``--track`` the learner also
+reads the camera's calibration, and publishes each tracked cloud's camera pose on
+``gngdt/<cam>/tf``.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import numpy as np
 
 from gngdt.core.learner.frame_budget import StepBudget
 from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
+from gngdt.core.learner.keyframes import choose_keyframe
 from gngdt.core.learner.results import Counters, FrameResult, Outcome, Publication
 from gngdt.schemas.wire import (
     ENCODING_FRAME_ACK,
@@ -40,12 +44,28 @@ from gngdt.schemas.wire import (
     topic,
 )
 from gngdt.services.learner import checkpoints
+from gngdt.services.learner.inbound import (
+    MAX_EOS_BYTES,
+    Arrival,
+    EndOfStream,
+    LatestCalibration,
+    arrive,
+    payload_bytes,
+)
 from gngdt.services.learner.messages import (
-    decode_points,
+    PointsMessage,
     objects_message,
     scene_message,
     status_message,
     topology_message,
+)
+from gngdt.services.learner.tracking import (
+    MAX_MAP_AGE_S,
+    TRACKER_BACKLOG,
+    FrameQueue,
+    Handover,
+    Tracked,
+    TrackerThread,
 )
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.session import declare_publisher, through_shared_memory
@@ -55,12 +75,6 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-#: bytes a stream-end message may take (a real one is under 200)
-MAX_EOS_BYTES = 64 * 1024
-#: bytes per point a foreign cloud layout may use (gngdt's own uses 15)
-MAX_POINT_STRIDE_BYTES = 64
-#: bytes a calibration message may take (a real one is under 500)
-MAX_CALIBRATION_BYTES = 64 * 1024
 #: the outcome a malformed cloud is acknowledged with
 MALFORMED = "malformed"
 #: why a cloud was not learned, as much as an acknowledgement carries
@@ -78,28 +92,6 @@ class LatencyWindow:
 
     def percentile(self, q: float) -> float:
         return float(np.percentile(np.fromiter(self._values, float), q)) if self._values else 0.0
-
-
-class EndOfStream:
-    """Remembers the last end-of-stream announced on the camera (set from zenoh's thread)."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self.last_sequence: int | None = None
-        self.received_at = 0.0
-
-    def set(self, last_sequence: int) -> None:
-        with self._lock:
-            self.last_sequence = last_sequence
-            self.received_at = time.monotonic()
-
-    def finished(self, learned_sequence: int, drain_seconds: float = 5.0) -> bool:
-        """True once the last frame was learned, or ``drain_seconds`` after eos without it."""
-        with self._lock:
-            if self.last_sequence is None:
-                return False
-            return (learned_sequence >= self.last_sequence
-                    or time.monotonic() - self.received_at > drain_seconds)
 
 
 class LatestTopology:
@@ -170,42 +162,6 @@ def result_count(counters: Counters, result: FrameResult) -> int:
             Outcome.OTHER_FRAME: counters.frames_other_frame}[result.outcome]
 
 
-def payload_bytes(sample: zenoh.Sample, limit: int) -> bytes:
-    """The sample's payload, refused (``MessageError``) before any copy when over ``limit``."""
-    from gngdt.schemas.messages import MessageError
-
-    size = len(sample.payload)
-    if size > limit:
-        raise MessageError(f"{size} bytes, more than the limit of {limit}")
-    return sample.payload.to_bytes()
-
-
-def attachment_bytes(sample: zenoh.Sample) -> bytes | None:
-    attachment = sample.attachment
-    if attachment is None or len(attachment) > 64:
-        return None
-    return attachment.to_bytes()
-
-
-class LatestCalibration:
-    """The camera's latest intrinsics (set from zenoh's thread), for tracking."""
-
-    def __init__(self, learner: FrameLearner) -> None:
-        self.learner = learner
-        self.intrinsics = None
-
-    def on_sample(self, sample: zenoh.Sample) -> None:
-        from gngdt.schemas.images import calibration_to_intrinsics
-        from gngdt.schemas.messages import MessageError
-
-        try:
-            self.intrinsics = calibration_to_intrinsics(
-                payload_bytes(sample, MAX_CALIBRATION_BYTES))
-        except (MessageError, ValueError) as error:
-            self.learner.counters.malformed_messages += 1
-            log.warning("malformed calibration skipped: %s", error)
-
-
 #: a cloud not learned is warned about the first time, then every this many of its kind
 WARN_EVERY = {Outcome.LOST_TRACKING: 30, Outcome.POSE_REJECTED: 100, Outcome.OTHER_FRAME: 100}
 WARNINGS = {Outcome.LOST_TRACKING: "camera not tracked, frame not learned",
@@ -235,8 +191,16 @@ class LearnerService:
         self.latest = LatestTopology()
         self.latencies = LatencyWindow()
         self.instances = LearnerInstances(session, camera)
-        self.points = session.declare_subscriber(topic(camera, "points"),
-                                                 zenoh.handlers.RingChannel(1))
+        #: with tracking, every frame goes to the tracker thread (`start`); else latest wins
+        self.frames = FrameQueue() if learner.tracking is not None else None
+        self.handover = Handover()
+        #: frames tracked and handed over, not learned or acknowledged yet; when one last was
+        self._candidates: list[Tracked] = []
+        self._map_learned_at = 0.0
+        self.points = session.declare_subscriber(
+            topic(camera, "points"),
+            zenoh.handlers.RingChannel(1) if self.frames is None else self.frames.put)
+        self.tracker: TrackerThread | None = None
         self._eos = session.declare_subscriber(topic(camera, "eos"), self._on_eos)
         self._topology = declare_publisher(session, topic(camera, "topology"),
                                            ENCODING_TOPOLOGY, latest_wins=True)
@@ -265,12 +229,12 @@ class LearnerService:
                                   latest_wins=False)]
         #: the last publication (its errors and cluster counts go into every status)
         self._published: Publication | None = None
-        self._max_cloud_bytes = self.options.max_cloud_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
         #: the last learned frame (stamp, positions, colours), kept to settle on at the end
         self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
         #: the last learned frame was not published yet (the budget put it off)
         self._unpublished = False
-        self.learned_sequence = -1
+        #: the last frame learned, and the last one done with (learned or not)
+        self.learned_sequence = self.handled_sequence = -1
         self._settled_end = 0.0  # the end of stream (its arrival time) already settled on
         self._frames_since_checkpoint = 0
         self._last_checkpoint = time.monotonic()
@@ -315,56 +279,98 @@ class LearnerService:
         return latency_ms
 
     def handle(self, sample: zenoh.Sample, waited: bool = False) -> None:
-        """Decode, learn and (when due) publish one points sample, then acknowledge it (a
-        capture reading a file waits for that before its next frame); a bad one is counted and
-        skipped. ``waited``: the learner was idle until it came (it keeps up)."""
+        """Decode, learn and (when due) publish one points sample (no tracking), then
+        acknowledge it. ``waited``: the learner was idle until it came (it keeps up)."""
+        self.take(Tracked(self._arrived(sample), None), waited)
+
+    def _arrived(self, sample: zenoh.Sample) -> Arrival:
         self.learner.counters.frames_received += 1
         self.clouds_shared += through_shared_memory(sample)
-        stamp = None
-        try:
-            stamp = FrameStamp.from_attachment(attachment_bytes(sample))
-            outcome, problem = self._learn(sample, waited)
-        except ValueError as error:  # MessageError is a ValueError
-            self.learner.counters.malformed_messages += 1
-            log.warning("points message skipped: %s", error)
-            outcome, problem = MALFORMED, str(error)
-        if stamp is not None:
-            self._acknowledge(stamp, outcome, problem)
+        return arrive(sample, self.options.max_cloud_points)
 
-    def _learn(self, sample: zenoh.Sample, waited: bool) -> tuple[str, str]:
-        """Learn one points sample (ValueError when it is malformed) and publish what was
-        learned when due; its outcome and, when not learned, why."""
+    def take(self, tracked: Tracked, waited: bool = False, learn: bool = True) -> None:
+        """One frame done with: learned (``learn``) and published when due, or not (a bad one
+        counted and skipped, a tracked one not chosen), then acknowledged (a capture reading a
+        file waits for that before its next frame)."""
+        arrival = tracked.arrival
+        if arrival.cloud is None:
+            self.learner.counters.malformed_messages += 1
+            log.warning("points message skipped: %s", arrival.problem)
+            outcome, problem = MALFORMED, arrival.problem
+        elif not learn or (tracked.located is not None and not tracked.located.posed):
+            outcome, problem = self._not_taken(arrival, tracked.located)
+        else:
+            outcome, problem = self._learn(arrival.cloud, waited, tracked.located)
+        if arrival.stamp is not None:
+            self._acknowledge(arrival.stamp, outcome, problem)
+            self.handled_sequence = max(self.handled_sequence, arrival.stamp.sequence)
+
+    def _not_taken(self, arrival: Arrival, located: FrameResult | None) -> tuple[str, str]:
+        """A frame not learned: lost by the tracker (said, with a status), or posed and passed
+        over for another."""
+        self.learner.counters.note_sequence(arrival.stamp.sequence)
+        if located is None or located.posed:
+            return Outcome.POSED, ""
+        warn_not_learned(located, result_count(self.learner.counters, located))
+        self._publish_status(arrival.stamp)
+        return located.outcome, located.problem
+
+    def _learn(self, cloud: PointsMessage, waited: bool,
+               located: FrameResult | None) -> tuple[str, str]:
+        """Learn one decoded cloud (where the tracker found it: ``located``) and publish what
+        was learned when due; its outcome and, when not learned, why."""
         started = time.perf_counter()
         learner = self.learner
         counters = learner.counters
-        stamp, positions, colors, frame_id, pose, sensor_ns = decode_points(
-            payload_bytes(sample, self._max_cloud_bytes), attachment_bytes(sample),
-            self.options.max_cloud_points)
+        stamp = cloud.stamp
         counters.note_sequence(stamp.sequence)
         received_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
         self.budget.arrived(stamp.sequence, stamp.capture_time_ns, waited)
         learning_before = counters.learning_seconds
-        result = learner.learn(positions, colors, frame_id, pose, sensor_ns,
-                               steps=self.budget.next().steps, camera=self.calibration.intrinsics)
+        result = learner.learn(cloud.positions, cloud.colors, cloud.frame_id, cloud.pose,
+                               cloud.sensor_ns, steps=self.budget.next().steps,
+                               camera=self.calibration.intrinsics, located=located)
         if not result.learned:  # counted by the learner; the status says why
             warn_not_learned(result, result_count(counters, result))
             if result.outcome is not Outcome.OTHER_FRAME:
                 self._publish_status(stamp)
             return result.outcome, result.problem
-        if result.tracked:
-            self._publish_pose(stamp, frame_id, result)
+        if result.tracked and located is None:  # tracked here, not by the tracker thread
+            self._publish_pose(Arrival(stamp, cloud), result)
         learned_at = time.perf_counter()
         self.budget.learned(learner.last_steps, counters.learning_seconds - learning_before,
                             learned_at - started)
-        self.last_frame = (stamp, positions, colors)
+        self.last_frame = (stamp, cloud.positions, cloud.colors)
         self.learned_sequence = stamp.sequence
         self._unpublished = True
         if self.budget.publish_due(learned_at):
             latency_ms = self.publish_learned(learned_at)
             log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
-                      stamp.sequence, len(positions), received_ms, latency_ms)
+                      stamp.sequence, len(cloud.positions), received_ms, latency_ms)
         self._checkpoint_if_due()
         return result.outcome, ""
+
+    def take_tracked(self) -> bool:
+        """The frames the tracker handed over: while the tracker keeps up (`TRACKER_BACKLOG`),
+        learn the one that adds most to the map and acknowledge every one; whether it did."""
+        self._candidates += self.handover.take()
+        behind = (len(self.frames) > TRACKER_BACKLOG
+                  and time.monotonic() - self._map_learned_at < MAX_MAP_AGE_S
+                  and not self.learner.tracking.waiting_for_map)  # the tracker waits for it
+        if not self._candidates or behind:
+            return False
+        frames, self._candidates = self._candidates, []
+        last_pose = self.learner.last_pose if self.learner.counters.frames_used else None
+        chosen = choose_keyframe(
+            [frame.located.pose if frame.located is not None and frame.located.posed
+             else frame.arrival.cloud.pose if frame.arrival.cloud is not None else None
+             for frame in frames],
+            [0.0 if frame.located is None else frame.located.novelty for frame in frames],
+            last_pose)
+        for index, frame in enumerate(frames):
+            self.take(frame, waited=False, learn=index == chosen)
+        self._map_learned_at = time.monotonic()
+        return True
 
     def _acknowledge(self, stamp: FrameStamp, outcome: str, problem: str) -> None:
         from gngdt.schemas.status import encode_frame_ack
@@ -383,11 +389,13 @@ class LearnerService:
         self._unpublished = False
         return latency_ms
 
-    def _publish_pose(self, stamp: FrameStamp, camera_frame: str, result: FrameResult) -> None:
-        """The tracked camera's pose: ``odom`` -> the cloud's (camera) frame."""
+    def _publish_pose(self, arrival: Arrival, result: FrameResult) -> None:
+        """A tracked camera's pose: ``odom`` -> the cloud's (camera) frame (from the tracker's
+        thread too)."""
         from gngdt.schemas.clouds import pose_to_transform
 
-        transform = pose_to_transform(result.pose, result.frame_id, camera_frame,
+        stamp = arrival.stamp
+        transform = pose_to_transform(result.pose, result.frame_id, arrival.cloud.frame_id,
                                       timestamp_ns=stamp.capture_time_ns)
         self._tracking[1].put(transform.SerializeToString(), attachment=stamp.to_attachment())
 
@@ -411,7 +419,7 @@ class LearnerService:
     def stream_over(self) -> bool:
         """Whether the stream ended and its last frame was learned; the first time, settle on
         that frame and publish the final network."""
-        if not self.end.finished(self.learned_sequence):
+        if not self.end.finished(self.handled_sequence):
             return False
         if self.last_frame is not None and self.end.received_at != self._settled_end:
             stamp, positions, colors = self.last_frame
@@ -423,6 +431,7 @@ class LearnerService:
     def run(self, exit_on_eos: bool) -> int:
         """Learn until a stop signal, the stream's end (``exit_on_eos``) or a second learner on
         the camera; the exit code."""
+        self.start()
         with lifecycle.graceful() as stop:
             waited = False  # idle since the last frame: the learner keeps up
             while not stop.is_set():
@@ -430,11 +439,18 @@ class LearnerService:
                     log.error("stopping: learner %s came first on camera %r",
                               self.instances.other_id, self.camera)
                     return 2
-                sample = self.points.try_recv()
-                if sample is not None:
-                    self.handle(sample, waited)
-                    waited = False
-                    continue
+                if self.tracker is not None:
+                    if self.tracker.failure is not None:
+                        raise RuntimeError("the tracker thread failed") from self.tracker.failure
+                    if self.take_tracked():
+                        waited = False
+                        continue
+                else:
+                    sample = self.points.try_recv()
+                    if sample is not None:
+                        self.handle(sample, waited)
+                        waited = False
+                        continue
                 waited = True
                 if self._unpublished:  # idle: what it learned is not left unpublished
                     self.publish_learned()
@@ -444,8 +460,18 @@ class LearnerService:
                 time.sleep(0.002)
         return 0
 
+    def start(self) -> None:
+        """With tracking: the tracker thread, posing every frame as it comes."""
+        if self.frames is not None and self.tracker is None:
+            self.tracker = TrackerThread(self.learner, self.frames, self.handover,
+                                         lambda: self.calibration.intrinsics, self._publish_pose)
+            self.tracker.start()
+
     def close(self) -> None:
-        """Save the last checkpoint and undeclare everything (the session stays open)."""
+        """Stop the tracker, save the last checkpoint and undeclare everything (the session
+        stays open)."""
+        if self.tracker is not None:
+            self.tracker.stop()
         if self.checkpoint is not None and self.learner.counters.frames_used > 0:
             checkpoints.save(self.learner, self.checkpoint)
         self._token.undeclare()

@@ -45,6 +45,7 @@ def format_summary(status: LearnerStatusInfo | None, end: StreamEndInfo | None,
             "the last frame)",
             *([f"last frame:         {status.settle_reason}"] if status.settled else []),
             *pose_lines(status),
+            *tracking_lines(status, end),
             f"clusters:           {clusters}",
             f"latency:            p50 {status.latency_p50_ms:.1f} ms, "
             f"p99 {status.latency_p99_ms:.1f} ms",
@@ -106,6 +107,24 @@ def pose_lines(status: LearnerStatusInfo) -> list[str]:
         return []
     return [f"poses rejected:     {status.frames_pose_rejected} frames not learned; the last: "
             f"{status.pose_problem}"]
+
+
+def tracking_lines(status: LearnerStatusInfo, end: StreamEndInfo | None) -> list[str]:
+    """The summary's line on camera tracking (none when the learner did not track): frames
+    posed of those sent, those lost and why, those the tracker did not reach in time."""
+    lost = status.frames_lost_tracking
+    if not status.frames_posed and not lost:
+        return []
+    sent = end.frames_sent if end is not None and end.frames_sent else None
+    posed = f"{status.frames_posed} of {sent} frames posed ({status.frames_posed / sent:.0%})" \
+        if sent else f"{status.frames_posed} frames posed"
+    reasons = ", ".join(f"{reason} {count}" for reason, count in
+                        sorted(status.frames_lost_by_reason.items(), key=lambda item: -item[1]))
+    lines = [f"tracking:           {posed}; {lost} lost" + (f" ({reasons})" if reasons else "")]
+    if status.frames_dropped:
+        lines.append(f"                    {status.frames_dropped} not reached in time "
+                     "(dropped before tracking: the machine is busy or the frames are large)")
+    return lines
 
 
 def mostly_rejected(status: LearnerStatusInfo | None) -> bool:
