@@ -48,8 +48,8 @@ def join_across_gaps(n_labels, low, high, crossing, creases, order, rim, crease_
 @njit(cache=True)
 def close_pairs_between(positions, nodes, labels, reach):
     """(P, 2) int64 pairs (i, j), i < j, of ``nodes`` at most ``reach`` apart whose
-    ``labels`` differ (both >= 0): a hash grid of cells ``reach`` wide, each node compared with
-    the nodes of the 27 cells around its own."""
+    ``labels`` differ (both >= 0): a hash grid of cells ``reach`` wide; each pair of cells is
+    visited once (a cell and the cells after it in key order among its 26 neighbours)."""
     m = nodes.size
     inv = 1.0 / reach
     cell = np.empty((m, 3), dtype=np.int64)
@@ -60,35 +60,65 @@ def close_pairs_between(positions, nodes, labels, reach):
         key[k] = _cell_key(cell[k, 0], cell[k, 1], cell[k, 2])
     order = np.argsort(key)
     sorted_key = key[order]
-    found = []
     limit = reach * reach
-    for k in range(m):
+    capacity = 4 * m + 16
+    result = np.empty((capacity, 2), dtype=np.int64)
+    count = 0
+    # runs of three consecutive keys (z - 1 .. z + 1) at these (dx, dy), and the own run from
+    # the node's place on: every pair of nearby nodes once
+    later = ((0, 1), (1, -1), (1, 0), (1, 1))
+    for a in range(m):
+        k = order[a]
         i = nodes[k]
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                for dz in range(-1, 2):
-                    target = _cell_key(cell[k, 0] + dx, cell[k, 1] + dy, cell[k, 2] + dz)
-                    slot = np.searchsorted(sorted_key, target)
-                    while slot < m and sorted_key[slot] == target:
-                        j = nodes[order[slot]]
-                        slot += 1
-                        if j <= i or labels[j] == labels[i] or labels[i] < 0 or labels[j] < 0:
-                            continue
-                        d = ((positions[i, 0] - positions[j, 0]) ** 2
-                             + (positions[i, 1] - positions[j, 1]) ** 2
-                             + (positions[i, 2] - positions[j, 2]) ** 2)
-                        if d <= limit:
-                            found.append((i, j))
-    result = np.empty((len(found), 2), dtype=np.int64)
-    for k in range(len(found)):
-        result[k, 0] = found[k][0]
-        result[k, 1] = found[k][1]
-    return result
+        if labels[i] < 0:
+            continue
+        for run in range(5):
+            if run == 0:
+                slot = a + 1
+                last = _cell_key(cell[k, 0], cell[k, 1], cell[k, 2] + 1)
+            else:
+                dx, dy = later[run - 1]
+                first = _cell_key(cell[k, 0] + dx, cell[k, 1] + dy, cell[k, 2] - 1)
+                slot = _lower_bound(sorted_key, first)
+                last = first + 2
+            while slot < m and sorted_key[slot] <= last:
+                j = nodes[order[slot]]
+                slot += 1
+                if labels[j] < 0 or labels[j] == labels[i]:
+                    continue
+                d = ((positions[i, 0] - positions[j, 0]) ** 2
+                     + (positions[i, 1] - positions[j, 1]) ** 2
+                     + (positions[i, 2] - positions[j, 2]) ** 2)
+                if d > limit:
+                    continue
+                if count == capacity:
+                    grown = np.empty((2 * capacity, 2), dtype=np.int64)
+                    grown[:count] = result[:count]
+                    result = grown
+                    capacity *= 2
+                result[count, 0] = min(i, j)
+                result[count, 1] = max(i, j)
+                count += 1
+    return result[:count].copy()
+
+
+@inlined
+def _lower_bound(values, target):
+    """The first index of ascending ``values`` whose value is >= ``target``."""
+    low, high = 0, values.size
+    while low < high:
+        middle = (low + high) >> 1
+        if values[middle] < target:
+            low = middle + 1
+        else:
+            high = middle
+    return low
 
 
 @inlined
 def _cell_key(x, y, z):
-    """One int64 per grid cell (cells within 2**20 of the origin on each axis)."""
+    """One int64 per grid cell (cells within 2**20 of the origin on each axis); cells with the
+    same x and y and consecutive z have consecutive keys."""
     return ((x + (1 << 20)) << 42) | ((y + (1 << 20)) << 21) | (z + (1 << 20))
 
 

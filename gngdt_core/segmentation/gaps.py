@@ -146,10 +146,10 @@ def _pairs_across_gaps(labels: np.ndarray, positions: np.ndarray, edges: np.ndar
     n_labels = int(labels.max()) + 1
     on_support = np.zeros(n_labels + 1, dtype=bool)
     on_support[labels[support_node]] = True
-    # segment pairs with enough shared edges were judged on those edges (step 4)
-    edge_keys, shared = np.unique(_segment_pair_keys(labels, edges, n_labels),
-                                  return_counts=True)
-    judged = edge_keys[(edge_keys >= 0) & (shared >= rules.min_pairs)]
+    # segment pairs with enough shared edges were judged on those edges (step 4), per key
+    edge_keys = _segment_pair_keys(labels, edges, n_labels)
+    judged = np.bincount(edge_keys[edge_keys >= 0],
+                         minlength=n_labels * n_labels) >= rules.min_pairs
     candidates = np.flatnonzero(
         (labels >= 0) & ~on_support[labels]
         & view.near_unmeasured(positions, camera_from_model, GAP_BORDER_M))
@@ -158,7 +158,7 @@ def _pairs_across_gaps(labels: np.ndarray, positions: np.ndarray, edges: np.ndar
         pairs = candidates[cKDTree(positions[candidates]).query_pairs(rules.gap_m,
                                                                       output_type="ndarray")]
     pair_key = _segment_pair_keys(labels, pairs, n_labels)
-    unjudged = (pair_key >= 0) & ~np.isin(pair_key, judged)
+    unjudged = (pair_key >= 0) & ~judged[np.maximum(pair_key, 0)]
     pairs, pair_key = pairs[unjudged], pair_key[unjudged]
     missing, blocked, hidden = view.gap_samples(positions, pairs, camera_from_model,
                                                 GAP_DEPTH_MARGIN, GAP_SAMPLES)
@@ -182,18 +182,19 @@ def _network_gap_pairs(labels: np.ndarray, positions: np.ndarray, edges: np.ndar
                        on_support: np.ndarray, view: SensorView, camera_from_model: np.ndarray,
                        judged: np.ndarray, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Node pairs across a gap only the network shows (a stripe of missing rows narrower than
-    the view's cells): (P, 2) pairs of nodes of two segments (neither a support, their pair not
-    in ``judged``) at the network's border (`kernels.gaps.border_nodes`), at most
-    ``reach_m`` apart, with no neighbour of either end near the middle between them
-    (`kernels.gaps.empty_between`) and nothing else measured along the line (the sensor
-    neither saw through it nor saw a nearer surface); and (P,) their segment pair keys."""
+    the view's cells): (P, 2) pairs of nodes of two segments (neither a support, their pair
+    not ``judged``: (n_labels ** 2,) bool per segment pair key) at the network's border
+    (`kernels.gaps.border_nodes`), at most ``reach_m`` apart, with no neighbour of either end
+    near the middle between them (`kernels.gaps.empty_between`) and nothing else measured
+    along the line (the sensor neither saw through it nor saw a nearer surface); and (P,)
+    their segment pair keys."""
     offsets, neighbours, _ = RK.csr_adjacency(len(labels), edges, np.ones(len(edges),
                                                                           dtype=bool))
     nodes = np.flatnonzero((labels >= 0) & ~on_support[labels]
                            & GK.border_nodes(positions, offsets, neighbours, BORDER_RESULTANT))
     pairs = GK.close_pairs_between(positions, nodes, labels.astype(np.int64), reach_m)
     key = _segment_pair_keys(labels, pairs, int(labels.max()) + 1)
-    keep = ~np.isin(key, judged)
+    keep = ~judged[key]
     keep[keep] = GK.empty_between(positions, offsets, neighbours, pairs[keep], EMPTY_SHARE)
     pairs, key = pairs[keep], key[keep]
     _, blocked, _ = view.gap_samples(positions, pairs, camera_from_model, GAP_DEPTH_MARGIN,
