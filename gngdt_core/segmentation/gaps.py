@@ -5,7 +5,10 @@ Where the sensor measured no depth (a glossy rim, a dark or shiny patch) the net
 edges, so one object can come out as two segments (a mug's inside and outside). Node pairs of
 two segments closer than the bridge are judged as edges would be where their straight line
 crosses a gap; rims (back to back pairs) and openings (one segment seen through the other's)
-join too. The procedure is written out in `gngdt.core.segmentation.network`'s docstring, step 6.
+join too. A stripe of missing depth narrower than the view's cells shows only in the network
+(a band without nodes): pairs of the network's border nodes across such a band are judged as
+well (``network_gap_m``), by convex share only. The procedure is written out in
+`gngdt.core.segmentation.network`'s docstring, step 6.
 """
 
 from __future__ import annotations

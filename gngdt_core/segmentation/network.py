@@ -304,7 +304,6 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     # adjacency, and not in the convexity topology
     spanning = RK.long_edges(n, positions, edges, LONG_EDGE_RATIO)
     all_edges, edges = edges, edges[~spanning]
-    camera_from_model = np.eye(4) if camera_from_model is None else camera_from_model
     rise_of_j, rise_of_i = edge_elevations(positions, normals, edges)
     smooth = np.maximum(np.abs(rise_of_j), np.abs(rise_of_i)) < _sine(params.smooth_angle_deg)
     concavity = np.maximum(rise_of_j, rise_of_i)
@@ -312,6 +311,7 @@ def segment_network(positions: np.ndarray, normals: np.ndarray, edges: np.ndarra
     adjacency = _adjacency(n, edges, smooth)
     patches = _smooth_patches(n, edges, adjacency, normals, rise_of_j, rise_of_i,
                               math.cos(math.radians(params.patch_angle_deg)))
+    camera_from_model = np.eye(4) if camera_from_model is None else camera_from_model
     depths = positions @ camera_from_model[2, :3] + camera_from_model[2, 3]
     # a support grows over every edge, long ones too: a sparse table's far nodes are on its plane
     supports = find_supports(patches, positions, normals,
