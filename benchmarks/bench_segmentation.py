@@ -4,6 +4,7 @@ the Open3D peer (plane RANSAC + DBSCAN, the baseline) in the same run.
     python benchmarks/bench_segmentation.py [--sets DIR ...] [--params FILE.toml]
                                             [--out report/bench_segmentation] [--max-frames N]
                                             [--split benchmarks/mosd_split.json]
+                                            [--seed S] [--damage-depth SEED]
 
 Per set and method: mean best IoU, R@0.5, R@0.75 (pooled over every ground-truth segment, the
 labelled README's score), segments per frame, objects fragmented / merged / missed
@@ -17,7 +18,8 @@ per-pixel labels), without deprojection. Targets (issue 10): independent <= 300 
 frame (issue 26: <= 200 ms), streaming <= 30 ms per frame for learning + segmentation +
 per-pixel labels, IoU and R@0.5 at least the peer's (issue 26: >= 0.90 mean best IoU). Every
 frame goes into ``--out``/per_frame.md and per_frame.tsv; each set's full report (``gngdt eval
-segmentation``'s) into ``--out``/<set>/.
+segmentation``'s) into ``--out``/<set>/. ``--damage-depth SEED`` runs every method on the
+frames damaged as a structured-light camera damages them (`gngdt.eval.segmentation_damage`).
 """
 
 from __future__ import annotations
@@ -141,6 +143,9 @@ def main() -> int:
     parser.add_argument("--figures", type=int, default=4)
     parser.add_argument("--split", type=Path, default=DEFAULT_SPLIT,
                         help="frames of a set split by scene into 'tune' and 'held_out' halves")
+    parser.add_argument("--seed", type=int, default=0, help="gngdt's random seed")
+    parser.add_argument("--damage-depth", type=int, default=None, metavar="SEED",
+                        help="drop depth as a structured-light camera does, with this seed")
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
     missing = [path for path in args.sets if not path.is_dir()]
@@ -153,7 +158,8 @@ def main() -> int:
     summary_rows, phase_lines, frame_rows = [], [], []
     for set_dir in args.sets:
         settings = SegmentationEvalSettings(modes=("independent", "online"), params=args.params,
-                                            figures=args.figures, max_frames=args.max_frames)
+                                            figures=args.figures, max_frames=args.max_frames,
+                                            seed=args.seed, damage_seed=args.damage_depth)
         data = evaluate_segmentation(set_dir, settings, args.out / set_dir.name, progress=True)
         if not data["peer"]["run"]:
             print(f"peer not run: {data['peer']['status']}")
@@ -167,8 +173,10 @@ def main() -> int:
     print(markdown_table(headers, summary_rows))
     print("\nms per phase, p50/p90:")
     print("\n".join(phase_lines))
-    print(f"\nprofile: {data['gngdt']['parameters']['profile']}; peer: "
+    print(f"\nprofile: {data['gngdt']['parameters']['profile']}; seed {args.seed}; peer: "
           f"{data['peer']['description'] if data['peer']['run'] else 'not run'}")
+    if data["damage"] is not None:
+        print(f"depth damaged (seed {args.damage_depth}): {data['damage']['description']}")
     print(f"peak RSS {status_mb(os.getpid(), 'VmHWM'):.0f} MB; wall "
           f"{time.perf_counter() - started:.0f} s; load average before/after "
           f"{load_before[0]:.1f}/{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")

@@ -253,6 +253,11 @@ def _add_segmentation(sub: argparse._SubParsersAction) -> None:
     segmentation.add_argument("--max-frames", type=_positive_int, default=None,
                               help="only the first N frames")
     segmentation.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
+    segmentation.add_argument(
+        "--damage-depth", type=int, default=None, metavar="SEED",
+        help="drop depth from every frame as a structured-light camera does (stripes of "
+        "missing rows and columns, holes at depth edges and on dark or glossy spots), drawn "
+        "with this seed; every method sees the same frames, scored on the pixels left")
     _add_no_progress_option(segmentation)
 
 
@@ -382,6 +387,7 @@ def _main_segmentation(args: argparse.Namespace) -> int:
     settings = SegmentationEvalSettings(
         modes=modes or ("online",), params=args.params, peer=not args.no_peer,
         figures=args.figures, max_frames=args.max_frames, seed=args.seed,
+        damage_seed=args.damage_depth,
     )
     out = args.out or Path("report") / args.set_dir.resolve().name
     data = evaluate_segmentation(args.set_dir, settings, out, progress=not args.no_progress)

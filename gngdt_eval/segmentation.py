@@ -22,6 +22,7 @@ import numpy as np
 from gngdt.eval.open3d_peer import PeerParams
 from gngdt.eval.report import format_number, markdown_table, write_report
 from gngdt.eval.segment_scores import FAILURES, RECALL_THRESHOLDS, recall_key
+from gngdt.eval.segmentation_damage import DamagedSource, DepthDamage
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +49,10 @@ class SegmentationEvalSettings:
     #: only the first N frames (None: all)
     max_frames: int | None = None
     seed: int = 0
+    #: drop depth from every frame as a structured-light camera does, seeded by this (None:
+    #: the frames as recorded); every method sees the same damaged frames
+    damage_seed: int | None = None
+    damage: DepthDamage = field(default_factory=DepthDamage)
 
     def validate(self) -> None:
         unknown = sorted(set(self.modes) - set(MODES))
@@ -113,6 +118,8 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
     started = time.perf_counter()
     profile = load_sensor_profile(settings.params)
     source = open_source(set_dir)
+    if settings.damage_seed is not None:
+        source = DamagedSource(source, settings.damage, settings.damage_seed)
     frames: list[_Frame] = []
     for name, frame in _limited(source.frames(), settings.max_frames):  # fail before any work
         truth = read_truth(set_dir, name, frame.depth.shape, frame.index)
@@ -154,6 +161,9 @@ def evaluate_segmentation(set_dir: str | Path, settings: SegmentationEvalSetting
                  "pooled over every ground-truth segment of the set",
         "gngdt": {"modes": list(settings.modes), "parameters": profile.as_dict(),
                   "random_state": settings.seed},
+        "damage": None if settings.damage_seed is None else {
+            "seed": settings.damage_seed, "description": settings.damage.describe(),
+            **settings.damage.as_dict()},
         "peer": {"run": open3d is not None, "status": peer_note,
                  "parameters": settings.peer_params.as_dict(),
                  "description": settings.peer_params.describe()},
@@ -279,6 +289,10 @@ def _markdown(data: dict[str, Any]) -> str:
     lines = [f"# Segmentation: {Path(data['set']).name} ({data['frames']} frames)", "",
              f"Set `{data['set']}` ({data['format']}; intrinsics from {data['intrinsics_from']}).",
              "", f"Score: {data['score']}.", "",
+             *([] if data["damage"] is None else [
+                 f"Depth damaged (seed {data['damage']['seed']}): "
+                 f"{data['damage']['description']}; scored on the pixels that keep their "
+                 "depth.", ""]),
              f"gngdt: modes {', '.join(data['gngdt']['modes'])}; profile "
              f"`{data['gngdt']['parameters']['profile']}`, seed {data['gngdt']['random_state']}.",
              ""]

@@ -73,15 +73,29 @@ def boundary_pairs(patch, offsets, neighbours, positions, normals, sin_concave, 
     surface). Elevations as `segmentation.edge_elevations`.
     """
     n = patch.size
+    # a pair across patches has a node with a neighbour in another patch at or next to its
+    # lower end: only those ends are visited
+    border = np.zeros(n, dtype=np.bool_)
+    for u in range(n):
+        for slot in range(offsets[u], offsets[u + 1]):
+            if patch[neighbours[slot]] != patch[u]:
+                border[u] = True
+                break
+    visit = border.copy()
     capacity = 0
     for v in range(n):
         degree = offsets[v + 1] - offsets[v]
+        if border[v]:
+            for slot in range(offsets[v], offsets[v + 1]):
+                visit[neighbours[slot]] = True
         capacity += degree * degree + degree
     low = np.empty(capacity, dtype=np.int64)
     high = np.empty(capacity, dtype=np.int64)
     flags = np.empty(capacity, dtype=np.uint8)
     count = 0
     for u in range(n):
+        if not visit[u]:
+            continue
         pu = patch[u]
         for slot in range(offsets[u], offsets[u + 1]):
             v = neighbours[slot]
@@ -167,6 +181,35 @@ def pair_statistics(n_regions, low, high, flags):
     return pair_low[:n_pairs], pair_high[:n_pairs], counts[:n_pairs]
 
 
+@njit(cache=True)
+def nodes_per_side(regions, offsets, neighbours, pair_low, pair_high):
+    """(K,) int64 per region pair (pair_low[k], pair_high[k]) of `pair_statistics`: how many
+    distinct nodes with a position edge across the pair lie on the side that has fewer (CSR
+    ``offsets``/``neighbours``; regions: (n,) int)."""
+    n_regions = 0
+    for u in range(regions.size):
+        n_regions = max(n_regions, regions[u] + 1)
+    slot_of = Dict.empty(key_type=types.int64, value_type=types.int64)
+    for k in range(pair_low.size):
+        slot_of[pair_low[k] * n_regions + pair_high[k]] = k
+    count = np.zeros((pair_low.size, 2), dtype=np.int64)
+    seen = np.full(n_regions, -1, dtype=np.int64)  # the last node that counted each region
+    for u in range(regions.size):
+        own = regions[u]
+        for slot in range(offsets[u], offsets[u + 1]):
+            other = regions[neighbours[slot]]
+            if other == own or seen[other] == u:
+                continue
+            seen[other] = u
+            key = min(own, other) * n_regions + max(own, other)
+            if key in slot_of:
+                count[slot_of[key], 1 if own > other else 0] += 1
+    result = np.empty(pair_low.size, dtype=np.int64)
+    for k in range(pair_low.size):
+        result[k] = min(count[k, 0], count[k, 1])
+    return result
+
+
 @inlined
 def _find(parent, x):
     root = x
@@ -180,24 +223,27 @@ def _find(parent, x):
 
 
 @inlined
-def _may_join(counts, e, min_edges, convex_share, crease_share):
+def _may_join(counts, e, rule):
+    """Whether pair slot e may join under ``rule`` (`join_regions`)."""
     edges = counts[e, 0]
-    return (edges >= min_edges and (counts[e, 1] >= convex_share * edges or counts[e, 3] == 0)
-            and counts[e, 3] <= crease_share * counts[e, 2])
+    convex = counts[e, 1]
+    return (edges >= rule[0] and convex >= rule[1]
+            and (convex >= rule[2] * edges or counts[e, 3] == 0)
+            and counts[e, 3] <= rule[3] * counts[e, 2])
 
 
 @njit(cache=True)
-def join_regions(n_regions, pair_low, pair_high, counts, fixed, min_edges, convex_share,
-                 crease_share):
+def join_regions(n_regions, pair_low, pair_high, counts, fixed, rule):
     """Agglomerative merging of regions (patches) by their boundary statistics.
 
     pair_low, pair_high, counts: `pair_statistics`; fixed: (n_regions,) bool regions that never
-    join anything (support surfaces). Two adjacent regions may join when at least
-    ``min_edges`` position edges lie between them, ``convex_share`` of those are convex (or no
-    node pair between them is a crease), and at most ``crease_share`` of the node pairs between
-    them are creases. Pairs are joined surest first (fewest creases, most convex boundary,
-    longest); after each join the statistics of the union
-    with every neighbour are the sums of its parts', so later joins judge the whole union: a
+    join anything (support surfaces); rule: (4,) float64 ``min_edges, min_convex,
+    convex_share, crease_share``. Two adjacent regions may join when at least ``min_edges``
+    position edges lie between them, at least ``min_convex`` of those are convex and
+    ``convex_share`` of them are (or no node pair between them is a crease), and at most
+    ``crease_share`` of the node pairs between them are creases. Pairs are joined surest first
+    (fewest creases, most convex boundary, longest); after each join the statistics of the
+    union with every neighbour are the sums of its parts', so later joins judge the whole union: a
     chain of small patches cannot carry one object into another once their union has creases
     between them. Returns (n_regions,) int64 the representative region of each.
     """
@@ -224,8 +270,7 @@ def join_regions(n_regions, pair_low, pair_high, counts, fixed, min_edges, conve
                 link[tail[region]] = entry
             tail[region] = entry
             size[region] += 1
-        if not fixed[a] and not fixed[b] and _may_join(counts, e, min_edges, convex_share,
-                                                       crease_share):
+        if not fixed[a] and not fixed[b] and _may_join(counts, e, rule):
             heapq.heappush(heap, _priority(counts, e))
     while heap:
         item = heapq.heappop(heap)
@@ -235,8 +280,7 @@ def join_regions(n_regions, pair_low, pair_high, counts, fixed, min_edges, conve
         if a == b:
             continue
         key = min(a, b) * n_regions + max(a, b)
-        if _slot(key_slot, key) != e or not _may_join(counts, e, min_edges, convex_share,
-                                                       crease_share):
+        if _slot(key_slot, key) != e or not _may_join(counts, e, rule):
             continue
         if size[a] < size[b]:
             a, b = b, a
@@ -259,8 +303,7 @@ def join_regions(n_regions, pair_low, pair_high, counts, fixed, min_edges, conve
                     else:
                         key_slot[new] = f
                         target = f
-                    if not fixed[other] and _may_join(counts, target, min_edges, convex_share,
-                                                      crease_share):
+                    if not fixed[other] and _may_join(counts, target, rule):
                         heapq.heappush(heap, _priority(counts, target))
             entry = link[entry]
         if head[b] >= 0:

@@ -5,7 +5,10 @@ Where the sensor measured no depth (a glossy rim, a dark or shiny patch) the net
 edges, so one object can come out as two segments (a mug's inside and outside). Node pairs of
 two segments closer than the bridge are judged as edges would be where their straight line
 crosses a gap; rims (back to back pairs) and openings (one segment seen through the other's)
-join too. The procedure is written out in `gngdt.core.segmentation.network`'s docstring, step 6.
+join too. A stripe of missing depth narrower than the view's cells shows only in the network
+(a band without nodes): pairs of the network's border nodes across such a band are judged as
+well (``network_gap_m``), by convex share only. The procedure is written out in
+`gngdt.core.segmentation.network`'s docstring, step 6.
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gngdt.core.clustering import rank_by_size
+from gngdt.core.kernels import gaps as GK
 from gngdt.core.kernels import regions as RK
 from gngdt.core.sensor.view import SensorView
 
@@ -44,6 +48,13 @@ ENCLOSING_SHARE = 0.2
 #: node's word (a streamed ycbv network tied the foam brick to the mug by three pairs from one
 #: node; 2, the fewest that is not one node: ycbv streamed merged 0.4 -> 0 per seed, 3 split mugs)
 GAP_MIN_NODES = 2
+#: network gaps (``network_gap_m``): a node is at the network's border when the unit vectors
+#: to its neighbours sum to more than this share of its degree (its neighbours lie mostly on one
+#: side; inside a surface they cancel out: median 0.2, p90 0.46 on a damaged mosd frame) ...
+BORDER_RESULTANT = 0.3
+#: ... and a pair of such nodes spans a region the network left empty when no neighbour of
+#: either end lies nearer the middle between them than this share of half their distance
+EMPTY_SHARE = 0.8
 
 
 @dataclass(frozen=True)
@@ -59,6 +70,9 @@ class GapRules:
     #: sines of ``concavity_angle_deg`` and ``crease_angle_deg``
     concavity_sine: float
     crease_sine: float
+    #: metres: node pairs at most this far apart across a region the network left empty are
+    #: judged too (``network_gap_m``; 0: only gaps the view shows)
+    network_gap_m: float = 0.0
 
 
 def bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
@@ -72,8 +86,9 @@ def bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
     ``rules.min_pairs`` of them were judged in step 4 and are left as they are); view: what the
     sensor measured in the frame; camera_from_model: (4, 4); support_node: (n,) bool nodes on
     a support plane."""
-    pairs, pair_key, over_gap = _pairs_across_gaps(labels, positions, edges, rules, view,
-                                                   camera_from_model, support_node)
+    pairs, pair_key, over_gap, network = _pairs_across_gaps(labels, positions, edges, rules,
+                                                            view, camera_from_model,
+                                                            support_node)
     if len(pairs) == 0:
         return labels
     n_labels = int(labels.max()) + 1
@@ -92,16 +107,20 @@ def bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
         return (count(among) >= rules.min_pairs) & (nodes >= GAP_MIN_NODES)
 
     crossing, convex_count = count(over_gap), count(over_gap & convex)
-    back_to_back = count(over_gap & opposed & convex)
-    enough_over_gap = enough(over_gap)
-    rim = enough_over_gap & ((back_to_back >= RIM_SHARE * crossing)
-                             | (back_to_back >= RIM_PAIRS))
+    # rims and openings only where the sensor measured the gap: a gap only the network shows
+    # may be a container's mouth whose rim returned depth (mOSD labels inside and outside apart)
+    sensed = over_gap & ~network
+    back_to_back = count(sensed & opposed & convex)
+    rim = enough(sensed) & ((back_to_back >= RIM_SHARE * count(sensed))
+                            | (back_to_back >= RIM_PAIRS))
     if ENCLOSED_SHARE <= 1.0:
         # a container's inside faces its rim over the gap and behind its wall alike
-        every = np.ones(len(pairs), dtype=bool)
-        rim |= enough(every) & _enclosed(labels, positions, pairs, keys, n_labels,
-                                         camera_from_model)
-    join = rim | (enough_over_gap & (convex_count >= rules.convex_share * crossing))
+        rim |= enough(~network) & _enclosed(labels, positions, pairs[~network], keys,
+                                            n_labels, camera_from_model)
+    # a join by convex share needs min_pairs convex pairs (3 pairs, 2 convex tied the inside
+    # of mosd's bowls to their outside across the gap at their rims)
+    join = rim | (enough(over_gap) & (convex_count >= rules.convex_share * crossing)
+                  & (convex_count >= rules.min_pairs))
     if not join.any():
         return labels
     creases = count(over_gap & (rise > rules.crease_sine))
@@ -116,39 +135,74 @@ def bridge_gaps(labels: np.ndarray, positions: np.ndarray, normals: np.ndarray,
 def _pairs_across_gaps(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
                        rules: GapRules, view: SensorView,
                        camera_from_model: np.ndarray, support_node: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Node pairs of two segments (neither a support, not judged in step 4) closer than
     ``rules.gap_m`` whose straight line crosses a gap: (P, 2) pairs, (P,) their segment pair
-    keys (`_segment_pair_keys`) and (P,) bool ``over_gap``: at least half the line lies where
-    the sensor measured nothing and at most a third where it measured something else. The
-    others returned run partly over a gap and otherwise behind a nearer surface, never where
-    the sensor saw through: from a container's inside to its rim, behind its wall."""
+    keys (`_segment_pair_keys`), (P,) bool ``over_gap``: at least half the line lies where
+    the sensor measured nothing and at most a third where it measured something else, and (P,)
+    bool ``network``: the pair crosses a gap only the network shows (`_network_gap_pairs`,
+    ``over_gap`` too). The others returned run partly over a gap and otherwise behind a
+    nearer surface, never where the sensor saw through: from a container's inside to its rim,
+    behind its wall."""
     from scipy.spatial import cKDTree
 
-    none = (np.zeros((0, 2), dtype=np.int64), np.zeros(0, dtype=np.int64),
-            np.zeros(0, dtype=bool))
-    on_support = np.zeros(int(labels.max()) + 2, dtype=bool)
+    n_labels = int(labels.max()) + 1
+    on_support = np.zeros(n_labels + 1, dtype=bool)
     on_support[labels[support_node]] = True
+    # segment pairs with enough shared edges were judged on those edges (step 4), per key
+    edge_keys = _segment_pair_keys(labels, edges, n_labels)
+    judged = np.bincount(edge_keys[edge_keys >= 0],
+                         minlength=n_labels * n_labels) >= rules.min_pairs
     candidates = np.flatnonzero(
         (labels >= 0) & ~on_support[labels]
         & view.near_unmeasured(positions, camera_from_model, GAP_BORDER_M))
-    if candidates.size < 2:
-        return none
-    pairs = candidates[cKDTree(positions[candidates]).query_pairs(rules.gap_m,
-                                                                  output_type="ndarray")]
-    n_labels = int(labels.max()) + 1
+    pairs = np.zeros((0, 2), dtype=np.int64)
+    if candidates.size >= 2:
+        pairs = candidates[cKDTree(positions[candidates]).query_pairs(rules.gap_m,
+                                                                      output_type="ndarray")]
     pair_key = _segment_pair_keys(labels, pairs, n_labels)
-    # segment pairs with enough shared edges were judged on those edges (step 4)
-    edge_keys, shared = np.unique(_segment_pair_keys(labels, edges, n_labels),
-                                  return_counts=True)
-    judged = edge_keys[(edge_keys >= 0) & (shared >= rules.min_pairs)]
-    unjudged = (pair_key >= 0) & ~np.isin(pair_key, judged)
+    unjudged = (pair_key >= 0) & ~judged[np.maximum(pair_key, 0)]
     pairs, pair_key = pairs[unjudged], pair_key[unjudged]
     missing, blocked, hidden = view.gap_samples(positions, pairs, camera_from_model,
                                                 GAP_DEPTH_MARGIN, GAP_SAMPLES)
     over_gap = (2 * missing >= GAP_SAMPLES) & (3 * blocked <= GAP_SAMPLES)
     keep = over_gap | ((missing > 0) & (blocked == hidden))
-    return pairs[keep], pair_key[keep], over_gap[keep]
+    pairs, pair_key, over_gap = pairs[keep], pair_key[keep], over_gap[keep]
+    network = np.zeros(len(pairs), dtype=bool)
+    if rules.network_gap_m > 0:
+        extra, extra_key = _network_gap_pairs(labels, positions, edges, on_support, view,
+                                              camera_from_model, judged, rules.network_gap_m)
+        new = ~np.isin(extra[:, 0] * len(labels) + extra[:, 1],
+                       pairs[:, 0] * len(labels) + pairs[:, 1])
+        pairs = np.concatenate([pairs, extra[new]])
+        pair_key = np.concatenate([pair_key, extra_key[new]])
+        over_gap = np.concatenate([over_gap, np.ones(int(new.sum()), dtype=bool)])
+        network = np.concatenate([network, np.ones(int(new.sum()), dtype=bool)])
+    return pairs, pair_key, over_gap, network
+
+
+def _network_gap_pairs(labels: np.ndarray, positions: np.ndarray, edges: np.ndarray,
+                       on_support: np.ndarray, view: SensorView, camera_from_model: np.ndarray,
+                       judged: np.ndarray, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Node pairs across a gap only the network shows (a stripe of missing rows narrower than
+    the view's cells): (P, 2) pairs of nodes of two segments (neither a support, their pair
+    not ``judged``: (n_labels ** 2,) bool per segment pair key) at the network's border
+    (`kernels.gaps.border_nodes`), at most ``reach_m`` apart, with no neighbour of either end
+    near the middle between them (`kernels.gaps.empty_between`) and nothing else measured
+    along the line (the sensor neither saw through it nor saw a nearer surface); and (P,)
+    their segment pair keys."""
+    offsets, neighbours, _ = RK.csr_adjacency(len(labels), edges, np.ones(len(edges),
+                                                                          dtype=bool))
+    nodes = np.flatnonzero((labels >= 0) & ~on_support[labels]
+                           & GK.border_nodes(positions, offsets, neighbours, BORDER_RESULTANT))
+    pairs = GK.close_pairs_between(positions, nodes, labels.astype(np.int64), reach_m)
+    key = _segment_pair_keys(labels, pairs, int(labels.max()) + 1)
+    keep = ~judged[key]
+    keep[keep] = GK.empty_between(positions, offsets, neighbours, pairs[keep], EMPTY_SHARE)
+    pairs, key = pairs[keep], key[keep]
+    _, blocked, _ = view.gap_samples(positions, pairs, camera_from_model, GAP_DEPTH_MARGIN,
+                                     GAP_SAMPLES)
+    return pairs[blocked == 0], key[blocked == 0]
 
 
 def _nodes_per_side(labels: np.ndarray, pairs: np.ndarray, pair_of_key: np.ndarray,
@@ -227,27 +281,10 @@ def _join_across_gaps(n_labels: int, low: np.ndarray, high: np.ndarray, crossing
     pairs tie to a mug's inside stays apart when twenty creases tie it to the mug's outside.
     A ``rim`` pair (back to back across a thin wall) joins regardless: a container's mouth is
     full of creases between its inside and its outside."""
-    parent = np.arange(n_labels)
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for k in np.flatnonzero(joinable)[np.argsort(-strength[joinable], kind="stable")]:
-        a, b = find(int(low[k])), find(int(high[k]))
-        if a == b:
-            continue
-        if rim[k]:
-            parent[b] = a
-            continue
-        root_low = np.array([find(int(x)) for x in low])
-        root_high = np.array([find(int(x)) for x in high])
-        between = ((root_low == a) & (root_high == b)) | ((root_low == b) & (root_high == a))
-        if creases[between].sum() <= crease_share * crossing[between].sum():
-            parent[b] = a
-    return np.array([find(x) for x in range(n_labels)])
+    order = np.flatnonzero(joinable)[np.argsort(-strength[joinable], kind="stable")]
+    return GK.join_across_gaps(n_labels, low.astype(np.int64), high.astype(np.int64),
+                               crossing.astype(np.float64), creases.astype(np.float64),
+                               order.astype(np.int64), rim, crease_share)
 
 
 def _segment_pair_keys(labels: np.ndarray, pairs: np.ndarray, n_labels: int) -> np.ndarray:
