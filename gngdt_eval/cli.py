@@ -1,6 +1,6 @@
 """Evaluate: the paper's tables reproduced, a recording scored against references, a logged run.
 
-``gngdt eval paper`` runs the paper's simulation experiment (Tables 2-4, Figure 10);
+``gngdt eval paper`` runs the paper's simulation experiment (Tables 2-4, Figures 8-11);
 ``gngdt eval recording`` replays a recording offline through each method; ``gngdt eval rrd``
 reads a logged run back from its .rrd file. Each writes a Markdown report, a JSON file with every
 figure and PNG plots into ``--out``.
@@ -20,7 +20,7 @@ from gngdt.io.deproject import RUN_POINT_CAP
 log = logging.getLogger(__name__)
 
 EXAMPLES = """examples:
-  gngdt eval paper --trials 5 --out report/paper      # Tables 2-4, Figures 10-11
+  gngdt eval paper --trials 5 --out report/paper      # Tables 2-4, Figures 8-11
   gngdt eval paper --trials 1 --max-nodes 60          # a quick look
   gngdt eval paper --frames ../shared/data/rgbd/*/ ../shared/data/labelled/*/   # + Tables 5-6
   gngdt eval paper --trials 10 --color-noise 0 1 2 3 4 5 6 8 10 15 20 30   # the colour fit
@@ -88,12 +88,13 @@ def _add_paper(sub: argparse._SubParsersAction) -> None:
     defaults = PaperSettings(workers=1)
     paper = _leaf(
         sub, "paper",
-        "the paper's simulation (Tables 2-4, Figs. 10-11) and RGB-D (Tables 5-6) runs",
+        "the paper's simulation (Tables 2-4, Figures 8-11) and RGB-D (Tables 5-6) runs",
         "Run the paper's simulation experiment (Section 3.1): GNG, GNG-W and GNG-DT on Data1 "
         "and Data2 at every scale and every --color-noise level, over --trials seeds each, each "
         "run stopping at the node budget; with --frames also its RGB-D experiment (Section 3.3) "
-        "on real frames. Writes paper.md (Tables 2-6, the paper's claims checked), paper.json "
-        "and Figures 8-10 into --out.",
+        "on real frames. Writes into --out paper.md (Tables 2-6, Figures 8-11, the paper's "
+        "claims checked), paper.json (every figure) and the drawings of Figures 8-10 "
+        "(figure8_data1.png, figure9_data2.png, figure10_data1.png, figure10_data2.png).",
         "\n".join(line for line in EXAMPLES.splitlines() if " paper " in line) + "\n")
     paper.add_argument("--trials", type=_positive_int, default=defaults.trials,
                        help="trials per cell (default: %(default)s)")

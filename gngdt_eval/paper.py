@@ -1,4 +1,4 @@
-"""The paper's simulation experiment (Section 3.1): Tables 2-4 and Figures 10-11, reproduced.
+"""The paper's simulation experiment (Section 3.1): Tables 2-4 and Figures 8-11, reproduced.
 
 GNG, GNG-W and GNG-DT learn Data1 (2D) and Data2 (3D) at scl ∈ {10, 1, 0.1, 0.01}, at one or more
 levels of within-region colour noise, ``trials`` times each with a different sampling seed,

@@ -27,13 +27,18 @@ def noise_label(level: float) -> str:
     return f"σ = {level:g}"
 
 
+#: the paper's topology drawings: Figure 8 is Data1's, Figure 9 Data2's
+TOPOLOGY_FIGURES = {"Data1": "Figure 8", "Data2": "Figure 9"}
+
+
 def write_plots(
     tables: dict[str, Any],
     topologies: dict[tuple[str, str, float], dict[str, Any]],
     settings: PaperSettings,
     out_dir: Path,
 ) -> list[Path]:
-    """Figure 10 per data set and the Figures 8/9 topology grids, for the main noise level."""
+    """Figure 10 per data set (``figure10_<data>.png``) and the topology grids of Figures 8
+    (``figure8_data1.png``) and 9 (``figure9_data2.png``), for the main noise level."""
     from gngdt.eval.plots import TopologyPanel, plot_scale_curves, plot_topology_grid
 
     paths = []
@@ -78,11 +83,11 @@ def write_plots(
             if row:
                 rows.append(row)
         if rows:
-            figure = "Figure 8" if dataset == "Data1" else "Figure 9"
+            figure = TOPOLOGY_FIGURES.get(dataset, "Figure 9")
             paths.append(
                 plot_topology_grid(
                     rows,
-                    out_dir / f"topologies_{dataset.lower()}.png",
+                    out_dir / f"{figure.lower().replace(' ', '')}_{dataset.lower()}.png",
                     title=f"{figure} — {dataset} ({main}): topologies of trial 0, nodes "
                     "coloured by cluster",
                 )
@@ -91,7 +96,7 @@ def write_plots(
 
 
 def render_markdown(data: dict[str, Any], settings: PaperSettings, plots: list[Path]) -> str:
-    """The whole report: settings, the colour model's fit, Tables 2-6, Figures 10-11, claims."""
+    """The whole report: settings, the colour model's fit, Tables 2-6, Figures 8-11, claims."""
     levels = data["levels"]
     main_level = settings.color_noise[0]
     main = levels[main_level]["tables"]
@@ -107,7 +112,7 @@ def render_markdown(data: dict[str, Any], settings: PaperSettings, plots: list[P
         + ", ".join(f"{k.rstrip('_')}={v:g}" for k, v in PAPER_PARAMETERS.items())
         + f", τ_col={GNGDT_THRESHOLDS['tau_col']:g}, τ_nor={GNGDT_THRESHOLDS['tau_nor']:g}; "
         f"GNG-W weights w_pos={GNGW_WEIGHTS['w_pos']:g}, w_col={GNGW_WEIGHTS['w_col']:g}.",
-        _protocol_text(settings, learning),
+        _protocol_text(settings, learning, main),
         "**Colour model (ours; the paper does not describe its colours):** every point takes its "
         "region's base colour plus independent Gaussian noise of standard deviation σ on each of "
         "R, G and B, clipped to 0-255 (Data1: pure red (255, 0, 0) and green (0, 255, 0); "
@@ -148,7 +153,8 @@ def render_markdown(data: dict[str, Any], settings: PaperSettings, plots: list[P
                              rows)
         )
     parts.append("## Topologies (Figures 8 and 9)")
-    parts.extend(f"![{p.stem}]({p.name})" for p in plots if p.stem.startswith("topologies"))
+    parts.extend(f"![{p.stem}]({p.name})" for p in plots
+                 if p.stem.startswith(("figure8", "figure9")))
     parts.append(_clusters_section(main, settings))
     if "Data2" in settings.datasets and "GNG-DT" in settings.methods:
         parts.append(_figure11_section(levels, settings))
@@ -159,7 +165,8 @@ def render_markdown(data: dict[str, Any], settings: PaperSettings, plots: list[P
     return "\n\n".join(parts)
 
 
-def _protocol_text(settings: PaperSettings, learning: dict[str, Any]) -> str:
+def _protocol_text(settings: PaperSettings, learning: dict[str, Any],
+                   tables: dict[str, Any]) -> str:
     if settings.stop == "budget":
         rule = (
             "every run stops when it has "
@@ -177,11 +184,33 @@ def _protocol_text(settings: PaperSettings, learning: dict[str, Any]) -> str:
     return (
         "**Stopping rule and node budget (not given in the paper; ours):** " + rule
         + f" Runs learned {_span(learning['steps_min'], learning['steps_max'])} steps and "
-        f"ended with {_span(learning['nodes_min'], learning['nodes_max'])} nodes. The budget of "
-        f"{settings.max_nodes} nodes is the one that puts GNG-DT's Data1 position error at "
-        "scl = 1 at the paper's 7.341 (GNG-DT's position error does not depend on colour, so "
-        "this pins the node count independently of the colour model)."
+        f"ended with {_span(learning['nodes_min'], learning['nodes_max'])} nodes. "
+        + _budget_text(settings, tables)
     )
+
+
+#: the cell the default node budget was chosen by: GNG-DT's Data1 position error at scl = 1
+BUDGET_CELL = ("table2", "Data1", "GNG-DT", 1.0)
+
+
+def _budget_text(settings: PaperSettings, tables: dict[str, Any]) -> str:
+    """What the node budget does to the cell it was chosen by, from this run's own figures."""
+    default = PaperSettings.max_nodes
+    key, dataset, method, scale = BUDGET_CELL
+    cell = tables[key].get(dataset, {}).get(method, {}).get(scale) or {}
+    ours, paper = (cell.get("ours") or {}).get("mean"), (cell.get("paper") or {}).get("mean")
+    why = ("the default budget, {default} nodes, was chosen to put GNG-DT's Data1 position "
+           "error at scl = 1 near the paper's {paper} (it does not depend on colour, so this "
+           "pins the node count independently of the colour model)")
+    if ours is None or paper is None or not math.isfinite(ours):
+        return (why.format(default=default, paper="published value").capitalize()
+                + "; this run has no such cell to check it against.")
+    found = (f"With {settings.max_nodes} nodes, GNG-DT's Data1 position error at scl = 1 is "
+             f"{format_number(ours)}, {ours / paper:.2f} × the paper's {format_number(paper)}")
+    if settings.max_nodes == default:
+        return f"{found}: {why.format(default=default, paper=format_number(paper))}."
+    return (f"{found}; {why.format(default=default, paper=format_number(paper))}, and "
+            f"{settings.max_nodes} is not it.")
 
 
 def _span(low: int, high: int) -> str:

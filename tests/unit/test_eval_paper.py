@@ -156,7 +156,7 @@ def test_cli_rejects_a_folder_without_frames(tmp_path, capsys) -> None:
 
 
 @pytest.mark.timeout(300)
-def test_eval_paper_small_run(tmp_path) -> None:
+def test_eval_paper_small_run(tmp_path, capsys) -> None:
     out = tmp_path / "paper"
     argv = ["eval", "paper", "--trials", "1", "--max-nodes", "40", "--data2-points", "20000",
             "--workers", "2", "--out", str(out), "--no-progress"]
@@ -179,6 +179,13 @@ def test_eval_paper_small_run(tmp_path) -> None:
         assert heading in markdown
     assert "every run stops when it has 40 nodes" in markdown
     assert "7.341 ± 0.022" in markdown  # a published cell beside ours
+    # issue 35.7: what the report says of its budget is what its own table holds
+    ours = data["tables"]["table2"]["Data1"]["GNG-DT"]["1.0"]["ours"]["mean"]
+    assert (f"With 40 nodes, GNG-DT's Data1 position error at scl = 1 is {ours:.3f}, "
+            f"{ours / 7.341:.2f} × the paper's 7.341") in markdown
+    assert "and 40 is not it" in markdown
+    assert "the one that puts GNG-DT's Data1 position error at scl = 1 at the paper's" \
+        not in markdown
 
     # the default: the chosen colour noise, and flat colours beside it
     main, flat = str(PaperSettings().color_noise[0]), "0.0"
@@ -227,14 +234,18 @@ def test_eval_paper_small_run(tmp_path) -> None:
     spread = tables(main)["normal_edges"]["1.0"]
     assert set(spread) == {"floor", "prism red face", "prism brown face", "half cylinder"}
 
-    for plot in (
-        "figure10_data1.png",
-        "figure10_data2.png",
-        "topologies_data1.png",
-        "topologies_data2.png",
-    ):
+    # the files are the figures the help names (issue 35.7), each shown in the report
+    with pytest.raises(SystemExit):
+        gngdt_main(["eval", "paper", "--help"])
+    help_text = capsys.readouterr().out
+    written = sorted(path.name for path in out.glob("*.png"))
+    assert written == ["figure10_data1.png", "figure10_data2.png", "figure8_data1.png",
+                       "figure9_data2.png"]
+    for plot in written:
         assert (out / plot).stat().st_size > 5_000
         assert plot in markdown
+        assert plot in " ".join(help_text.split()), plot
+    assert "Figures 8-11" in help_text and "Figures 10-11" not in help_text
 
 
 def test_a_scale_the_paper_does_not_have_is_checked_without_the_papers_winner(tmp_path) -> None:
