@@ -81,8 +81,19 @@ def build_parser() -> argparse.ArgumentParser:
         module.add_arguments(sub)
         for leaf in leaf_parsers(sub):
             add_common_arguments(leaf)
+            leaf.set_defaults(_parser=leaf)  # whose usage an unknown option prints
         sub.set_defaults(_module=module)
     return parser
+
+
+def parse_arguments(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
+    """``parser``'s arguments; an option no parser knows is refused by the subcommand that
+    was given it, with that subcommand's usage (argparse's own refusal prints the top-level
+    usage, which does not list the subcommand's options): exit 2."""
+    args, unknown = parser.parse_known_args(argv)
+    if unknown:
+        getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(unknown)}")
+    return args
 
 
 def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
@@ -107,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
         # before OpenCV loads: the largest image it may decode, rather than its own 2**30
         # pixels (3 GB for a few kilobytes of PNG)
         os.environ.setdefault("OPENCV_IO_MAX_IMAGE_PIXELS", str(MAX_IMAGE_PIXELS))
-        args = build_parser().parse_args(argv)
+        args = parse_arguments(build_parser(), argv)
         logging.basicConfig(
             level=getattr(logging, args.log_level),
             format="%(asctime)s %(levelname)s %(name)s: %(message)s",
