@@ -34,7 +34,8 @@ from gngdt.io.errors import RecordingError
 from gngdt.io.frame import CameraIntrinsics, Frame
 from gngdt.io.image_files import check_depth_dtype, is_regular_file, read_image
 
-__all__ = ["FORMATS", "CameraParameters", "count_image_frames", "iter_image_frames", "load_camera"]
+__all__ = ["FORMATS", "CameraParameters", "camera_assumptions", "count_image_frames",
+           "iter_image_frames", "load_camera"]
 
 logger = logging.getLogger(__name__)
 
@@ -137,6 +138,33 @@ def load_camera(
     if camera_json is None and not path.is_file():
         return defaults
     return _checked(path, replace(defaults, **_camera_values(path)))
+
+
+#: each layout's own depth units, said beside an assumed depth_scale
+_LAYOUT_DEPTH_UNITS = "TUM's frames use 5000, most others 1000: millimetres"
+
+
+def camera_assumptions(directory: str | Path, fmt: str, camera_json: str | Path | None = None,
+                       depth_scale: float | None = None) -> list[str]:
+    """The camera parameters a folder of frames is read with that nothing gave (the layout's
+    defaults), one sentence each naming the file or option that sets them; [] when
+    ``camera_json`` (else ``DIR/camera.json``) and ``depth_scale`` give them all."""
+    _check_format(fmt)
+    defaults = DEFAULT_CAMERAS[fmt]
+    path = Path(camera_json) if camera_json is not None else Path(directory) / "camera.json"
+    given = _camera_values(path) if camera_json is not None or path.is_file() else {}
+    found = []
+    missing = [key for key in ("fx", "fy", "cx", "cy") if key not in given]
+    if missing:
+        values = " ".join(f"{key}={getattr(defaults, key):g}" for key in missing)
+        found.append(f"{values} px assumed, the {fmt} layout's defaults ({path} "
+                     f"{'lacks them' if given else 'is missing'}): wrong intrinsics bend every "
+                     f"surface; add them to {path.name} or pass --camera-json FILE")
+    if "depth_scale" not in given and depth_scale is None:
+        found.append(f"depth_scale={defaults.depth_scale:g} units per metre assumed, the {fmt} "
+                     f"layout's default ({_LAYOUT_DEPTH_UNITS}): wrong units scale every "
+                     f"distance; set depth_scale in {path.name} or pass --depth-scale")
+    return found
 
 
 #: the depth units of a recording's 16-bit depth when nothing says otherwise (millimetres)

@@ -52,6 +52,22 @@ def pose_limit_values(args: argparse.Namespace) -> dict[str, float]:
             if getattr(args, option, None) is not None}
 
 
+#: frames with depth a reader looks at before it judges the depth's units (`depth_warning`)
+DEPTH_CHECK_FRAMES = 5
+
+
+def depth_warning(depth: DepthRange) -> str:
+    """The one message for depth an RGB-D camera cannot have measured (`DepthRange.problem`:
+    wrong units), naming what sets the units; "" when the depth is plausible. `gngdt record
+    images`, `gngdt segment` and `gngdt capture` (so `gngdt run`) say it alike."""
+    problem = depth.problem()
+    if not problem:
+        return ""
+    return (f"{problem}: {depth.describe()}; check depth_scale: camera.json's depth_scale or "
+            "--depth-scale, the depth units per metre (1000 for millimetres, 5000 for TUM's "
+            "frames)")
+
+
 @dataclass
 class PoseReport:
     """What the pose checks of an import found: a line to show, and how many of the posed

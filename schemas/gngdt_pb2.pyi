@@ -160,18 +160,38 @@ class LearnerStatus(_message.Message):
     def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., frame_id: _Optional[str] = ..., steps: _Optional[int] = ..., steps_per_second: _Optional[float] = ..., nodes: _Optional[int] = ..., frames_received: _Optional[int] = ..., frames_used: _Optional[int] = ..., frames_dropped: _Optional[int] = ..., malformed_messages: _Optional[int] = ..., latency_ms: _Optional[float] = ..., latency_p50_ms: _Optional[float] = ..., latency_p99_ms: _Optional[float] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., cluster_counts: _Optional[_Mapping[str, int]] = ..., settle_reason: _Optional[str] = ..., seen_nodes: _Optional[int] = ..., ghost_share: _Optional[float] = ..., ghost_distance_m: _Optional[float] = ..., nodes_forgotten: _Optional[int] = ..., frames_other_frame: _Optional[int] = ..., frames_pose_rejected: _Optional[int] = ..., pose_problem: _Optional[str] = ..., frame_budget_ms: _Optional[float] = ..., frame_steps: _Optional[int] = ..., frames_lost_tracking: _Optional[int] = ..., tracking: _Optional[str] = ..., settled: _Optional[bool] = ..., frames_posed: _Optional[int] = ..., frames_lost_by_reason: _Optional[_Mapping[str, int]] = ...) -> None: ...
 
 class StreamEnd(_message.Message):
-    __slots__ = ("timestamp", "frames_sent", "last_frame_sequence", "recording", "frame_id")
+    __slots__ = ("timestamp", "frames_sent", "last_frame_sequence", "recording", "frame_id", "frames_refused", "frames_without_cloud", "warnings")
+    class FramesRefusedEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: int
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[int] = ...) -> None: ...
+    class FramesWithoutCloudEntry(_message.Message):
+        __slots__ = ("key", "value")
+        KEY_FIELD_NUMBER: _ClassVar[int]
+        VALUE_FIELD_NUMBER: _ClassVar[int]
+        key: str
+        value: int
+        def __init__(self, key: _Optional[str] = ..., value: _Optional[int] = ...) -> None: ...
     TIMESTAMP_FIELD_NUMBER: _ClassVar[int]
     FRAMES_SENT_FIELD_NUMBER: _ClassVar[int]
     LAST_FRAME_SEQUENCE_FIELD_NUMBER: _ClassVar[int]
     RECORDING_FIELD_NUMBER: _ClassVar[int]
     FRAME_ID_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_REFUSED_FIELD_NUMBER: _ClassVar[int]
+    FRAMES_WITHOUT_CLOUD_FIELD_NUMBER: _ClassVar[int]
+    WARNINGS_FIELD_NUMBER: _ClassVar[int]
     timestamp: _timestamp_pb2.Timestamp
     frames_sent: int
     last_frame_sequence: int
     recording: str
     frame_id: str
-    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frames_sent: _Optional[int] = ..., last_frame_sequence: _Optional[int] = ..., recording: _Optional[str] = ..., frame_id: _Optional[str] = ...) -> None: ...
+    frames_refused: _containers.ScalarMap[str, int]
+    frames_without_cloud: _containers.ScalarMap[str, int]
+    warnings: _containers.RepeatedScalarFieldContainer[str]
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frames_sent: _Optional[int] = ..., last_frame_sequence: _Optional[int] = ..., recording: _Optional[str] = ..., frame_id: _Optional[str] = ..., frames_refused: _Optional[_Mapping[str, int]] = ..., frames_without_cloud: _Optional[_Mapping[str, int]] = ..., warnings: _Optional[_Iterable[str]] = ...) -> None: ...
 
 class FrameAck(_message.Message):
     __slots__ = ("timestamp", "frame_sequence", "outcome", "problem")

@@ -74,6 +74,12 @@ class StreamEndInfo:
     last_frame_sequence: int = 0
     recording: str = ""
     frame_id: str = ""
+    #: frames capture did not send, by why (the reason without the frame's index)
+    frames_refused: dict[str, int] = field(default_factory=dict)
+    #: frames sent with their images but no cloud, by why (no camera pose at their time, ...)
+    frames_without_cloud: dict[str, int] = field(default_factory=dict)
+    #: what capture warns about the stream as a whole (each naming what changes it)
+    warnings: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -88,7 +94,10 @@ class FrameAckInfo:
 
 
 #: the messages' map fields (set and read as dicts)
-MAP_FIELDS = ("quantization_error", "cluster_counts", "frames_lost_by_reason")
+MAP_FIELDS = ("quantization_error", "cluster_counts", "frames_lost_by_reason", "frames_refused",
+              "frames_without_cloud")
+#: the messages' repeated fields (read as lists)
+REPEATED_FIELDS = ("warnings",)
 
 _InfoT = TypeVar("_InfoT", LearnerStatusInfo, StreamEndInfo, FrameAckInfo)
 
@@ -126,6 +135,8 @@ def _message_to_info(info_type: type[_InfoT], message: Message) -> _InfoT:
             values[item.name] = timestamp_to_ns(message.timestamp)
         elif item.name in MAP_FIELDS:
             values[item.name] = dict(getattr(message, item.name))
+        elif item.name in REPEATED_FIELDS:
+            values[item.name] = list(getattr(message, item.name))
         else:
             values[item.name] = getattr(message, item.name)
     return info_type(**values)

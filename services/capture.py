@@ -32,7 +32,7 @@ import numpy as np
 
 from gngdt.io.deproject import RUN_POINT_CAP, CloudOptions, FrameToCloud
 from gngdt.io.mcap.limits import ReadLimits
-from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS, SourceOptions
+from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS, BadFrameHandler, SourceOptions
 from gngdt.schemas.clouds import MAX_CLOUD_POINTS
 from gngdt.schemas.wire import (
     CAPTURE,
@@ -46,6 +46,7 @@ from gngdt.schemas.wire import (
     alive_key,
     topic,
 )
+from gngdt.services.capture_tally import CaptureTally, exit_status, no_points_reason
 from gngdt.services.pacing import LearnerLost, LearnerPacing
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.session import (
@@ -252,8 +253,10 @@ def frame_to_cloud(args: argparse.Namespace) -> FrameToCloud:
     return FrameToCloud(options, args.seed)
 
 
-def source_options(args: argparse.Namespace) -> SourceOptions:
-    """How to read the source, from the command line (``ValueError`` for a wrong value)."""
+def source_options(args: argparse.Namespace,
+                   on_bad_frame: BadFrameHandler | None = None) -> SourceOptions:
+    """How to read the source, from the command line (``ValueError`` for a wrong value); a
+    frame it cannot read goes to ``on_bad_frame`` (default: logged) and is skipped."""
     if args.max_skew_ms < 0:
         raise ValueError(f"--max-skew-ms must be >= 0, got {args.max_skew_ms}")
     limits = ReadLimits(args.max_frame_pixels, args.max_chunk_mb << 20,
@@ -262,7 +265,7 @@ def source_options(args: argparse.Namespace) -> SourceOptions:
     return SourceOptions(camera_json=args.camera_json, depth_scale=args.depth_scale,
                          topic_prefix=args.topics,
                          max_skew_ms=args.max_skew_ms, fixed_frame=fixed_frame, limits=limits,
-                         on_bad_frame=log_bad_frame)
+                         on_bad_frame=on_bad_frame or log_bad_frame)
 
 
 class CapturePublisher:
@@ -326,16 +329,23 @@ class CapturePublisher:
                               pose=None if pose is None else pose.matrix)
         self.points.put(cloud, attachment=attachment)
 
-    def publish_end(self, frames_sent: int, last_sequence: int, recording: str) -> None:
+    def publish_end(self, frames_sent: int, last_sequence: int, recording: str,
+                    tally: CaptureTally | None = None) -> None:
+        """The end of stream: frames sent, and (``tally``) those refused by why, those sent
+        without a cloud and what capture warns about the stream."""
         from gngdt.schemas.status import encode_stream_end
 
         now = time.time_ns()
+        tally = tally or CaptureTally()
         message = encode_stream_end(
             timestamp_ns=now,
             frames_sent=frames_sent,
             last_frame_sequence=last_sequence,
             recording=recording,
             frame_id=self.camera,
+            frames_refused=dict(tally.refused),
+            frames_without_cloud=dict(tally.without_cloud),
+            warnings=tally.warnings,
         )
         self.eos.put(
             message.SerializeToString(), attachment=FrameStamp(last_sequence, now).to_attachment()
@@ -354,12 +364,16 @@ class Replay:
     kept in ``error``: with not a single frame read, the capture fails (exit 2).
     """
 
-    def __init__(self, source: FrameSource, loop: bool, stop: threading.Event) -> None:
+    def __init__(self, source: FrameSource, loop: bool, stop: threading.Event,
+                 tally: CaptureTally | None = None) -> None:
         self.source = source
         self.loop = loop
         self.stop = stop
         self.error: Exception | None = None
         self.frames_read = 0
+        self.frames_sent = 0
+        #: frames refused by why, sent without a cloud, the stream's warnings
+        self.tally = tally if tally is not None else CaptureTally()
         #: why the learner stopped taking frames of a paced file ("": it did not)
         self.learner_lost = ""
 
@@ -423,9 +437,10 @@ def main(args: argparse.Namespace) -> int:
     from gngdt.io.errors import RecordingError
     from gngdt.io.sources import open_source
 
+    tally = CaptureTally()
     try:
         args.recording = source_spec(args)
-        source = open_source(args.recording, options=source_options(args))
+        source = open_source(args.recording, options=source_options(args, tally.bad_frame))
         to_cloud = frame_to_cloud(args)
         clock = ReplayClock(None if args.fast or source.live else args.rate, args.max_gap)
     except (ValueError, RecordingError) as error:
@@ -433,27 +448,24 @@ def main(args: argparse.Namespace) -> int:
         return 2
     session = open_session(args)  # ZenohSetupError: said by the command line, exit 1
     try:
-        replay = capture(args, source, clock, to_cloud, session)
+        replay = capture(args, source, clock, to_cloud, session, tally)
     finally:
         session.close()
-    if replay.frames_read == 0 and replay.error is not None:
-        log.error("%s", replay.error)
-        return 2
-    if replay.learner_lost:
-        return 1
-    return 1 if source.live and replay.error is not None else 0  # a camera lost mid-stream
+    return exit_status(replay, source.live)
 
 
 def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
-            to_cloud: FrameToCloud, session: zenoh.Session) -> Replay:
+            to_cloud: FrameToCloud, session: zenoh.Session,
+            tally: CaptureTally | None = None) -> Replay:
     """Publish the source's frames on ``session`` until it ends or a stop signal, then the end
-    of stream; the replay (what was read, what went wrong). A file is paced by its learner
-    (`gngdt.services.pacing`) unless ``--realtime``."""
+    of stream; the replay (what was read, sent and refused, what went wrong). A file is paced by
+    its learner (`gngdt.services.pacing`) unless ``--realtime``."""
     paced = not source.live and not args.realtime
     publisher = CapturePublisher(session, args.cam, paced)
     token = session.liveliness().declare_token(alive_key(args.cam, CAPTURE))
     with lifecycle.graceful() as stop:
-        replay = Replay(source, args.loop, stop)
+        replay = Replay(source, args.loop, stop, tally)
+        replay.tally.warnings[:0] = source.assumptions
         pacing = wait_for_consumers(args, session, publisher, paced, stop)
         speed = ("live" if source.live else "as fast as possible" if clock.rate is None
                  else f"at {clock.rate:g}x the recorded rate")
@@ -466,10 +478,15 @@ def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
         finally:
             if pacing is not None:
                 pacing.close()
+        replay.frames_sent = frames_sent
+        replay.tally.judge_depth()  # a stream shorter than the check
         if not stop.is_set() or not args.loop:
             # with nothing sent, frame 0 is named and frames_sent = 0 says it never came
-            publisher.publish_end(frames_sent, max(frames_sent - 1, 0), source.path.name)
-            log.info("sent %d frames of %s, end of stream", frames_sent, args.recording)
+            publisher.publish_end(frames_sent, max(frames_sent - 1, 0), source.path.name,
+                                  replay.tally)
+            said = replay.tally.describe()
+            log.info("sent %d frames of %s, end of stream%s", frames_sent, args.recording,
+                     f"; {said}" if said else "")
     time.sleep(0.2)  # let BLOCK puts drain to the router before the session closes
     token.undeclare()
     publisher.close()
@@ -506,7 +523,7 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
     once the learner took the one before, the next frame read meanwhile); the number of frames
     sent."""
     frames_sent = 0  # also the next frame's sequence: only published frames are numbered
-    without_pose = 0
+    tally = replay.tally
     last_cloud = -1  # the sequence of the last cloud sent
     sensor_clock = RecordedClock() if pacing is not None else None
     for frame in replay:
@@ -516,14 +533,18 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         capture_time_ns = time.time_ns()
         sensor_time_ns = (None if sensor_clock is None
                           else sensor_clock.stamp(frame.timestamp_ns))
+        tally.check_depth(frame)
         try:
             positions, colors = to_cloud(frame)
         except ValueError as error:
-            log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
+            tally.refuse(f"{args.recording}: frame {frame.index}", str(error))
             continue
         if frame.pose_error:  # the reader warned; the cloud would not fit the map
             positions = colors = None
-            without_pose += 1
+            tally.no_cloud(f"frame {frame.index}", "no camera pose at its time")
+        elif len(positions) == 0:  # every pixel out of range: no depth, or another unit
+            positions = colors = None
+            tally.no_cloud(f"frame {frame.index}", no_points_reason(to_cloud.options))
         if pacing is not None and not wait_taken(pacing, last_cloud, replay, stop):
             break
         publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
@@ -533,9 +554,6 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         frames_sent += 1
     if pacing is not None:  # the end of stream after the last frame's learning
         wait_taken(pacing, last_cloud, replay, stop)
-    if without_pose:
-        log.warning("%d frames had no camera pose: their clouds were not published",
-                    without_pose)
     return frames_sent
 
 

@@ -199,11 +199,12 @@ def write_recording(
 def report_checks(checks: ImportChecks) -> bool:
     """Say what the import's checks found (depth range, poses); False when the poses are
     unusable (most frames rejected)."""
+    from gngdt.io.import_checks import depth_warning
+
     print(checks.depth.describe(), flush=True)
-    problem = checks.depth.problem()
-    if problem:
-        logger.warning("%s; check depth_scale (camera.json or --depth-scale: depth units per "
-                       "metre, 1000 for millimetres)", problem)
+    warning = depth_warning(checks.depth)
+    if warning:
+        logger.warning("%s", warning)
     report = checks.pose_report()
     if report is None:
         return True

@@ -79,14 +79,20 @@ def segment_source(source: FrameSource, profile: Profile, out: Path, *,
                    ) -> dict[str, Any]:
     """Segment every frame of ``source`` into ``out`` (label PNGs + summary.json, written as a
     whole or not at all); returns the summary."""
+    from gngdt.core.sensor.depth import DepthRange
     from gngdt.eval.report import to_jsonable
     from gngdt.io.errors import RecordingError
+    from gngdt.io.import_checks import depth_warning
     from gngdt.io.segment_frames import make_segmenter, segment_frames, timing_summary
     from gngdt.io.staged_directory import StagedDirectory
 
     staged = StagedDirectory(out, overwrite=overwrite)  # refuses a non-empty DIR before work
     log.info("checking %s (%s) ...", source.path, source.format)
-    total = source.check()
+    depth = DepthRange()
+    total = source.check(depth)
+    warnings = [*source.assumptions, *filter(None, [depth_warning(depth)])]
+    for warning in warnings:
+        log.warning("%s", warning)
     mode = "independent" if independent else "online"
     compile_seconds = compile_kernels(profile, seed)
     log.info("%d frames; segmenting %s with %s", total, mode, profile.path)
@@ -115,6 +121,7 @@ def segment_source(source: FrameSource, profile: Profile, out: Path, *,
             "intrinsics": {"fx": intrinsics.fx, "fy": intrinsics.fy, "cx": intrinsics.cx,
                            "cy": intrinsics.cy, "from": source.camera_note},
             "parameters": {**profile.as_dict(), "random_state": seed},
+            "warnings": warnings,
             "milliseconds": timing_summary([frame["milliseconds"] for frame in frames]),
             "compile_seconds": compile_seconds,
             "wall_seconds": time.perf_counter() - started,
@@ -169,6 +176,6 @@ def main(args: argparse.Namespace) -> int:
     print(f"wrote {summary['frames']} label images and {SUMMARY_NAME} to {args.out} "
           f"({summary['mode']}, {total['p50']:.0f} ms/frame p50, {total['p90']:.0f} p90; "
           f"kernels ready in {summary['compile_seconds']:.1f} s before the first frame)")
-    if source.intrinsics_assumed:
-        print(f"WARNING: intrinsics {source.camera_note}")
+    for warning in summary["warnings"]:
+        print(f"WARNING: {warning}")
     return 0

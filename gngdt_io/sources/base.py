@@ -14,10 +14,14 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from gngdt.io.errors import RecordingError
 from gngdt.io.frame import Frame
 from gngdt.io.mcap.limits import ReadLimits
+
+if TYPE_CHECKING:
+    from gngdt.core.sensor.depth import DepthRange
 
 #: colour and depth of one frame may differ by this much in a ROS 2 bag (half a 60 Hz period;
 #: gngdt's own recordings stamp both identically)
@@ -70,6 +74,9 @@ class FrameSource(ABC):
         self.path = Path(path) if not isinstance(path, Path) else path
         #: where the intrinsics come from (``"ASSUMED: ..."`` when they are guessed)
         self.camera_note = camera_note
+        #: camera parameters nothing gave, each a sentence naming the file or option that sets
+        #: them (`gngdt run`'s summary and `gngdt segment` warn with them)
+        self.assumptions: list[str] = []
 
     @property
     def intrinsics_assumed(self) -> bool:
@@ -84,10 +91,15 @@ class FrameSource(ABC):
         """One line for people: what is read."""
         return f"{self.path} ({self.format})"
 
-    def check(self) -> int:
-        """Read every frame once (nothing kept) so that bad input fails before any work;
-        returns the number of frames. RecordingError naming the file otherwise."""
-        count = sum(1 for _ in self.frames())
+    def check(self, depth: DepthRange | None = None) -> int:
+        """Read every frame once (nothing kept; their depth added to ``depth`` when given) so
+        that bad input fails before any work; returns the number of frames. RecordingError
+        naming the file otherwise."""
+        count = 0
+        for _, frame in self.frames():
+            count += 1
+            if depth is not None:
+                depth.add(frame.depth)
         if count == 0:
             raise RecordingError(self.path, None, "no frames")
         return count

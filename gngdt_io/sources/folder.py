@@ -16,7 +16,13 @@ from pathlib import Path
 
 from gngdt.io.errors import RecordingError
 from gngdt.io.frame import Frame
-from gngdt.io.images import DEFAULT_CAMERAS, FORMATS, iter_image_frames, load_camera
+from gngdt.io.images import (
+    DEFAULT_CAMERAS,
+    FORMATS,
+    camera_assumptions,
+    iter_image_frames,
+    load_camera,
+)
 from gngdt.io.sources.base import FrameSource, SourceOptions
 
 log = logging.getLogger(__name__)
@@ -43,8 +49,10 @@ class ImageFolderSource(FrameSource):
                     f"used: fx={camera.fx} fy={camera.fy} cx={camera.cx} cy={camera.cy} px, "
                     f"depth_scale={camera.depth_scale:g} units/m. Wrong intrinsics bend every "
                     "surface; add camera.json or pass --camera-json")
-            log.warning("%s", note)
         super().__init__(path, note)
+        self.assumptions = camera_assumptions(path, layout, self.camera_json, self.depth_scale)
+        for assumption in self.assumptions:
+            log.warning("%s", assumption)
 
     @staticmethod
     def accepts(path: Path) -> bool:

@@ -155,9 +155,11 @@ def test_a_folder_without_camera_json_warns_which_intrinsics_are_assumed(
     out = tmp_path / "out"
     assert gngdt(["segment", str(folder), "--out", str(out), "--params", str(small_profile)]) == 0
     warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
-    assert any("camera.json is missing" in w and "fx=525.0" in w and "cy=239.5" in w
+    assert any("camera.json is missing" in w and "fx=525 " in w and "cy=239.5" in w
                for w in warnings), warnings
-    assert "WARNING: intrinsics ASSUMED" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "WARNING: fx=525 fy=525 cx=319.5 cy=239.5 px assumed" in printed
+    assert "WARNING: depth_scale=1000 units per metre assumed" in printed
     summary = check_outputs(out, ["000000", "000001"], [f.depth for f in recorded_frames[:2]])
     assert summary["intrinsics"]["from"].startswith("ASSUMED")
     assert summary["intrinsics"]["fx"] == 525.0
