@@ -19,7 +19,7 @@ import time
 from collections import Counter
 from typing import TYPE_CHECKING
 
-from gngdt.schemas.wire import LEARNER, FrameStamp, alive_key, topic
+from gngdt.schemas.wire import LEARNER, FrameStamp, alive_key, learner_instance_key, topic
 
 if TYPE_CHECKING:
     import zenoh
@@ -51,10 +51,15 @@ class LearnerPacing:
         #: learners that went away while they had a frame, so the frame went with them
         self.frames_lost = 0
         self._comings = 0  # how many times the learner's token appeared
+        #: learners of the camera that announced themselves (their instance token): they are
+        #: starting (compiling their kernels) until their liveliness token comes
+        self._instances: set[str] = set()
         self._subscribers = [
             session.declare_subscriber(topic(camera, "learner/ack"), self._on_ack),
             session.liveliness().declare_subscriber(alive_key(camera, LEARNER), self._on_token,
                                                     history=True),
+            session.liveliness().declare_subscriber(learner_instance_key(camera),
+                                                    self._on_instance, history=True),
         ]
 
     def _on_ack(self, sample: zenoh.Sample) -> None:
@@ -80,22 +85,44 @@ class LearnerPacing:
             self._comings += self.learner_up
             self._changed.notify_all()
 
+    def _on_instance(self, sample: zenoh.Sample) -> None:
+        import zenoh
+
+        with self._changed:
+            if sample.kind == zenoh.SampleKind.PUT:
+                self._instances.add(str(sample.key_expr))
+            else:
+                self._instances.discard(str(sample.key_expr))
+            self._changed.notify_all()
+
     def wait_for_learner(self, timeout_s: float, stop: threading.Event) -> bool:
-        """Wait up to ``timeout_s`` for the camera's learner to be up (its liveliness token);
-        whether it is."""
-        deadline = time.monotonic() + timeout_s
-        said = time.monotonic()
+        """Wait up to ``timeout_s`` for the camera's learner to be up (its liveliness token),
+        and past it as long as a learner of the camera is starting (its instance token is
+        there: it compiles its kernels); whether it is up. Says every `PROGRESS_EVERY_S` what
+        it waits for."""
+        started = time.monotonic()
+        deadline = started + timeout_s
+        said = started
         with self._changed:
             while not self.learner_up and not stop.is_set():
                 now = time.monotonic()
-                if now >= deadline:
+                if now >= deadline and not self._instances:
                     break
                 if now - said >= PROGRESS_EVERY_S:
-                    log.info("waiting for a learner of camera %r (`gngdt learn --cam %s`), "
-                             "%.0f s more", self.camera, self.camera, deadline - now)
+                    log.info("%s (%.0f s so far)", self._waiting_for(deadline - now),
+                             now - started)
                     said = now
-                self._changed.wait(min(0.5, deadline - now))
+                self._changed.wait(0.5 if self._instances else min(0.5, deadline - now))
             return self.learner_up
+
+    def _waiting_for(self, left_s: float) -> str:
+        """What `wait_for_learner` waits for, in words."""
+        if self._instances:
+            return (f"waiting for the learner of camera {self.camera!r}: it is starting "
+                    "(compiling its kernels; its first run on a machine takes minutes on a busy "
+                    "one), and the file is sent once it takes frames")
+        return (f"waiting for a learner of camera {self.camera!r} (`gngdt learn --cam "
+                f"{self.camera}`), {left_s:.0f} s more (--wait-learner)")
 
     def wait_taken(self, sequence: int, stop: threading.Event) -> None:
         """Wait until the learner acknowledged frame ``sequence`` (or a stop signal), or came

@@ -118,7 +118,7 @@ def main(args: argparse.Namespace) -> int:
     from gngdt.io.checkpoints import CheckpointError, CheckpointLock
     from gngdt.io.profiles import format_parameters
     from gngdt.services.learner import checkpoints
-    from gngdt.services.learner.serve import serve, warm_up
+    from gngdt.services.learner.serve import LearnerInstances, serve, warm_up
 
     lock = None
     try:
@@ -135,14 +135,18 @@ def main(args: argparse.Namespace) -> int:
             learner = checkpoints.resume(args.checkpoint, args.cam, config)
         else:
             learner = FrameLearner(args.cam, config)
-        started = time.monotonic()
-        log.info("preparing the learning kernels (the first run on a machine compiles them "
-                 "with numba, 15-40 s; later runs load them from its cache in under a second)")
-        warm_up(config)
-        log.info("kernels ready in %.1f s", time.monotonic() - started)
         session = open_session(args)  # ZenohSetupError: said by the command line, exit 1
         try:
-            return serve(args, config, learner, session)
+            # announced before the kernels: a second learner of the camera is refused at once,
+            # and a capture reading a file waits for this one while it compiles
+            instances = LearnerInstances(session, args.cam)
+            started = time.monotonic()
+            log.info("preparing the learning kernels (the first run on a machine compiles them "
+                     "with numba, 15-40 s; later runs load them from its cache in under a "
+                     "second)")
+            warm_up(config)
+            log.info("kernels ready in %.1f s", time.monotonic() - started)
+            return serve(args, config, learner, session, instances)
         finally:
             time.sleep(0.1)  # let the last BLOCK puts reach the router
             session.close()

@@ -180,7 +180,8 @@ class LearnerService:
     """One camera's learner on a zenoh session: its subscribers, publishers and queryable."""
 
     def __init__(self, session: zenoh.Session, camera: str, config: LearnerConfig,
-                 learner: FrameLearner, checkpoint: Path | None = None) -> None:
+                 learner: FrameLearner, checkpoint: Path | None = None,
+                 instances: LearnerInstances | None = None) -> None:
         import zenoh
 
         self.camera = camera
@@ -190,7 +191,7 @@ class LearnerService:
         self.end = EndOfStream()
         self.latest = LatestTopology()
         self.latencies = LatencyWindow()
-        self.instances = LearnerInstances(session, camera)
+        self.instances = instances or LearnerInstances(session, camera)
         #: with tracking, every frame goes to the tracker thread (`start`); else latest wins
         self.frames = FrameQueue() if learner.tracking is not None else None
         self.handover = Handover()
@@ -485,9 +486,10 @@ class LearnerService:
 
 
 def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner,
-          session: zenoh.Session) -> int:
-    """Learn on ``session`` until stopped; checkpoint on the way out."""
-    service = LearnerService(session, args.cam, config, learner, args.checkpoint)
+          session: zenoh.Session, instances: LearnerInstances | None = None) -> int:
+    """Learn on ``session`` (as the learner ``instances`` announced, if it was) until stopped;
+    checkpoint on the way out."""
+    service = LearnerService(session, args.cam, config, learner, args.checkpoint, instances)
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
              config.options.samples_per_frame)
     try:
