@@ -47,6 +47,18 @@ REPUBLISH_SECONDS = 1.0
 MAX_KEYS = 256
 
 
+def websocket_url(host: str, port: int) -> str:
+    """The address a Foxglove client opens for a server listening on ``host:port``."""
+    from gngdt.io.outputs.rerun_sinks import url_host
+
+    return f"ws://{url_host(host)}:{port}"
+
+
+#: how to open a Foxglove WebSocket in Foxglove (the desktop app, or app.foxglove.dev)
+FOXGLOVE_STEPS = ("open it in Foxglove, the app or app.foxglove.dev: Open connection > Foxglove "
+                  "WebSocket")
+
+
 def check_bindable(host: str, port: int) -> None:
     """OSError naming ``host:port`` when a server could not listen there (a port in use, an
     address not of this machine); as the SDK's server does, with SO_REUSEADDR."""
@@ -103,8 +115,7 @@ class FoxgloveServer:
 
     @property
     def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"ws://{host}:{self.port}"
+        return websocket_url(self.host, self.port)
 
     def channel(self, topic: str, type_name: str) -> Any | None:
         """The channel of ``topic`` carrying ``type_name`` (advertised on first use); None when
@@ -184,8 +195,7 @@ class FoxgloveOutput(Output):
         return cls(host, port, args.foxglove_backlog)
 
     def describe(self) -> str:
-        return (f"serving Foxglove at {self.server.url} (Foxglove: Open connection > Foxglove "
-                "WebSocket)")
+        return f"serving Foxglove at {self.server.url} ({FOXGLOVE_STEPS} > {self.server.url})"
 
     def receive(self, sample: zenoh.Sample) -> None:
         key, encoding = str(sample.key_expr), str(sample.encoding)

@@ -43,7 +43,6 @@ log = logging.getLogger(__name__)
 
 #: most bytes waiting for the writer thread (~100 full 640x480 frames)
 DEFAULT_MAX_QUEUED_BYTES = 256 * 1024 * 1024
-DEFAULT_MAX_MCAP_MB = 4096
 #: messages are compressed and written a chunk at a time: what a failed write can lose at most
 DEFAULT_CHUNK_BYTES = 1024 * 1024
 DEFAULT_MAX_CAMERAS = 16
@@ -368,11 +367,6 @@ class McapOutput(Output):
                             "topology, scene, objects, status) into this MCAP file, which "
                             "Foxglove opens directly (rerun shows only its images and clouds); "
                             "<name>.1.mcap if it exists")
-        parser.add_argument("--max-mcap-mb", type=int, default=DEFAULT_MAX_MCAP_MB,
-                            metavar="MB", help="stop writing the MCAP (a complete file) once "
-                            f"it is this large and go on running (default {DEFAULT_MAX_MCAP_MB};"
-                            " 0: no cap); it stops too below --min-free-mb, or when a write "
-                            "fails, and stays readable")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> McapOutput | None:

@@ -26,13 +26,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from gngdt.io.outputs.base import Output, StreamSample, split_bind
+from gngdt.io.outputs.file_limits import FILE_LIMITS_TITLE, add_file_limit_arguments
 from gngdt.io.outputs.rerun_blueprint import EntityPaths, blueprint
 from gngdt.io.outputs.rerun_log import DisplayRates, RerunLog
 from gngdt.io.outputs.rerun_sinks import (
     DEFAULT_BIND,
     DEFAULT_GRPC_PORT,
-    DEFAULT_MAX_RRD_MB,
-    DEFAULT_MIN_FREE_MB,
     DEFAULT_WEB_PORT,
 )
 from gngdt.schemas.wire import DEFAULT_CAMERA
@@ -237,14 +236,8 @@ class RerunOutput(Output):
         add_viewer_arguments(parser)
         add_rate_arguments(parser.add_argument_group(RATES_TITLE))
         add_serve_arguments(parser)
+        add_file_limit_arguments(parser.add_argument_group(FILE_LIMITS_TITLE))
         limits = parser.add_argument_group("limits of the rerun output")
-        limits.add_argument("--max-rrd-mb", type=int, default=DEFAULT_MAX_RRD_MB, metavar="MB",
-                            help="stop writing the .rrd (a complete file) once it is this large "
-                            f"and go on running (default {DEFAULT_MAX_RRD_MB}; 0: no cap)")
-        limits.add_argument("--min-free-mb", type=int, default=DEFAULT_MIN_FREE_MB, metavar="MB",
-                            help="stop writing the .rrd (and the --mcap file) when less than "
-                            f"this is free on its disk (default {DEFAULT_MIN_FREE_MB}); a failed "
-                            "write stops it too")
         limits.add_argument("--max-topology-nodes", type=int, default=DEFAULT_MAX_TOPOLOGY_NODES,
                             metavar="N", help="largest topology logged, in nodes (default "
                             f"{DEFAULT_MAX_TOPOLOGY_NODES:,}; a learner sends its --max-nodes)")

@@ -135,6 +135,31 @@ def exit_now_if_stuck(stuck: bool, code: int) -> int:
     os._exit(code)
 
 
+def client_host(bind: str) -> str:
+    """Where a client on this machine reaches a server bound to ``bind`` (any address:
+    loopback)."""
+    return "127.0.0.1" if bind in ("0.0.0.0", "::", "") else bind
+
+
+def url_host(bind: str) -> str:
+    """`client_host` as a URL holds it (an IPv6 address in brackets)."""
+    host = client_host(bind)
+    return f"[{host}]" if ":" in host else host
+
+
+def grpc_url(bind: str, grpc_port: int) -> str:
+    """The gRPC server a viewer connects to (``rerun --connect URL``)."""
+    return f"rerun+http://{url_host(bind)}:{grpc_port}/proxy"
+
+
+def web_viewer_url(bind: str, grpc_port: int, web_port: int) -> str:
+    """The page to open in a browser: the web viewer, connected to the gRPC server (as
+    ``rerun --serve-web`` words it)."""
+    from urllib.parse import quote
+
+    return f"http://{url_host(bind)}:{web_port}?url={quote(grpc_url(bind, grpc_port), safe='')}"
+
+
 class ViewerServer:
     """``rerun --serve-web`` bound to one address: a gRPC proxy the logger logs to, and the web
     viewer; a child process that dies with this one."""
@@ -154,15 +179,15 @@ class ViewerServer:
 
     @property
     def grpc_url(self) -> str:
-        return f"rerun+http://{self._host}:{self.grpc_port}/proxy"
+        return grpc_url(self.bind, self.grpc_port)
 
     @property
     def web_url(self) -> str:
-        return f"http://{self._host}:{self.web_port}"
+        return web_viewer_url(self.bind, self.grpc_port, self.web_port)
 
     @property
     def _host(self) -> str:
-        return "127.0.0.1" if self.bind in ("0.0.0.0", "::") else self.bind
+        return client_host(self.bind)
 
     def wait_ready(self, timeout_s: float = 60.0) -> None:
         """Until both ports accept connections; ``OSError`` with rerun's output if it failed."""

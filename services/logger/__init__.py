@@ -16,13 +16,15 @@ import argparse
 import logging
 from typing import TYPE_CHECKING
 
+from gngdt.io.outputs.file_limits import FILE_LIMITS_TITLE, add_file_limit_arguments
 from gngdt.io.outputs.rerun_output import RATES_TITLE, add_rate_arguments
 from gngdt.services.logger.cameras import DEFAULT_MAX_CAMERAS
 from gngdt.services.logger.inbox import DEFAULT_QUEUE_MB
+from gngdt.services.plumbing.report import add_report_argument
 from gngdt.services.plumbing.session import add_zenoh_arguments
 from gngdt.services.plumbing.settings import OptionGroup, add_settings_argument
 
-__all__ = ["DISPLAY", "EXAMPLES", "SETTINGS", "add_arguments", "main"]
+__all__ = ["DISPLAY", "EXAMPLES", "FILE_LIMITS", "SETTINGS", "add_arguments", "main"]
 
 if TYPE_CHECKING:
     from gngdt.io.outputs import Output
@@ -42,8 +44,10 @@ EXAMPLES = """examples:
 #: what the logger puts into the .rrd, declared once (by the rerun output) for `gngdt log` and
 #: `gngdt run`
 DISPLAY = OptionGroup(RATES_TITLE, add_rate_arguments)
+#: how large its files may grow, and the free disk they leave (declared by the rerun output)
+FILE_LIMITS = OptionGroup(FILE_LIMITS_TITLE, add_file_limit_arguments)
 #: the option groups a settings file (``--settings``) may hold
-SETTINGS = [DISPLAY]
+SETTINGS = [DISPLAY, FILE_LIMITS]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -65,6 +69,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     limits.add_argument("--max-queue-mb", type=int, default=DEFAULT_QUEUE_MB, metavar="MB",
                         help="messages held while the logger is busy, in MB (default "
                         f"{DEFAULT_QUEUE_MB}); the oldest make room")
+    add_report_argument(parser, "each output, where it went and why it stopped early, if it "
+                        "did")
     add_settings_argument(parser)
     add_zenoh_arguments(parser)
 

@@ -11,12 +11,10 @@ from gngdt.services.logger.cameras import Cameras, CaptureWatch
 from gngdt.services.logger.dispatch import Dispatcher
 from gngdt.services.logger.inbox import Inbox
 from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.report import write_report
 from gngdt.services.plumbing.session import ZenohSetupError, open_session
 
 log = logging.getLogger(__name__)
-
-#: the logger's liveliness token (``gngdt run`` waits for it)
-
 
 def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
     """Subscribe to ``gngdt/**`` and drive ``outputs`` until stopped or every stream is over;
@@ -61,6 +59,10 @@ def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
     log.info("logger done: %d malformed, %d dropped, %d oversized, %d refused (cameras beyond "
              "--max-cameras)%s", dispatcher.malformed, inbox.dropped, inbox.oversized,
              dispatcher.cameras.refused, f"; {stopped}" if stopped else "")
+    write_report(getattr(args, "report", None), {
+        "outputs": [{"output": type(output).__name__, "where": output.describe(),
+                     "stopped_early": output.stopped_early()} for output in outputs],
+        "malformed": dispatcher.malformed, "dropped": inbox.dropped})
     return 0
 
 

@@ -268,8 +268,9 @@ def open_config(config: zenoh.Config, what: str = "session",
             if waited >= wait_s:
                 raise ZenohSetupError(_open_failure(config, what, error)) from error
             if attempts % 20 == 0:  # the first failure, then every ten seconds
-                log.warning("no zenoh router at %s yet (%s); retrying for %.0f s more",
-                            ", ".join(_endpoints(config)), _short(error), wait_s - waited)
+                log.warning("no zenoh router at %s yet (%s); retrying for %.0f s more (%s)",
+                            ", ".join(_endpoints(config)), _short(error), wait_s - waited,
+                            router_advice(what))
             attempts += 1
             time.sleep(min(0.5, max(wait_s - waited, 0.0)))
             continue
@@ -291,8 +292,38 @@ def _open_failure(config: zenoh.Config, what: str, error: Exception) -> str:
                 "--listen" if "in use" in reason else "check --listen and --zenoh-config")
         return f"cannot open a zenoh router on {listen}: {reason}; {hint}"
     endpoints = ", ".join(_endpoints(config)) or "no endpoint"
-    return (f"cannot open zenoh {what} (router {endpoints}): {reason}; is a router running? "
-            "start one with `gngdt router`")
+    return f"cannot open zenoh {what} (router {endpoints}): {reason}; {router_advice(what)}"
+
+
+#: the session that joins ROS 2's router (`gngdt ros2 --ros2-connect`, `gngdt run --ros2`)
+ROS2_SESSION = "ROS 2 session"
+
+
+def router_advice(what: str = "session") -> str:
+    """What to start when no router answers, as docs/ros2.md says: ROS 2's own router for the
+    ROS 2 side (rmw_zenohd holds port 7447: a `gngdt router` there would take its place), a
+    `gngdt router` otherwise."""
+    if what == ROS2_SESSION:
+        return ("is ROS 2's router running there? start it first, `ros2 run rmw_zenoh_cpp "
+                "rmw_zenohd` (it listens on tcp/[::]:7447), or name the endpoint it listens on; "
+                "`gngdt router` is not ROS 2's router (docs/ros2.md)")
+    return ("is a router running? start one with `gngdt router`; beside ROS 2, rmw_zenohd is "
+            "the router (it holds 7447: connect to it, do not start `gngdt router` there; "
+            "docs/ros2.md)")
+
+
+def endpoint_listening(endpoint: str, timeout_s: float = 2.0) -> bool | None:
+    """Whether something accepts TCP connections at a ``tcp/HOST:PORT`` endpoint (None: another
+    kind of endpoint, which this cannot tell)."""
+    kind, _, address = endpoint.partition("/")
+    host, _, port = address.rpartition(":")
+    if kind != "tcp" or not port.isdigit() or not host:
+        return None
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
+            return True
+    except OSError:
+        return False
 
 
 def _setting(config: zenoh.Config, key: str) -> Any:

@@ -37,7 +37,8 @@ from gngdt.io.mcap.limits import ReadLimits
 from gngdt.io.sources.base import DEFAULT_MAX_SKEW_MS
 from gngdt.schemas.wire import BRIDGE, CAPTURE, DEFAULT_CAMERA, alive_key, topic
 from gngdt.services.capture import add_cloud_arguments, add_sampling_seed_argument
-from gngdt.services.plumbing.session import add_zenoh_arguments
+from gngdt.services.plumbing.report import add_report_argument, write_report
+from gngdt.services.plumbing.session import DEFAULT_ENDPOINT, add_zenoh_arguments
 
 if TYPE_CHECKING:
     import zenoh
@@ -110,6 +111,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         f"{limits.max_held_bytes >> 20})")
     add_cloud_arguments(camera)
     add_sampling_seed_argument(camera)
+    add_report_argument(parser, "the node, the router its ROS 2 side used, its topics and the "
+                        "messages it published")
     add_zenoh_arguments(parser)
 
 
@@ -183,9 +186,9 @@ def main(args: argparse.Namespace) -> int:
 
 def open_ros2_session(endpoints: list[str], wait_s: float) -> zenoh.Session:
     """A client session of the ROS 2 router (loopback defaults: listening nowhere, no scouting)."""
-    from gngdt.services.plumbing.session import client_config, open_config
+    from gngdt.services.plumbing.session import ROS2_SESSION, client_config, open_config
 
-    return open_config(client_config(endpoints), what="ROS 2 session", wait_s=wait_s)
+    return open_config(client_config(endpoints), what=ROS2_SESSION, wait_s=wait_s)
 
 
 def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, domain: int,
@@ -195,7 +198,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
     from gngdt.io.ros2.node import Ros2Node
     from gngdt.services.plumbing import lifecycle
     from gngdt.services.ros2.inbound import CameraTopics, RosToGngdt
-    from gngdt.services.ros2.outbound import GngdtToRos
+    from gngdt.services.ros2.outbound import GngdtToRos, ros_topics
 
     node = Ros2Node(ros, f"gngdt_{args.cam}", domain_id=domain)
     outbound = GngdtToRos(gngdt, node, args.cam, args.camera_frame or args.cam,
@@ -232,3 +235,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
             inbound.close()
         node.close()
         time.sleep(0.1)  # let the undeclarations reach the router
+        write_report(args.report, {
+            "node": f"/gngdt_{args.cam}", "domain": domain,
+            "router": args.ros2_connect or args.zenoh_connect or [DEFAULT_ENDPOINT],
+            "topics": list(ros_topics(args.cam).values()), "messages_out": outbound.published})
