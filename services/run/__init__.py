@@ -6,11 +6,13 @@ off) and admits only this run's children: each authenticates with a user and pas
 the run for its role (zenoh's usrpwd; `RunAccess`), and the router's access control lets each
 role put only on its own streams, so a neighbour on the machine can neither publish into the
 run (a forged end of stream) nor listen, and no service can speak for another. ``run`` starts
-the learner and the logger, waits for their liveliness tokens, starts the capture, waits for
-the end of the stream, lets the learner finish its last frame and the logger flush, then
-prints a summary. SIGINT, SIGTERM and SIGHUP stop
-everything cleanly, and the children die with ``run`` however it ends. Exit status is non-zero
-when the recording is unusable, a service failed, or the stream ended before the recording did.
+the learner and the logger, waits for their liveliness tokens, says where its servers are,
+starts the capture, waits for the end of the stream, lets the learner finish its last frame and
+the logger flush (or serve on, ``--linger``), then prints a summary: every frame sent accounted
+for, every refusal with its reason (capture's from its end of stream, the learner's from its
+acknowledgements), the files and servers with their addresses, and warnings. SIGINT, SIGTERM
+and SIGHUP stop everything cleanly, and the children die with ``run`` however it ends. The exit
+status says which service said no (`gngdt.services.run.verdict`).
 """
 
 from __future__ import annotations
@@ -18,17 +20,12 @@ from __future__ import annotations
 import argparse
 import logging
 import shutil
-import signal
-import subprocess
 import sys
 import tempfile
 import threading
-import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any
+from typing import Any
 
-from gngdt.core.learner.warm_up import PROGRESS_PHRASE
 from gngdt.io.deproject import RUN_POINT_CAP
 from gngdt.io.outputs.rerun_output import add_serve_arguments
 from gngdt.schemas.wire import (
@@ -45,16 +42,35 @@ from gngdt.services.capture import add_source_arguments
 from gngdt.services.learner import SETTINGS as LEARNER_SETTINGS
 from gngdt.services.logger import SETTINGS as LOGGER_SETTINGS
 from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.report import read_report
 from gngdt.services.plumbing.roles import RunAccess
 from gngdt.services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
-from gngdt.services.plumbing.settings import OptionGroup, write_settings
-from gngdt.services.run.plan import RunPlan, drop_unwritten, plan_run
-from gngdt.services.run.summary import file_size, format_summary, mostly_rejected, recorded_frames
+from gngdt.services.plumbing.settings import OptionGroup
+from gngdt.services.run import live
+from gngdt.services.run.children import (
+    Child,
+    Pipeline,
+    StartupProgress,
+    cpu_ticks,
+    wait_for_startup,
+    wait_until,
+)
+from gngdt.services.run.observe import Observed
+from gngdt.services.run.plan import ROS2_ROUTER, RunPlan, drop_unwritten, plan_run
+from gngdt.services.run.summary import RunFacts, file_size, format_summary, recorded_frames
+from gngdt.services.run.verdict import (
+    DONE,
+    EXIT_STATUS_HELP,
+    FAILED,
+    INPUT_UNUSABLE,
+    INTERRUPTED,
+    RunOutcome,
+    exit_status,
+)
 
-if TYPE_CHECKING:
-    import zenoh
-
-    from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
+__all__ = ["CHILD_SETTINGS", "EXAMPLES", "Child", "Observed", "Pipeline", "RunAccess",
+           "StartupProgress", "add_arguments", "child_settings", "cpu_ticks", "main",
+           "wait_for_startup", "wait_until"]
 
 log = logging.getLogger(__name__)
 
@@ -69,10 +85,10 @@ EXAMPLES = """examples:
   gngdt run session.db3 --foxglove                   # live in Foxglove at ws://127.0.0.1:8765
   gngdt run recordings/tabletop.mcap --ros2          # + ROS 2 topics, via rmw_zenohd on 7447
   gngdt run walk.mcap --track                        # camera poses estimated, not read
-"""
+  gngdt run recordings/tabletop.mcap --serve --linger   # the web viewer serves on until Ctrl-C
 
-#: where `--ros2` finds ROS 2 by default: rmw_zenohd listens there
-ROS2_ROUTER = "tcp/127.0.0.1:7447"
+""" + EXIT_STATUS_HELP
+
 #: each service's option groups: `gngdt run` has their options and hands each service its own
 CHILD_SETTINGS: dict[str, list[OptionGroup]] = {
     "capture": CAPTURE_SETTINGS, "learn": LEARNER_SETTINGS, "log": LOGGER_SETTINGS}
@@ -95,6 +111,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--foxglove", action="store_true",
                         help="also serve every stream live to Foxglove (WebSocket at --bind, "
                         "port 8765 unless --bind names one)")
+    live.add_linger_argument(parser)
     parser.add_argument("--overwrite", action="store_true",
                         help="replace an existing --save or --mcap file (default: refused)")
     parser.add_argument("--cam", default=DEFAULT_CAMERA, help="camera name in the topics")
@@ -115,204 +132,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             options.add_to(parser)
 
 
-@dataclass(eq=False)  # a process: equal only to itself (and hashable)
-class Child:
-    """One service process; its stderr goes to a file whose tail is shown when it fails."""
-
-    name: str
-    process: subprocess.Popen
-    stderr_path: Path
-    stderr_file: IO[bytes]
-
-    def stderr_tail(self, lines: int = 20) -> str:
-        text = self.stderr_path.read_text(errors="replace").splitlines()
-        return "\n".join(text[-lines:])
-
-    def interrupt(self) -> None:
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-
-    def stop(self, timeout_s: float) -> int:
-        """Wait for the process, escalating SIGINT -> SIGKILL after ``timeout_s``."""
-        try:
-            return self.process.wait(timeout_s)
-        except subprocess.TimeoutExpired:
-            self.interrupt()
-        try:
-            return self.process.wait(10.0)
-        except subprocess.TimeoutExpired:
-            log.error("%s did not stop; killing it", self.name)
-            self.process.kill()
-            return self.process.wait()
-
-
-@dataclass
-class Observed:
-    """What ``run`` hears on its own router session: liveliness, status and eos."""
-
-    lock: threading.Lock = field(default_factory=threading.Lock)
-    alive: set[str] = field(default_factory=set)
-    status: LearnerStatusInfo | None = None
-    end: StreamEndInfo | None = None
-
-    def on_liveliness(self, sample: zenoh.Sample) -> None:
-        import zenoh
-
-        key = str(sample.key_expr)
-        with self.lock:
-            if sample.kind == zenoh.SampleKind.PUT:
-                self.alive.add(key)
-            else:
-                self.alive.discard(key)
-
-    def on_status(self, sample: zenoh.Sample) -> None:
-        from gngdt.schemas.messages import MessageError
-        from gngdt.schemas.status import decode_status
-
-        try:
-            status = decode_status(sample.payload.to_bytes())
-        except MessageError:
-            return
-        with self.lock:
-            self.status = status
-
-    def on_eos(self, sample: zenoh.Sample) -> None:
-        from gngdt.schemas.messages import MessageError
-        from gngdt.schemas.status import decode_stream_end
-
-        try:
-            end = decode_stream_end(sample.payload.to_bytes())
-        except MessageError:
-            return
-        with self.lock:
-            self.end = end
-
-    def has_alive(self, prefix: str) -> bool:
-        with self.lock:
-            return any(key.startswith(prefix) for key in self.alive)
-
-
-
-
-class Pipeline:
-    """The child processes of one run."""
-
-    def __init__(self, access: RunAccess, log_dir: Path, log_level: str) -> None:
-        self.access = access
-        self.log_dir = log_dir
-        self.log_level = log_level
-        self.children: list[Child] = []
-        self.interrupted = False
-
-    def start(self, name: str, arguments: list[str],
-              settings: dict[str, Any] | None = None) -> Child:
-        """Start the service ``name`` with ``arguments`` and its ``settings`` (its options'
-        values: a file beside its log, `gngdt.services.plumbing.settings`)."""
-        if settings is not None:
-            path = write_settings(self.log_dir / f"{name}.settings.json", settings)
-            arguments = [*arguments, "--settings", str(path)]
-        # -P: the user's current folder is not put first on the children's import path
-        command = [sys.executable, "-P", "-m", "gngdt.services.cli", name, *arguments,
-                   "--zenoh-config", str(self.access.client_file(name)),
-                   "--log-level", self.log_level]
-        stderr_path = self.log_dir / f"{name}.log"
-        stderr_file = open(stderr_path, "wb")  # closed in Pipeline.close()
-        env = lifecycle.child_environment()  # the child dies with this process
-        log.debug("starting %s", " ".join(command))
-        process = subprocess.Popen(command, stdout=stderr_file, stderr=subprocess.STDOUT,
-                                   stdin=subprocess.DEVNULL, env=env, start_new_session=True)
-        child = Child(name, process, stderr_path, stderr_file)
-        self.children.append(child)
-        return child
-
-    def failed(self) -> Child | None:
-        """The first child that exited with an error, if any (not counting our own SIGINT)."""
-        interrupted_codes = (130, -signal.SIGINT) if self.interrupted else ()
-        for child in self.children:
-            code = child.process.poll()
-            if code is not None and code != 0 and code not in interrupted_codes:
-                return child
-        return None
-
-    def interrupt_all(self) -> None:
-        self.interrupted = True
-        for child in self.children:
-            child.interrupt()
-
-    def close(self) -> None:
-        for child in self.children:
-            if child.process.poll() is None:
-                child.process.kill()
-                child.process.wait()
-            child.stderr_file.close()
-
-
-def wait_until(condition, timeout_s: float, stop: threading.Event, pipeline: Pipeline) -> bool:
-    """Poll ``condition`` until true; False on timeout, stop request or a failed child."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline and not stop.is_set() and pipeline.failed() is None:
-        if condition():
-            return True
-        time.sleep(0.05)
-    return bool(condition())
-
-
-class StartupProgress:
-    """Whether a starting child is making progress: the CPU time it used, the lines it logged
-    (its start-up steps, e.g. "compiling kernels 2/4", are shown as they come)."""
-
-    def __init__(self, child: Child) -> None:
-        self.child = child
-        self.cpu_ticks = -1
-        self.log_bytes = 0
-        self.last_progress = time.monotonic()
-
-    def advanced(self) -> bool:
-        """Did the child use CPU or log anything since the last call? New start-up steps in its
-        log are shown."""
-        ticks = cpu_ticks(self.child.process.pid)
-        size = self.child.stderr_path.stat().st_size if self.child.stderr_path.exists() else 0
-        moved = ticks != self.cpu_ticks or size != self.log_bytes
-        if size > self.log_bytes:
-            with open(self.child.stderr_path, "rb") as file:
-                file.seek(self.log_bytes)
-                for line in file.read(size - self.log_bytes).decode(errors="replace").splitlines():
-                    if PROGRESS_PHRASE in line:
-                        log.info("%s: %s", self.child.name,
-                                 line[line.index(PROGRESS_PHRASE):])
-        self.cpu_ticks, self.log_bytes = ticks, size
-        if moved:
-            self.last_progress = time.monotonic()
-        return moved
-
-
-def cpu_ticks(pid: int) -> int:
-    """CPU time a process has used (user + system, in clock ticks; Linux /proc), -1 if gone."""
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return -1
-    return int(fields[11]) + int(fields[12])
-
-
-def wait_for_startup(starting: dict[Child, str], observed: Observed, silence_s: float,
-                     stop: threading.Event, pipeline: Pipeline) -> Child | None:
-    """Wait until every child in ``starting`` has declared its liveliness token, as long as each
-    keeps making progress; the first child silent for ``silence_s`` (None: all came up, or a
-    stop signal or a failed child ended the wait)."""
-    progress = {child: StartupProgress(child) for child in starting}
-    while not stop.is_set() and pipeline.failed() is None:
-        waiting = [child for child, token in starting.items() if not observed.has_alive(token)]
-        if not waiting:
-            return None
-        for child in waiting:
-            watch = progress[child]
-            if not watch.advanced() and time.monotonic() - watch.last_progress > silence_s:
-                return child
-        time.sleep(0.1)
-    return None
-
-
 def child_settings(args: argparse.Namespace, service: str, veil_ratio: float | None = None
                    ) -> dict[str, Any]:
     """The options ``service`` runs with: its option groups' values as the run parsed them,
@@ -331,44 +150,30 @@ def child_settings(args: argparse.Namespace, service: str, veil_ratio: float | N
     return values
 
 
-def ros2_arguments(args: argparse.Namespace) -> list[str]:
-    """The ROS 2 bridge's command line under ``run --ros2``: results out, no camera input."""
+def ros2_arguments(args: argparse.Namespace, report: Path) -> list[str]:
+    """The ROS 2 bridge's command line under ``run --ros2``: results out, no camera input; what
+    it did into ``report``."""
     return ["--cam", args.cam, "--no-input", "--ros2-connect", args.ros2,
-            "--router-wait", str(args.startup_timeout)]
+            "--router-wait", str(args.startup_timeout), "--report", str(report)]
 
 
 def logger_arguments(args: argparse.Namespace, rrd_path: Path | None,
-                     mcap_path: Path | None = None) -> list[str]:
-    """Where the logger writes and serves (the run reserved its paths: ``--overwrite``)."""
-    arguments = ["--overwrite"]
+                     mcap_path: Path | None = None, report: Path | None = None) -> list[str]:
+    """Where the logger writes and serves (the run reserved its paths: ``--overwrite``), and
+    what it did into ``report``; with ``--linger`` its servers outlive the stream."""
+    arguments = ["--overwrite", *(["--report", str(report)] if report else [])]
     if mcap_path is not None:
         arguments += ["--mcap", str(mcap_path)]
+    if args.linger is not None:
+        arguments.append("--keep-running")  # until the run tells it to stop
     if args.connect:
         return [*arguments, "--connect", *(["--url", args.url] if args.url else [])]
     if args.foxglove:
         arguments += ["--foxglove", "--bind", args.bind]
     if args.serve:
-        return [*arguments, "--serve", "--keep-running", "--bind", args.bind, "--grpc-port",
+        return [*arguments, "--serve", "--bind", args.bind, "--grpc-port",
                 str(args.grpc_port), "--web-port", str(args.web_port)]
     return [*arguments, "--save", str(rrd_path)]  # (the run reserved its paths: --overwrite)
-
-
-def learned_nothing(outcome: RunOutcome) -> bool:
-    """Whether the stream ended without the learner learning a single frame (issue 24.6: depth
-    in the wrong unit leaves every cloud empty)."""
-    return (outcome.end is not None and outcome.status is None and outcome.failure is None
-            and not outcome.interrupted)
-
-
-@dataclass
-class RunOutcome:
-    """How a run went: what the run's own router heard, and which service failed."""
-
-    status: LearnerStatusInfo | None
-    end: StreamEndInfo | None
-    early_end: str
-    failure: Child | None
-    interrupted: bool
 
 
 def run_pipeline(args: argparse.Namespace, plan: RunPlan, log_dir: Path) -> RunOutcome:
@@ -380,13 +185,15 @@ def run_pipeline(args: argparse.Namespace, plan: RunPlan, log_dir: Path) -> RunO
     declared = [
         router.liveliness().declare_subscriber(ALL_KEYS, observed.on_liveliness, history=True),
         router.declare_subscriber(topic(args.cam, "learner/status"), observed.on_status),
+        router.declare_subscriber(topic(args.cam, "learner/ack"), observed.on_ack),
         router.declare_subscriber(topic(args.cam, "eos"), observed.on_eos),
     ]
     pipeline = Pipeline(access, log_dir, args.log_level)
     try:
         with lifecycle.graceful() as stop:
-            early_end = supervise(args, pipeline, observed, stop, plan.rrd_path,
-                                  plan.veil_ratio, plan.mcap_path)
+            early_end, lingered = supervise(args, pipeline, observed, stop, plan)
+        # a stop while the servers lingered ends the lingering, not the run's work
+        interrupted = stop.is_set() and lingered is None
         failure = pipeline.failed()
     finally:
         pipeline.close()
@@ -395,31 +202,65 @@ def run_pipeline(args: argparse.Namespace, plan: RunPlan, log_dir: Path) -> RunO
         router.close()
         access.forget()
     with observed.lock:
-        status, end = observed.status, observed.end
-    if stop.is_set():
+        status, end, acks = observed.status, observed.end, observed.acks
+    if interrupted:
         early_end = early_end or f"interrupted ({lifecycle.stop_reason()})"
-    return RunOutcome(status, end, early_end, failure, stop.is_set())
+    return RunOutcome(status, end, early_end, failure, interrupted, acks,
+                      read_report(log_dir / "log.report.json"),
+                      read_report(log_dir / "ros2.report.json"), lingered)
 
 
-def report(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome) -> None:
-    """Print the run's summary (and a failed service's last words)."""
-    outputs = [f"  in the .rrd:      {plan.rates.describe()}"]
-    if plan.rrd_path is not None:
-        outputs[0:0] = [f"  .rrd size:        {file_size(plan.rrd_path)}"]
-    if plan.mcap_path is not None:
-        outputs.append(f"mcap:               {plan.mcap_path} ({file_size(plan.mcap_path)}; "
-                       "every stream, for Foxglove)")
+def report(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome, code: int) -> None:
+    """Print the run's summary (and a failed service's last words); ``code``: its exit
+    status."""
+    facts = RunFacts(outcome.status, outcome.end, outcome.acks, plan.destination,
+                     recorded_frames(args.recording), outcome.early_end,
+                     output_lines(args, plan, outcome, code),
+                     plan.profile.model_value("max_nodes"), plan.mode, plan.paced,
+                     [stop_warning(output) for output in outcome.stopped_outputs])
     failure = outcome.failure
     try:  # after a SIGHUP the terminal may be gone: nothing more to say then
-        print(format_summary(outcome.status, outcome.end, plan.destination,
-                             recorded_frames(args.recording), outcome.early_end, outputs,
-                             plan.profile.model_value("max_nodes"), plan.mode),
-              flush=True)
+        print(format_summary(facts), flush=True)
         if failure is not None:
             print(f"\n{failure.name} failed (exit {failure.process.returncode}):\n"
                   f"{failure.stderr_tail()}", file=sys.stderr)
     except OSError:
         pass
+
+
+def output_lines(args: argparse.Namespace, plan: RunPlan, outcome: RunOutcome,
+                 code: int) -> list[str]:
+    """The summary's lines on what the run wrote and served: the .rrd (or what the viewer was
+    given), the MCAP, the live servers' addresses, the ROS 2 bridge; a failed run's files are
+    said to be partial, or removed."""
+    what = "in the .rrd:" if plan.rrd_path is not None else "to the viewer:"
+    lines = [f"  {what:<18}{plan.rates.describe()}"]
+    if plan.rrd_path is not None:  # (what a removed file held is not said)
+        size = f"  .rrd size:        {kept_file(plan.rrd_path, code)}"
+        lines = [size, *lines] if plan.rrd_path.is_file() else [size]
+    if plan.mcap_path is not None:
+        lines.append(f"mcap:               {plan.mcap_path} ({kept_file(plan.mcap_path, code)}; "
+                     "every stream, for Foxglove)")
+    lines += live.summary_lines(live.live_outputs(args), outcome.lingered, plan.live)
+    if args.ros2:
+        lines.append(live.ros2_line(outcome.ros2_report, args.ros2))
+    return lines
+
+
+def kept_file(path: Path, code: int) -> str:
+    """A file's size, and what a run that ended with ``code`` left of it: a failed run's
+    file is partial, or removed when the learner learned no frame (`drop_unwritten`)."""
+    if not path.is_file():
+        return "not written" if code in (DONE, INTERRUPTED) else \
+            "removed: the run failed and the learner learned no frame"
+    return file_size(path) + ("; partial: the run failed, it holds what came until then"
+                              if code == FAILED else "")
+
+
+def stop_warning(output: dict[str, Any]) -> str:
+    """The summary's warning on an output that stopped writing before the end."""
+    return (f"{output['where']} stopped early: {output['stopped_early']}; what came before is "
+            "kept, complete and readable; nothing after it")
 
 
 def main(args: argparse.Namespace) -> int:
@@ -429,34 +270,24 @@ def main(args: argparse.Namespace) -> int:
         plan = plan_run(args)
     except (RecordingError, ValueError, OSError) as error:
         log.error("%s", error)
-        return 2
+        return INPUT_UNUSABLE
     log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))  # 0700: holds the run's password
     try:
         outcome = run_pipeline(args, plan, log_dir)
     except (ZenohSetupError, StartupTimeout) as error:
         if isinstance(error, ZenohSetupError):
             log.error("%s", error)
+        drop_unwritten(plan, everything=True)
         return 1
-    finally:
-        drop_unwritten(plan)
-    report(args, plan, outcome)
-    if outcome.failure is not None:
-        failure = outcome.failure
-        return 2 if failure.name == "capture" and failure.process.returncode == 2 else 1
-    shutil.rmtree(log_dir, ignore_errors=True)
-    if outcome.interrupted:
-        return 130
-    if learned_nothing(outcome):
-        log.error("the learner learned nothing: no frame's cloud had a point it could learn "
-                  "(depth in another unit than millimetres? `gngdt record images` prints the "
-                  "depth range it found)")
-        return 1
-    if mostly_rejected(outcome.status):
-        log.error("most frames were not learned: their camera poses are out of bounds or "
-                  "contradict their depth (see 'poses rejected' above; `gngdt record images "
-                  "--poses` names the usual misreadings of a pose file)")
-        return 1
-    return 1 if outcome.early_end else 0
+    code, why = exit_status(outcome)
+    drop_unwritten(plan, everything=code not in (DONE, INTERRUPTED)
+                   and not outcome.acks.outcomes["learned"])
+    report(args, plan, outcome, code)
+    if why:
+        log.error("%s", why)
+    if outcome.failure is None:
+        shutil.rmtree(log_dir, ignore_errors=True)
+    return code
 
 
 class StartupTimeout(Exception):
@@ -464,22 +295,21 @@ class StartupTimeout(Exception):
 
 
 def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
-              stop: threading.Event, rrd_path: Path | None,
-              veil_ratio: float | None = None, mcap_path: Path | None = None) -> str:
-    """Start the services and see the stream through; why it ended early, or ``""``."""
+              stop: threading.Event, plan: RunPlan) -> tuple[str, float | None]:
+    """Start the services and see the stream through; why it ended early (or ``""``), and how
+    long the servers served after a file's end (None: they did not)."""
     log.info("starting the learner and the logger (the first run on a machine compiles the "
              "learning kernels: 15-40 s, longer on a busy machine; later runs take seconds)")
     learner = pipeline.start("learn", ["--cam", args.cam, "--exit-on-eos"],
                              child_settings(args, "learn"))
-    logger = pipeline.start("log", logger_arguments(args, rrd_path, mcap_path),
+    logger = pipeline.start("log", logger_arguments(args, plan.rrd_path, plan.mcap_path,
+                                                    pipeline.log_dir / "log.report.json"),
                             child_settings(args, "log"))
     starting = {learner: alive_key(args.cam, LEARNER), logger: LOGGER_ALIVE}
     if args.ros2:  # the results into ROS 2 as well (see `gngdt ros2`)
-        bridge = pipeline.start("ros2", ros2_arguments(args))
+        bridge = pipeline.start("ros2", ros2_arguments(args, pipeline.log_dir / "ros2.report.json"))
         starting[bridge] = alive_key(args.cam, BRIDGE)
     silent = wait_for_startup(starting, observed, args.startup_timeout, stop, pipeline)
-    ready = not silent and not stop.is_set() and pipeline.failed() is None
-    early_end, stream_ended = "", False
     if silent:
         log.error("the %s shows no progress: no CPU time used and nothing logged for %.0f s "
                   "while starting (a hung process?); its log: %s", silent.name,
@@ -488,28 +318,48 @@ def supervise(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
         for child in pipeline.children:
             child.stop(args.drain_timeout)
         raise StartupTimeout
-    if ready:
-        log.info("replaying %s", args.recording)
-        capture = pipeline.start("capture", [str(args.recording), "--cam", args.cam],
-                                 child_settings(args, "capture", veil_ratio))
-        wait_until(lambda: capture.process.poll() is not None
-                   or learner.process.poll() is not None or logger.process.poll() is not None,
-                   float("inf"), stop, pipeline)
-        with observed.lock:
-            stream_ended = observed.end is not None  # only this run's capture can send it
-        if (capture.process.poll() is None and not stream_ended and not stop.is_set()
+    early_end, lingered = "", None
+    if not stop.is_set() and pipeline.failed() is None:
+        live.announce(live.live_outputs(args))
+        early_end = replay(args, pipeline, observed, stop, plan, learner, logger)
+        if (not early_end and args.linger is not None and not stop.is_set()
                 and pipeline.failed() is None):
-            quitter = learner if learner.process.poll() is not None else logger
-            early_end = (f"the {'learner' if quitter is learner else 'logger'} stopped while "
-                         "capture was still replaying")
+            learner.stop(args.drain_timeout)  # the final network reaches the servers first
+            lingered = args.linger
+            live.linger(live.live_outputs(args), args.linger, stop)
     failure = pipeline.failed()  # a capture that failed after its end of stream (a camera lost)
+    with observed.lock:
+        stream_ended = observed.end is not None  # only this run's capture can send it
     lost = failure is not None and failure.name == "capture" and stream_ended  # lets them finish
-    if stop.is_set() or (failure is not None and not lost) or early_end:
+    if (stop.is_set() and lingered is None) or (failure is not None and not lost) or early_end:
         log.info("%s; stopping the services",
                  "interrupted" if stop.is_set() else early_end or "a service failed")
         pipeline.interrupt_all()
     for child in pipeline.children:
-        if child.name == "ros2":  # bridges until told to stop: once the others are done
+        if child.name == "ros2" or lingered is not None:  # they serve until told to stop
             child.interrupt()
         child.stop(args.drain_timeout)
-    return early_end
+    return early_end, lingered
+
+
+def replay(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
+           stop: threading.Event, plan: RunPlan, learner: Child, logger: Child) -> str:
+    """Start the capture and wait until it, the learner or the logger ends (or a stop signal);
+    why the stream ended early, or ``""``."""
+    log.info("replaying %s", args.recording)
+    capture = pipeline.start("capture", [str(args.recording), "--cam", args.cam],
+                             child_settings(args, "capture", plan.veil_ratio))
+    wait_until(lambda: capture.process.poll() is not None
+               or learner.process.poll() is not None or logger.process.poll() is not None,
+               float("inf"), stop, pipeline)
+    if args.linger is not None:  # the learner ends the stream's learning, the logger lingers
+        wait_until(lambda: learner.process.poll() is not None, args.drain_timeout, stop,
+                   pipeline)
+    with observed.lock:
+        stream_ended = observed.end is not None
+    if (capture.process.poll() is None and not stream_ended and not stop.is_set()
+            and pipeline.failed() is None):
+        quitter = learner if learner.process.poll() is not None else logger
+        return (f"the {'learner' if quitter is learner else 'logger'} stopped while capture "
+                "was still replaying")
+    return ""

@@ -13,12 +13,15 @@ from gngdt.io.outputs.rerun_output import default_rrd_path, rates_from_args, res
 from gngdt.io.outputs.rerun_sinks import check_ports_free
 from gngdt.schemas.wire import topic
 from gngdt.services.capture import source_spec
+from gngdt.services.run.live import check_linger
 
 if TYPE_CHECKING:
     from gngdt.io.outputs.rerun_log import DisplayRates
     from gngdt.io.profiles import Profile
 
 
+#: where `--ros2` finds ROS 2 by default: rmw_zenohd listens there
+ROS2_ROUTER = "tcp/127.0.0.1:7447"
 #: how a source goes to the learner (the summary says which ran)
 PACED = ("every frame, each sent once the learner took the one before (a file; --realtime: at "
          "the recorded pace, the latest frame wins)")
@@ -53,8 +56,25 @@ class RunPlan:
         return None if schedule is None else schedule.veil_ratio
 
     @property
+    def paced(self) -> bool:
+        """A file read frame by frame (every frame waits for the learner)."""
+        return self.mode == PACED
+
+    @property
+    def live(self) -> bool:
+        """A live camera: real time, until Ctrl-C."""
+        return self.mode == LIVE
+
+    @property
     def destination(self) -> str:
-        return "rerun viewer" if self.rrd_path is None else str(self.rrd_path)
+        if self.rrd_path is not None:
+            return str(self.rrd_path)
+        if self.served:
+            return "served by --serve, not saved (without --serve a run saves its .rrd)"
+        return "a rerun viewer (--connect; nothing saved)"
+
+    #: the run serves rerun's web viewer (--serve)
+    served: bool = False
 
 
 def plan_run(args: argparse.Namespace) -> RunPlan:
@@ -74,10 +94,22 @@ def plan_run(args: argparse.Namespace) -> RunPlan:
     from gngdt.services.learner import profile_from_args
 
     FoxgloveOutput.check_args(args)  # a port in use: said before anything starts
+    check_linger(args)
+    check_ros2_router(args.ros2)
     profile = profile_from_args(args)  # a wrong params file: said before anything starts
     topic(args.cam, "points")  # validates the camera name
     rates = rates_from_args(args)
-    return RunPlan(rates, profile, *plan_outputs(args), mode=mode)
+    return RunPlan(rates, profile, *plan_outputs(args), mode=mode, served=args.serve)
+
+
+def check_ros2_router(endpoint: str | None) -> None:
+    """ValueError, before anything starts, when nothing listens at ``--ros2``'s endpoint (a
+    wrong endpoint fails in seconds, with what docs/ros2.md says to start)."""
+    from gngdt.services.plumbing.session import ROS2_SESSION, endpoint_listening, router_advice
+
+    if endpoint is not None and endpoint_listening(endpoint) is False:
+        raise ValueError(f"--ros2 {endpoint}: nothing listens there; "
+                         f"{router_advice(ROS2_SESSION)}")
 
 
 # --- issue 24.4: runs that never collide -------------------------------------------------------
@@ -115,9 +147,10 @@ def claim(path: Path, overwrite: bool) -> Path:
     return reserved
 
 
-def drop_unwritten(plan: RunPlan) -> None:
-    """Remove the files reserved for a run that wrote nothing into them."""
+def drop_unwritten(plan: RunPlan, everything: bool = False) -> None:
+    """Remove the files reserved for a run that wrote nothing into them, or (``everything``:
+    a run that failed before it learned a frame) whatever they hold."""
     for path in (plan.rrd_path, plan.mcap_path):
-        if path is not None and path.is_file() and path.stat().st_size == 0:
+        if path is not None and path.is_file() and (everything or path.stat().st_size == 0):
             path.unlink()
 # --- end of issue 24.4 ------------------------------------------------------------------------

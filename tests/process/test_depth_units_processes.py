@@ -27,7 +27,10 @@ def test_a_run_that_learns_nothing_says_why_and_fails(tmp_path: Path) -> None:
     completed = subprocess.run(
         [sys.executable, "-m", "gngdt.services.cli", "run", str(path), "--fast", "--save",
          str(tmp_path / "run.rrd")], cwd=REPO_ROOT, capture_output=True, text=True, timeout=200)
-    assert completed.returncode == 1, completed.stdout + completed.stderr
+    assert completed.returncode == 3, completed.stdout + completed.stderr  # nothing learned
     assert "learner:            no status received" in completed.stdout
     assert "the learner learned nothing" in completed.stderr
     assert "depth in another unit" in completed.stderr
+    # capture's own words (issue 35.4): the depth check, the frames it sent without a cloud
+    assert "WARNING: the median depth is" in completed.stdout
+    assert "sent without cloud: 3 frames: no depth between --min-depth" in completed.stdout

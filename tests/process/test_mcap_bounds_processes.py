@@ -48,8 +48,8 @@ def test_a_full_disk_leaves_a_readable_mcap_and_the_logger_exits_0(
 
 
 @pytest.mark.timeout(240)
-def test_a_run_whose_mcap_fills_its_disk_exits_0(tabletop_recording: Path,
-                                                 tmp_path: Path) -> None:
+def test_a_run_whose_mcap_fills_its_disk_says_so_and_exits_4(tabletop_recording: Path,
+                                                              tmp_path: Path) -> None:
     from mcap.reader import make_reader
 
     mcap_path = tmp_path / "run.mcap"
@@ -57,8 +57,10 @@ def test_a_run_whose_mcap_fills_its_disk_exits_0(tabletop_recording: Path,
         [sys.executable, "-c", FILE_SIZE_LIMITED, "run", str(tabletop_recording), "--fast",
          "--max-points", "0", "--save", str(tmp_path / "run.rrd"), "--mcap", str(mcap_path)],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=200)
-    assert completed.returncode == 0, completed.stdout + completed.stderr
+    assert completed.returncode == 4, completed.stdout + completed.stderr  # issue 35.6
     assert "frames sent:        8 of 8" in completed.stdout
+    assert f"WARNING: recording to {mcap_path} stopped early: writing it failed" in \
+        completed.stdout
     with open(mcap_path, "rb") as file:
         topics = [channel.topic for _, channel, _ in make_reader(file).iter_messages()]
     assert topics and 1_000_000 < mcap_path.stat().st_size <= 3_000_000  # cut at the limit

@@ -44,7 +44,7 @@ def run(recording: Path, tmp_path: Path) -> subprocess.CompletedProcess:
 @pytest.mark.timeout(300)
 def test_a_run_whose_poses_contradict_their_depth_says_why_and_fails(tmp_path: Path) -> None:
     completed = run(walk_recording(tmp_path / "wxyz.mcap", written_w_first), tmp_path)
-    assert completed.returncode == 1, completed.stdout + completed.stderr
+    assert completed.returncode == 3, completed.stdout + completed.stderr  # the learner's no
     assert "poses rejected:" in completed.stdout and "contradicts the depth" in completed.stdout
     assert "most frames were not learned" in completed.stderr
     assert "Traceback" not in completed.stdout + completed.stderr

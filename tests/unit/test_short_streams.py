@@ -8,7 +8,7 @@ from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
 from gngdt.io.deproject import Deprojector
 from gngdt.io.mcap.reader import read_frames
 from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
-from gngdt.services.run.summary import format_summary
+from gngdt.services.run.summary import RunFacts, format_summary
 
 SMALL_RECORDING = Path(__file__).resolve().parents[2] / "recordings" / "tabletop_small.mcap"
 
@@ -33,13 +33,14 @@ def test_a_stream_shorter_than_the_confirmation_ends_with_objects() -> None:
 def test_the_summary_says_how_much_was_learned_and_warns_when_little() -> None:
     end = StreamEndInfo(frames_sent=50, last_frame_sequence=49)
     few = LearnerStatusInfo(frames_used=3, frames_dropped=47, nodes=1000, steps=530_000)
-    text = format_summary(few, end, "runs/x.rrd", node_budget=1000)
-    assert "frames learned:     3 of 50 sent (6%) (47 dropped" in text
+    text = format_summary(RunFacts(few, end, destination="runs/x.rrd", node_budget=1000))
+    assert "frames learned:     3 of 50 sent (6%)" in text
+    assert "every frame sent:   50 = 3 learned + 47 dropped + 0 malformed + 0 refused" in text
     assert "WARNING: the learner kept up with only 6% of the frames" in text
     most = LearnerStatusInfo(frames_used=45, frames_dropped=5, nodes=1000, steps=450_000)
-    text = format_summary(most, end, "runs/x.rrd", node_budget=1000)
+    text = format_summary(RunFacts(most, end, destination="runs/x.rrd", node_budget=1000))
     assert "45 of 50 sent (90%)" in text and "WARNING" not in text
     small = LearnerStatusInfo(frames_used=3, nodes=62, steps=30_000)
-    text = format_summary(small, StreamEndInfo(frames_sent=3, last_frame_sequence=2),
-                          "runs/x.rrd", node_budget=1000)
+    text = format_summary(RunFacts(small, StreamEndInfo(frames_sent=3, last_frame_sequence=2),
+                                   destination="runs/x.rrd", node_budget=1000))
     assert "WARNING: the network has 62 of its 1000 nodes" in text
