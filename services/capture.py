@@ -291,12 +291,14 @@ class CapturePublisher:
 
     def publish_frame(
         self, frame: Frame, stamp: FrameStamp, positions: np.ndarray | None,
-        colors: np.ndarray | None, sensor_time_ns: int | None = None
+        colors: np.ndarray | None, sensor_time_ns: int | None = None,
+        cloud: bytearray | None = None
     ) -> None:
         """Calibration (when new), colour, depth, the camera's pose (posed frames) and the
-        cloud unless ``positions`` is None; the cloud's own timestamp is ``sensor_time_ns``
-        (default the stamp's capture time): when the camera took it, which the learner's motion
-        and pose checks use."""
+        cloud (``positions`` and ``colors``, or ``cloud`` serialised already, `cloud_of`;
+        neither: images only); the cloud's own timestamp is ``sensor_time_ns`` (default the
+        stamp's capture time): when the camera took it, which the learner's motion and pose
+        checks use."""
         from gngdt.schemas.clouds import cloud_to_wire, pose_to_transform
         from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
 
@@ -312,7 +314,7 @@ class CapturePublisher:
         self.color.put(color.SerializeToString(), attachment=attachment)
         depth = image_to_raw(frame.depth, timestamp_ns=time_ns, frame_id=self.camera)
         self.depth.put(depth.SerializeToString(), attachment=attachment)
-        if positions is None:  # no pose for a frame of a posed recording: images only
+        if positions is None and cloud is None:  # a posed recording's frame without a pose
             return
         pose = frame.pose
         if pose is not None:  # fixed frame -> camera (the images' frame_id), before the cloud
@@ -320,10 +322,10 @@ class CapturePublisher:
                                           timestamp_ns=time_ns)
             self.tf.put(transform.SerializeToString(), attachment=attachment)
         # serialised straight into one buffer: megabytes copied once more, into shared memory
-        sensor_time_ns = time_ns if sensor_time_ns is None else sensor_time_ns
-        cloud = cloud_to_wire(positions, colors, timestamp_ns=sensor_time_ns,
-                              frame_id=self.camera if pose is None else pose.frame_id,
-                              pose=None if pose is None else pose.matrix)
+        if cloud is None:
+            cloud = cloud_to_wire(positions, colors, timestamp_ns=sensor_time_ns or time_ns,
+                                  frame_id=self.camera if pose is None else pose.frame_id,
+                                  pose=None if pose is None else pose.matrix)
         self.points.put(cloud, attachment=attachment)
 
     def publish_end(self, frames_sent: int, last_sequence: int, recording: str) -> None:
@@ -427,6 +429,7 @@ def main(args: argparse.Namespace) -> int:
         args.recording = source_spec(args)
         source = open_source(args.recording, options=source_options(args))
         to_cloud = frame_to_cloud(args)
+        to_cloud.warm_up()  # numba's kernels loaded before the first frame, not on it
         clock = ReplayClock(None if args.fast or source.live else args.rate, args.max_gap)
     except (ValueError, RecordingError) as error:
         log.error("%s", error)
@@ -514,22 +517,22 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         if stop.is_set():
             break
         capture_time_ns = time.time_ns()
-        sensor_time_ns = (None if sensor_clock is None
+        sensor_time_ns = (capture_time_ns if sensor_clock is None
                           else sensor_clock.stamp(frame.timestamp_ns))
         try:
-            positions, colors = to_cloud(frame)
+            cloud, points = cloud_of(frame, to_cloud, args.cam, sensor_time_ns)
         except ValueError as error:
             log.error("%s: frame %d: %s; skipped", args.recording, frame.index, error)
             continue
         if frame.pose_error:  # the reader warned; the cloud would not fit the map
-            positions = colors = None
+            cloud, points = None, 0
             without_pose += 1
         if pacing is not None and not wait_taken(pacing, last_cloud, replay, stop):
             break
-        publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
-                                positions, colors, sensor_time_ns)
-        log.debug("frame %d: %d points", frames_sent, 0 if positions is None else len(positions))
-        last_cloud = frames_sent if positions is not None else last_cloud
+        publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns), None, None,
+                                cloud=cloud)
+        log.debug("frame %d: %d points", frames_sent, points)
+        last_cloud = frames_sent if cloud is not None else last_cloud
         frames_sent += 1
     if pacing is not None:  # the end of stream after the last frame's learning
         wait_taken(pacing, last_cloud, replay, stop)
@@ -537,6 +540,16 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         log.warning("%d frames had no camera pose: their clouds were not published",
                     without_pose)
     return frames_sent
+
+
+def cloud_of(frame: Frame, to_cloud: FrameToCloud, camera: str,
+             sensor_time_ns: int) -> tuple[bytearray, int]:
+    """The frame's cloud serialised for the wire (its points deprojected straight into the
+    buffer) and its point count; in the camera frame ``camera``, or the pose's fixed frame."""
+    pose = frame.pose
+    return to_cloud.to_wire(frame, timestamp_ns=sensor_time_ns,
+                            frame_id=camera if pose is None else pose.frame_id,
+                            pose=None if pose is None else pose.matrix)
 
 
 class RecordedClock:

@@ -6,9 +6,9 @@ import argparse
 import logging
 
 from gngdt.io.outputs import Output
-from gngdt.schemas.wire import ALL_KEYS, logger_alive_key
+from gngdt.schemas.wire import ALL_KEYS, ANY_CAMERA, logger_alive_key, topic
 from gngdt.services.logger.cameras import Cameras, CaptureWatch
-from gngdt.services.logger.dispatch import Dispatcher
+from gngdt.services.logger.dispatch import LOGGED_STREAMS, Dispatcher
 from gngdt.services.logger.inbox import Inbox
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.session import ZenohSetupError, open_session
@@ -29,7 +29,10 @@ def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
         for output in outputs:
             output.close()
         raise
-    declared = [session.declare_subscriber(ALL_KEYS, inbox.put)]
+    # only the streams the outputs log: a learner builds its scene only for a subscriber; raw
+    # outputs (--mcap, --foxglove) subscribe to everything themselves
+    declared = [session.declare_subscriber(topic(ANY_CAMERA, stream), inbox.put)
+                for stream in LOGGED_STREAMS]
     declared += [session.declare_subscriber(ALL_KEYS, output.receive)
                  for output in outputs if output.raw]
     captures = CaptureWatch()
