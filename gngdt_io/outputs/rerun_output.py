@@ -270,6 +270,20 @@ class RerunOutput(Output):
     def describe(self) -> str:
         return "" if self.to_stdout else f"logging to {self.destination}"
 
+    def wants(self, camera: str, stream: str, sequence: int) -> bool:
+        """Images and clouds of frames the .rrd thins away are not wanted (a cloud still is
+        while its camera's pose comes with the clouds, not on a tf stream)."""
+        rates = self.rerun_log.rates
+        if stream == "points":
+            if camera not in self._transforms:
+                return True
+            every = rates.cloud_every
+        elif stream in THINNED_IMAGES:
+            every = getattr(rates, THINNED_IMAGES[stream])
+        else:
+            return True
+        return self.rerun_log.would_log(camera, stream, sequence, every)
+
     def write(self, sample: StreamSample) -> None:
         from gngdt.schemas.images import calibration_to_intrinsics, raw_to_image
         from gngdt.schemas.scene import decode_object_boxes

@@ -21,8 +21,8 @@ log = logging.getLogger(__name__)
 def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
     """Subscribe to ``gngdt/**`` and drive ``outputs`` until stopped or every stream is over;
     the outputs are closed on the way out. The exit code."""
-    inbox = Inbox(args.max_queue_mb * 1024 * 1024)
     dispatcher = Dispatcher(outputs, Cameras(args.max_cameras))
+    inbox = Inbox(args.max_queue_mb * 1024 * 1024, dispatcher.wants)
     try:
         session = open_session(args)
     except ZenohSetupError:  # said by the command line, exit 1; the outputs close first
