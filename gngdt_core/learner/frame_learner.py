@@ -205,7 +205,9 @@ class FrameLearner:
         self.frame_id = frame_id
         #: the pose of the last cloud learned (None: it was in the network's frame as it is)
         self.last_pose: np.ndarray | None = None
-        self.ghosts = Ghosts()
+        self._ghosts = Ghosts()
+        #: the last learned frame (points, pose) whose ghosts are not measured yet
+        self._ghost_frame: tuple[np.ndarray, np.ndarray | None] | None = None
         #: checks every posed cloud before it is learned
         self.poses = PoseChecker(config.options.pose_limits())
         self._rng = np.random.default_rng(seed)
@@ -272,11 +274,24 @@ class FrameLearner:
         self.counters.add_learning(time.perf_counter() - started, steps)
         self.counters.frames_used += 1
         self.last_steps = steps
-        self.ghosts = self.measure_ghosts(positions, pose)
+        self._ghost_frame = (positions, pose)  # measured when asked (`ghosts`)
         if tracked:  # the tracker aligns the next frames to the map as it is now
             self.tracking.update_map(self.model, pose)
         return FrameResult(Outcome.LEARNED, pose, frame_id, tracked, "", steps,
                            located.novelty if tracked else 0.0)
+
+    @property
+    def ghosts(self) -> Ghosts:
+        """The ghost measure of the last learned frame, taken when first asked for (a learner
+        that publishes every few frames measures only those: ~6 ms at 3,000 nodes)."""
+        if self._ghost_frame is not None:
+            self._ghosts = self.measure_ghosts(*self._ghost_frame)
+            self._ghost_frame = None
+        return self._ghosts
+
+    @ghosts.setter
+    def ghosts(self, value: Ghosts) -> None:
+        self._ghosts, self._ghost_frame = value, None
 
     def locate(self, positions: np.ndarray, colors: np.ndarray | None,
                camera: CameraIntrinsics | None, stamp_ns: int | None = None) -> FrameResult:
