@@ -48,7 +48,7 @@ def _capture(router_endpoint: str, path: Path, *options: str) -> tuple[int, str,
     import subprocess
     import sys
 
-    from processes import peak_rss_mb, with_peak_rss
+    from helpers.processes import peak_rss_mb, with_peak_rss
 
     completed = subprocess.run(
         with_peak_rss([sys.executable, "-m", "gngdt.services.cli", "capture", str(path), "--fast",

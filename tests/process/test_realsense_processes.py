@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from realsense_recordings import DATA, require_pyrealsense
+from helpers.realsense import DATA, require_pyrealsense
 
 require_pyrealsense()
 

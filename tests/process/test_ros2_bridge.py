@@ -1,8 +1,8 @@
 """`gngdt ros2` end to end through a router: a robot side written by others (zenoh-ros2-sdk, see
-tests/ros2_sdk.py) publishes real Kinect frames as a ROS 2 camera driver would (sensor_msgs/Image
-colour and depth + CameraInfo, with its liveliness tokens) and receives, through the bridge and
-a real learner, gngdt's clouds, nodes and objects as ROS 2 messages; it also lists gngdt's
-node and topics as ROS 2's graph does."""
+tests/helpers/ros2_sdk.py) publishes real Kinect frames as a ROS 2 camera driver would
+(sensor_msgs/Image colour and depth + CameraInfo, with its liveliness tokens) and receives, through
+the bridge and a real learner, gngdt's clouds, nodes and objects as ROS 2 messages; it also lists
+gngdt's node and topics as ROS 2's graph does."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros2_sdk import message_class, sdk_session
+from helpers.ros2_sdk import message_class, sdk_session
 
 from gngdt.services.plumbing.session import client_config, open_config
 
@@ -388,7 +388,7 @@ def test_run_with_ros2_publishes_the_results_into_ros(
     """`gngdt run --ros2 ENDPOINT` on a recording whose camera moves: the bridge joins the ROS 2
     router, the robot side gets nodes, clouds in the camera frame and the camera's pose on
     /tf (one of the recording's poses), and run ends as usual."""
-    from synthetic_recordings import render_small_recording
+    from helpers.synthetic import render_small_recording
 
     from gngdt.io.mcap.reader import read_frames
 
@@ -473,7 +473,7 @@ def test_ros2_side_on_its_own_router_and_nothing_listening(
         router_endpoint: str, spawn: Callable) -> None:
     """``--ros2-connect``: gngdt's side on gngdt's router, the ROS 2 node on the other one; the
     bridge is a client of both and listens nowhere (no port, no scouting socket)."""
-    from processes import bound_sockets
+    from helpers.processes import bound_sockets
 
     from gngdt.services.plumbing.session import free_tcp_port, router_config
 

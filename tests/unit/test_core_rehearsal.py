@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers.forgetting_scenes import FORGETTING, PARAMS, STEPS, frames_of, to_world
 from scipy.spatial import cKDTree
-from test_core_forgetting import FORGETTING, PARAMS, STEPS, frames_of, to_world
 
 from gngdt.core import GNGDT
 from gngdt.core.gas.rehearsal import SampleMemory
