@@ -218,7 +218,8 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
             while not stop.wait(STATUS_PERIOD_S):
                 values = outbound.counts() | (inbound.counts_for_status() if inbound else {})
                 bad = sum(value for key, value in values.items()
-                          if key.endswith(("malformed", "failed", "bad_frames")))
+                          if key.endswith(("malformed", "failed", "bad_frames",
+                                           "calibrations_refused")))
                 outbound.publish_status(Status(
                     topic(args.cam, BRIDGE), WARN if bad > skipped else OK,
                     f"skipped {bad - skipped} bad messages" if bad > skipped else "bridging",

@@ -39,6 +39,7 @@ from gngdt.services.ros2.worker import Worker
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt.core.sensor.geometry import CameraIntrinsics
     from gngdt.io.deproject import FrameToCloud
     from gngdt.io.errors import RecordingError
     from gngdt.io.frame import Frame
@@ -75,6 +76,7 @@ class InboundCounts:
     frames_published: int = 0
     frames_without_pose: int = 0
     images_before_calibration: int = 0
+    calibrations_refused: int = 0
     bad_frames: int = 0
     transforms_refused: int = 0
 
@@ -91,6 +93,7 @@ class RosToGngdt:
         self.max_pixels = max_pixels
         self.fixed_frame = fixed_frame
         self.counts = InboundCounts()
+        self.topics = topics
         self.transforms = TransformTree(max_extrapolation_ns=LIVE_TF_EXTRAPOLATION_NS)
         self.assembler = FrameAssembler(
             Path(topics.color), None, max_skew_ns, on_bad_frame=self._bad_frame,
@@ -117,8 +120,8 @@ class RosToGngdt:
 
     def _on_sample(self, stream: str, payload: bytes, attachment: bytes | None) -> None:
         if stream == "camera_info":
-            intrinsics = decode_camera_info(payload).intrinsics
-            if intrinsics != self.assembler.calibration:
+            intrinsics = self._calibration(payload)
+            if intrinsics is not None and intrinsics != self.assembler.calibration:
                 log.info("camera calibration: %dx%d, fx %.1f fy %.1f cx %.1f cy %.1f",
                          intrinsics.width, intrinsics.height, intrinsics.fx, intrinsics.fy,
                          intrinsics.cx, intrinsics.cy)
@@ -128,6 +131,22 @@ class RosToGngdt:
             self._on_image(stream, payload)
         else:
             self._on_transforms(payload, static=stream == "tf_static")
+
+    def _calibration(self, payload: bytes) -> CameraIntrinsics | None:
+        """The CameraInfo's intrinsics, or None when they cannot be a camera's: refused,
+        counted, said once until a good one comes (a driver repeats it with every frame); the
+        calibration in use stays."""
+        from gngdt.io.ros2.messages import Ros2MessageError
+
+        try:
+            return decode_camera_info(payload).intrinsics
+        except Ros2MessageError as error:
+            self.counts.calibrations_refused += 1
+            if self.assembler.refuse_calibration(str(error)):
+                log.warning("%s: CameraInfo refused (%s); every CameraInfo refused is counted "
+                            "in the status (camera/calibrations_refused)", self.topics.camera_info,
+                            error)
+            return None
 
     def _on_image(self, role: str, payload: bytes) -> None:
         from gngdt.io.ros2.messages import Ros2MessageError
