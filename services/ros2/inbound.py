@@ -52,7 +52,9 @@ COLOR_ENCODINGS = frozenset({"rgb8", "bgr8", "rgba8", "bgra8", "mono8"})
 DEPTH_ENCODINGS = frozenset({"16UC1", "mono16", "32FC1"})
 #: a frame may be this much newer than the newest transform of its chain (a live /tf at 10 Hz)
 LIVE_TF_EXTRAPOLATION_NS = 100_000_000
-#: transforms older than this (behind the newest) are forgotten: /tf is held over a window
+#: /tf is held over a window this wide either side of the latest image's stamp (before the
+#: first image: behind each link's own newest sample); a transform stamped beyond it is
+#: ignored and counted (a far-future stamp once emptied every other link)
 TF_WINDOW_NS = 10_000_000_000
 #: tf2_ros' static listener QoS: reliable, transient local, keep last 100
 QOS_TF_STATIC = Qos(durability=Durability.TRANSIENT_LOCAL, depth=100)
@@ -79,6 +81,7 @@ class InboundCounts:
     calibrations_refused: int = 0
     bad_frames: int = 0
     transforms_refused: int = 0
+    transforms_far_off: int = 0
 
 
 class RosToGngdt:
@@ -94,13 +97,14 @@ class RosToGngdt:
         self.fixed_frame = fixed_frame
         self.counts = InboundCounts()
         self.topics = topics
-        self.transforms = TransformTree(max_extrapolation_ns=LIVE_TF_EXTRAPOLATION_NS)
+        self.transforms = TransformTree(max_extrapolation_ns=LIVE_TF_EXTRAPOLATION_NS,
+                                        evict=True)
         self.assembler = FrameAssembler(
             Path(topics.color), None, max_skew_ns, on_bad_frame=self._bad_frame,
             poses=self._pose if fixed_frame else None, max_held_bytes=max_held_bytes)
         self.worker = Worker("camera", self._on_sample, capacity=8)
         self._sequence = 0
-        self._newest_transform_ns = 0
+        self._image_stamp_ns: int | None = None  # the latest image's: poses are looked up near
         self._pruned_at = 0.0
         self._simulated_time = False
         subscriptions = [(topics.color, "color", IMAGE, QOS_SENSOR_DATA),
@@ -156,6 +160,7 @@ class RosToGngdt:
         if image.encoding not in accepted:
             raise Ros2MessageError(f"{role} image encoding {image.encoding!r} is not one of "
                                    f"{', '.join(sorted(accepted))}")
+        self._image_stamp_ns = image.stamp_ns
         if self.assembler.calibration is None:  # a driver sends CameraInfo with every frame
             self.counts.images_before_calibration += 1
             if self.counts.images_before_calibration == 1:
@@ -166,7 +171,14 @@ class RosToGngdt:
             self._publish(frame)
 
     def _on_transforms(self, payload: bytes, static: bool) -> None:
+        reference = self._image_stamp_ns
         for transform in decode_tf(payload):
+            if (not static and reference is not None
+                    and abs(transform.stamp_ns - reference) > TF_WINDOW_NS):
+                self._far_off(1, f"transform {transform.parent!r} -> {transform.child!r} "
+                              f"stamped {(transform.stamp_ns - reference) / 1e9:+.3g} s from "
+                              "the latest image")
+                continue
             try:
                 self.transforms.add(transform.parent, transform.child, transform.stamp_ns,
                                     transform.translation, transform.rotation, static)
@@ -174,11 +186,27 @@ class RosToGngdt:
                 self.counts.transforms_refused += 1
                 if self.counts.transforms_refused <= WARN_FIRST:
                     log.warning("%s: %s; skipped", "/tf_static" if static else "/tf", error)
-                continue
-            self._newest_transform_ns = max(self._newest_transform_ns, transform.stamp_ns)
         if time.monotonic() - self._pruned_at > 1.0:
-            self.transforms.forget_before(self._newest_transform_ns - TF_WINDOW_NS)
+            self._prune(reference)
             self._pruned_at = time.monotonic()
+
+    def _prune(self, reference: int | None) -> None:
+        """Hold /tf over the window around the latest image (samples beyond it, taken before
+        the first image, are counted as far off); before any image, each link over its own."""
+        if reference is None:
+            self.transforms.forget_stale(TF_WINDOW_NS)
+            return
+        far = self.transforms.forget_outside(-(2**63), reference + TF_WINDOW_NS)
+        if far:
+            self._far_off(far, f"{far} transform samples stamped over {TF_WINDOW_NS / 1e9:g} s "
+                          "after the latest image")
+        self.transforms.forget_outside(reference - TF_WINDOW_NS, 2**63 - 1)
+
+    def _far_off(self, count: int, what: str) -> None:
+        self.counts.transforms_far_off += count
+        if self.counts.transforms_far_off <= WARN_FIRST:
+            log.warning("/tf: %s ignored (another clock, or forged); counted in the status "
+                        "(camera/transforms_far_off)", what)
 
     def _pose(self, camera_frame: str, stamp_ns: int,
               index: int) -> tuple[CameraPose | None, str | None]:

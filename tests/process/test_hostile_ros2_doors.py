@@ -1,5 +1,5 @@
 """`gngdt ros2` under a hostile or careless robot side (issue 38), written with zenoh-ros2-sdk
-(tests/ros2_sdk.py): CameraInfo with finite absurd values. The bridge
+(tests/ros2_sdk.py): CameraInfo with finite absurd values, a /tf stamp in 2038. The bridge
 refuses and counts them, says so once, and nothing reaches the learner's map; the good frames
 around them go on."""
 
@@ -24,6 +24,8 @@ COLOR, DEPTH, INFO = ("/camera/camera/color/image_raw",
 OPTICAL = "camera_color_optical_frame"
 WIDTH, HEIGHT = 160, 120
 CAMERA = {"fx": 150.0, "fy": 150.0, "cx": 79.5, "cy": 59.5}
+#: 2038-01-19: the decoy's stamp in the issue
+YEAR_2038_NS = 2_147_483_000 * 1_000_000_000
 
 
 def frame_pixels(seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -188,3 +190,77 @@ def test_absurd_camera_info_is_refused_counted_said_once_and_never_learned(
     assert log.count("CameraInfo refused (") == 1, log[-3000:]  # said once, not per message
     assert "Traceback" not in log and "Traceback" not in log_text(learner)
     assert bridge.poll() is None and learner.poll() is None
+
+
+#: the camera's images reach the bridge this late behind /tf (a slow driver or link): each
+#: frame's pose is interpolated in the /tf the bridge holds from that long ago
+CAMERA_LATENCY_NS = 1_500_000_000
+
+
+class TfStream:
+    """/tf ``odom -> camera_color_optical_frame`` at (1, 2, 3), stamped now, every 50 ms."""
+
+    def __init__(self, robot: Robot) -> None:
+        self.robot = robot
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self.stop.wait(0.05):
+            self.robot.publish_transform("odom", OPTICAL, time.time_ns(), (1.0, 2.0, 3.0))
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(5)
+
+
+@pytest.mark.timeout(300)
+def test_a_far_future_transform_neither_stops_the_poses_nor_is_used(
+        router_endpoint: str, spawn: Callable, tmp_path: Path) -> None:
+    """Before, one transform ``map -> decoy`` stamped 2038 (unrelated to the camera) made the
+    bridge forget, every second, every other link's samples but the newest: no frame stamped
+    further back than that had a pose from then on. A forged sample on the camera's own link
+    is ignored too, counted in the status."""
+    port = int(router_endpoint.rsplit(":", 1)[1])
+    bridge = spawn("ros2", "--zenoh-connect", router_endpoint, "--fixed-frame", "odom")
+    wait_for(lambda: "gngdt/camera/ros2/alive" in tokens(router_endpoint), 60, "bridge up")
+    clouds = Clouds(router_endpoint)
+    try:
+        with sdk_session(port, tmp_path) as sdk:
+            robot = Robot(sdk, port)
+            tf = TfStream(robot)
+            sent = 0
+
+            def posed_frames(wanted: int) -> Callable[[], bool]:
+                """Publish one late frame per call until ``wanted`` more clouds came."""
+                goal = len(clouds.received) + wanted
+
+                def more() -> bool:
+                    nonlocal sent
+                    robot.publish_frame(sent, time.time_ns() - CAMERA_LATENCY_NS)
+                    sent += 1
+                    time.sleep(0.15)
+                    return len(clouds.received) >= goal
+                return more
+
+            try:
+                wait_for(posed_frames(2), 60, "posed clouds")
+                robot.publish_transform("map", "decoy", YEAR_2038_NS, (0.0, 0.0, 0.0))
+                robot.publish_transform("odom", OPTICAL, YEAR_2038_NS, (50.0, 50.0, 50.0))
+                started = time.monotonic()
+                wait_for(posed_frames(10), 90, "posed clouds after the 2038 stamps")
+                assert time.monotonic() - started > 1.0  # past a pruning of the window
+                wait_for(lambda: robot.count("transforms_far_off") >= 2, 60,
+                         "the two far-future transforms counted")
+            finally:
+                tf.close()
+                robot.close()
+    finally:
+        clouds.close()
+    assert {frame_id for frame_id, _, _ in clouds.received} == {"odom"}
+    for _, _, pose in clouds.received:  # never the forged (50, 50, 50)
+        np.testing.assert_allclose(pose[:3, 3], [1.0, 2.0, 3.0])
+    log = log_text(bridge)
+    assert "ignored" in log and "Traceback" not in log
+    assert bridge.poll() is None
