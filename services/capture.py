@@ -213,11 +213,14 @@ def source_options(args: argparse.Namespace) -> SourceOptions:
 
 
 class CapturePublisher:
-    """The capture's publishers, declared once; every put carries the frame's attachment."""
+    """The capture's publishers, declared once; every put carries the frame's attachment.
+    ``pool_bytes``: their shared-memory pools' size (`declare_publisher`)."""
 
-    def __init__(self, session: zenoh.Session, camera: str) -> None:
+    def __init__(self, session: zenoh.Session, camera: str,
+                 pool_bytes: int | None = None) -> None:
         def declare(name: str, encoding: str, latest_wins: bool) -> SharedMemoryPublisher:
-            return declare_publisher(session, topic(camera, name), encoding, latest_wins)
+            return declare_publisher(session, topic(camera, name), encoding, latest_wins,
+                                     pool_bytes)
 
         self.camera = camera
         self.color = declare("color", ENCODING_RAW_IMAGE, latest_wins=True)
@@ -390,7 +393,7 @@ def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
             to_cloud: FrameToCloud, session: zenoh.Session) -> Replay:
     """Publish the source's frames on ``session`` until it ends or a stop signal, then the end
     of stream; the replay (what was read, what went wrong)."""
-    publisher = CapturePublisher(session, args.cam)
+    publisher = CapturePublisher(session, args.cam, args.environment.shm_pool_bytes)
     token = session.liveliness().declare_token(alive_key(args.cam, CAPTURE))
     with lifecycle.graceful() as stop:
         replay = Replay(source, args.loop, stop)

@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import time
 from typing import TYPE_CHECKING
 
@@ -113,11 +112,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def domain_id(args: argparse.Namespace) -> int:
-    """``--domain``, else ``ROS_DOMAIN_ID``, else 0; ``ValueError`` naming the source."""
+    """``--domain``, else ``ROS_DOMAIN_ID`` (``args.environment``), else 0; ``ValueError``
+    naming the source."""
     if args.domain is not None:
         value, source = args.domain, "--domain"
     else:
-        text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+        text = args.environment.ros_domain_id
         if not text:
             return 0
         source = f"ROS_DOMAIN_ID={text!r}"
@@ -209,7 +209,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
                 CameraTopics(args.color_topic, args.depth_topic, args.camera_info_topic),
                 to_cloud, max_skew_ns=int(args.max_skew_ms * 1e6),
                 max_pixels=args.max_frame_pixels, max_held_bytes=args.max_pending_mb << 20,
-                fixed_frame=args.fixed_frame)
+                fixed_frame=args.fixed_frame, pool_bytes=args.environment.shm_pool_bytes)
             tokens.append(gngdt.liveliness().declare_token(alive_key(args.cam, CAPTURE)))
         log.info("ROS 2 node gngdt_%s in domain %d: %s", args.cam, domain,
                  "camera in, results out" if inbound else "results out")

@@ -90,8 +90,9 @@ class RosToGngdt:
 
     def __init__(self, session: zenoh.Session, node: Ros2Node, camera: str, topics: CameraTopics,
                  to_cloud: FrameToCloud, *, max_skew_ns: int, max_pixels: int,
-                 max_held_bytes: int, fixed_frame: str | None = None) -> None:
-        self.publisher = CapturePublisher(session, camera)
+                 max_held_bytes: int, fixed_frame: str | None = None,
+                 pool_bytes: int | None = None) -> None:
+        self.publisher = CapturePublisher(session, camera, pool_bytes)
         self.to_cloud = to_cloud
         self.max_pixels = max_pixels
         self.fixed_frame = fixed_frame
