@@ -117,6 +117,7 @@ class LearnerOptions:
                                     "publish the foxglove scene every this many learned frames; "
                                     "0: never")
     pose_workspace_m: float = _pose_limit("workspace_m")
+    pose_workspace_around: str = _pose_limit("workspace_around")
     pose_rotation_tolerance: float = _pose_limit("rotation_tolerance")
     pose_max_speed_m_s: float = _pose_limit("max_speed_m_s")
     pose_max_turn_deg_s: float = _pose_limit("max_turn_deg_s")
