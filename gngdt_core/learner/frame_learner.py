@@ -69,6 +69,13 @@ SETTLE_CHUNK = 20_000
 SETTLED_CHANGE = 0.01
 #: largest cloud a learner accepts by default (the wire's own limit, schemas' MAX_CLOUD_POINTS)
 DEFAULT_MAX_POINTS = 2_000_000
+#: a cloud starts a tracked map only when its depth image holds smooth surfaces: at least this
+#: share of its neighbouring pixels (both with depth) within ``SMOOTH_DEPTH_SHARE`` of each
+#: other's depth (measured: real and rendered scenes 0.99, a depth image of noise 0.02-0.36),
+#: judged from ``MIN_JUDGED_PAIRS`` such pairs (fewer: a sparse cloud, not judged)
+MIN_SMOOTH_SHARE = 0.5
+SMOOTH_DEPTH_SHARE = 0.02
+MIN_JUDGED_PAIRS = 1000
 
 
 def _pose_limit(name: str) -> Any:
@@ -175,6 +182,32 @@ class LearnerConfig:
             object.__setattr__(self, "schedule", replace(self.schedule, steps_per_frame=steps))
 
 
+def implausible_start(positions: np.ndarray, camera: CameraIntrinsics | None) -> str:
+    """Why a cloud (``positions`` (N, 3) camera frame, its depth image's valid pixels
+    deprojected with ``camera``) cannot start a map: its depth image holds no smooth surfaces
+    (see ``MIN_SMOOTH_SHARE``), a sensor's noise and not a scene; "" when it can, or when it
+    cannot be judged (no intrinsics, too sparse a cloud)."""
+    if camera is None:
+        return ""
+    from gngdt.core.sensor.depth import organize
+
+    organized, _ = organize(positions, None, camera.width, camera.height, camera.fx,
+                            camera.fy, camera.cx, camera.cy)
+    depth = organized[..., 2]
+    pairs = smooth = 0
+    for first, second in ((depth[:, 1:], depth[:, :-1]), (depth[1:, :], depth[:-1, :])):
+        both = np.isfinite(first) & np.isfinite(second)
+        pairs += int(both.sum())
+        smooth += int(np.count_nonzero(
+            np.abs(first[both] - second[both]) <= SMOOTH_DEPTH_SHARE * first[both]))
+    if pairs < MIN_JUDGED_PAIRS or smooth >= MIN_SMOOTH_SHARE * pairs:
+        return ""
+    return (f"a map is not started from this frame: only {smooth / pairs:.0%} of its "
+            f"neighbouring depth pixels lie within {SMOOTH_DEPTH_SHARE:.0%} of each other "
+            f"(a scene's surfaces: ~99 %; at least {MIN_SMOOTH_SHARE:.0%} needed): the depth "
+            "image holds no smooth surfaces (noise, not a scene)")
+
+
 class FrameLearner:
     """One GNG-DT network fed frame by frame, and what each learned frame shows.
 
@@ -236,7 +269,11 @@ class FrameLearner:
         tracked = self.tracking is not None and pose is None
         if tracked:
             located = self.tracking.locate(self.model, positions, colors, camera, stamp_ns)
-            if located.pose is None:
+            implausible = implausible_start(positions, camera) if located.first else ""
+            if implausible:
+                self.tracking.reset()  # the next cloud may start the map instead
+                self.tracking.problem = implausible
+            if located.pose is None or implausible:
                 return self._not_learned(Outcome.LOST_TRACKING, self.tracking.problem)
             pose, frame_id = located.pose, TRACKED_FRAME
         frame_id = frame_id or self.camera
