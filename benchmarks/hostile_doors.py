@@ -8,13 +8,22 @@ reached the user, and what was learned or kept."""
 
 from __future__ import annotations
 
+import base64
+import json
+import os
 import shutil
+import signal
+import socket
 import sqlite3
 import struct
+import subprocess
 import tempfile
+import threading
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from hostile_trust import GNGDT, Attack, attack, line_with, run
+from hostile_trust import GNGDT, Attack, Ran, attack, line_with, run
 
 # ----------------------------------------------------------------- RealSense files, made odd
 
@@ -91,12 +100,239 @@ def device_file_attacks(folder: Path) -> list[Attack]:
     return rows
 
 
+# ------------------------------------------------------------------ Foxglove clients, hostile
+
+
+def _frame(sock: socket.socket) -> tuple[int, bytes]:
+    """One WebSocket frame from the server (unmasked): (opcode, payload)."""
+    def exactly(count: int) -> bytes:
+        data = b""
+        while len(data) < count:
+            chunk = sock.recv(count - len(data))
+            if not chunk:
+                raise ConnectionError("the server closed the connection")
+            data += chunk
+        return data
+
+    first, second = exactly(2)
+    length = second & 0x7F
+    if length == 126:
+        (length,) = struct.unpack(">H", exactly(2))
+    elif length == 127:
+        (length,) = struct.unpack(">Q", exactly(8))
+    return first & 0x0F, exactly(length)
+
+
+def _masked_text(text: str) -> bytes:
+    """A client's (masked) WebSocket text frame."""
+    data, mask = text.encode(), os.urandom(4)
+    header = bytes([0x81, 0x80 | 126]) + struct.pack(">H", len(data)) if len(data) > 125 \
+        else bytes([0x81, 0x80 | len(data)])
+    return header + mask + bytes(byte ^ mask[index % 4] for index, byte in enumerate(data))
+
+
+def stalled_foxglove_client(port: int, timeout_s: float = 10.0) -> socket.socket:
+    """A client that subscribes to every channel the server advertises, then never reads: the
+    WebSocket handshake (subprotocol foxglove.sdk.v1), frames read until the advertisement,
+    one subscribe message, and a small receive buffer. A server that ends the connection
+    before (a client refused) leaves it as it is."""
+    sock = socket.create_connection(("127.0.0.1", port), timeout=timeout_s)
+    try:
+        _subscribe_all(sock, port)
+    except (ConnectionError, OSError):
+        pass  # refused: the socket is closed by the server
+    return sock
+
+
+def _subscribe_all(sock: socket.socket, port: int) -> None:
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    key = base64.b64encode(os.urandom(16)).decode()
+    sock.sendall((f"GET / HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nUpgrade: websocket\r\n"
+                  f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+                  "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Protocol: foxglove.sdk.v1\r\n"
+                  "\r\n").encode())
+    response = b""
+    while b"\r\n\r\n" not in response:
+        chunk = sock.recv(1)
+        if not chunk:
+            raise ConnectionError("no WebSocket handshake")
+        response += chunk
+    channels: list[int] = []
+    while not channels:
+        opcode, payload = _frame(sock)
+        if opcode == 1:
+            message = json.loads(payload)
+            if message.get("op") == "advertise":
+                channels = [channel["id"] for channel in message["channels"]]
+    subscriptions = [{"id": index + 1, "channelId": channel}
+                     for index, channel in enumerate(channels)]
+    sock.sendall(_masked_text(json.dumps({"op": "subscribe", "subscriptions": subscriptions})))
+
+
+class ReadingClients:
+    """``count`` well-behaved Foxglove clients on one asyncio thread: each subscribes to every
+    channel and reads (and discards) everything, until `close`; ``received`` bytes in all."""
+
+    def __init__(self, port: int, count: int) -> None:
+        import asyncio
+
+        self.received = 0
+        self.connected = 0
+        self._loop = asyncio.new_event_loop()
+        self._stop = asyncio.Event()
+        self._thread = threading.Thread(target=self._loop.run_until_complete,
+                                        args=(self._run(port, count),), daemon=True)
+        self._thread.start()
+
+    async def _run(self, port: int, count: int) -> None:
+        import asyncio
+
+        await asyncio.gather(*(self._client(port) for _ in range(count)),
+                             return_exceptions=True)
+
+    async def _client(self, port: int) -> None:
+        import asyncio
+
+        from websockets.asyncio.client import connect
+
+        async with connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.sdk.v1"],
+                           max_size=None, compression=None, open_timeout=30) as websocket:
+            self.connected += 1
+            subscribed = set()
+            while not self._stop.is_set():
+                try:
+                    frame = await asyncio.wait_for(websocket.recv(), 0.5)
+                except TimeoutError:
+                    continue
+                if isinstance(frame, str):
+                    message = json.loads(frame)
+                    if message.get("op") == "advertise":
+                        new = [c["id"] for c in message["channels"] if c["id"] not in subscribed]
+                        subscribed.update(new)
+                        await websocket.send(json.dumps({"op": "subscribe", "subscriptions": [
+                            {"id": channel, "channelId": channel} for channel in new]}))
+                else:
+                    self.received += len(frame)
+
+    def close(self) -> None:
+        self._loop.call_soon_threadsafe(self._stop.set)
+        self._thread.join(30)
+
+
+@dataclass
+class FoxglovePhases:
+    """The logger's resident memory (MB) through a Foxglove attack: before any client, its
+    peak while ``stalled`` clients that never read were connected and once they were gone (after
+    ``settle_s``), the same for ``reading`` well-behaved ones; how many of each the logger still
+    had connected at the end of their phase (dropped ones are not); its log."""
+
+    before_mb: float = 0.0
+    stalled_peak_mb: float = 0.0
+    after_stalled_mb: float = 0.0
+    reading_peak_mb: float = 0.0
+    after_reading_mb: float = 0.0
+    stalled_left: int = 0
+    reading_received_mb: float = 0.0
+    log: str = ""
+
+
+def served_clients(pid: int, port: int) -> int:
+    """Established TCP connections of process ``pid`` on local ``port`` (from /proc)."""
+    inodes = set()
+    for descriptor in Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(descriptor)
+        except OSError:
+            continue
+        if target.startswith("socket:["):
+            inodes.add(target[8:-1])
+    count = 0
+    for table in ("tcp", "tcp6"):
+        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
+            columns = line.split()
+            local_port = int(columns[1].rsplit(":", 1)[1], 16)
+            if local_port == port and columns[3] == "01" and columns[9] in inodes:
+                count += 1
+    return count
+
+
+def foxglove_under_clients(folder: Path, recording: Path, stalled: int, reading: int,
+                           hold_s: float = 20.0, settle_s: float = 20.0,
+                           logger_options: tuple[str, ...] = ()) -> FoxglovePhases:
+    """A logger serving Foxglove (``--foxglove``) while `gngdt capture --loop` replays
+    ``recording`` at its rate: ``stalled`` clients that never read for ``hold_s``, closed, then
+    ``reading`` well-behaved ones for ``hold_s``, closed; its memory through it all (sampled
+    from /proc every 0.1 s: VmHWM is the peak)."""
+    from procstat import gngdt, status_mb, wait_until
+
+    from gngdt.services.plumbing.session import free_tcp_port, open_config, router_config
+
+    endpoint, port = f"tcp/127.0.0.1:{free_tcp_port()}", free_tcp_port()
+    router = open_config(router_config([endpoint]), what="router")
+    log = folder / "logger.log"
+    logger = gngdt("log", "--save", str(folder / "foxglove.rrd"), "--foxglove", "--bind",
+                   f"127.0.0.1:{port}", "--keep-running", "--zenoh-connect", endpoint,
+                   *logger_options, log=log)
+    capture = gngdt("capture", str(recording), "--loop", "--zenoh-connect", endpoint,
+                    log=folder / "capture.log")
+    phases = FoxglovePhases()
+    try:
+        wait_until(lambda: "serving Foxglove" in log.read_text(), 180, "the logger")
+        time.sleep(5.0)  # streaming, no client yet
+        phases.before_mb = status_mb(logger.pid, "VmRSS")
+        sockets = [stalled_foxglove_client(port) for _ in range(stalled)]
+        time.sleep(hold_s)
+        phases.stalled_left = served_clients(logger.pid, port)
+        phases.stalled_peak_mb = status_mb(logger.pid, "VmHWM")
+        for sock in sockets:
+            sock.close()
+        time.sleep(settle_s)
+        phases.after_stalled_mb = status_mb(logger.pid, "VmRSS")
+        clients = ReadingClients(port, reading)
+        time.sleep(hold_s)
+        phases.reading_peak_mb = status_mb(logger.pid, "VmHWM")
+        phases.reading_received_mb = clients.received / 1e6
+        clients.close()
+        time.sleep(settle_s)
+        phases.after_reading_mb = status_mb(logger.pid, "VmRSS")
+    finally:
+        for process in (capture, logger):
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGINT)
+                try:
+                    process.wait(60)
+                except subprocess.TimeoutExpired:
+                    os.killpg(process.pid, signal.SIGKILL)
+                    process.wait()
+        router.close()
+    phases.log = log.read_text(errors="replace")
+    return phases
+
+
+def foxglove_attacks(folder: Path) -> list[Attack]:
+    """40 Foxglove clients that never read, then 50 that do, on a logger serving a 640x480
+    recording at 30 fps: its peak and its memory once they left."""
+    recording = folder / "tabletop.mcap"
+    made = run([*GNGDT, "record", "synth", "--scene", "tabletop", "--frames", "30", "--out",
+                str(recording)], folder / "record.log")
+    if made.code:
+        raise SystemExit(f"cannot make the recording: {made.output[-500:]}")
+    phases = foxglove_under_clients(folder, recording, stalled=40, reading=50)
+    ran = Ran(0, max(phases.stalled_peak_mb, phases.reading_peak_mb), phases.log)
+    note = (f"RSS {phases.before_mb:.0f} MB before; 40 never reading: peak "
+            f"{phases.stalled_peak_mb:.0f}, {phases.after_stalled_mb:.0f} 20 s after, "
+            f"{phases.stalled_left} left connected; 50 reading: peak "
+            f"{phases.reading_peak_mb:.0f}, {phases.after_reading_mb:.0f} 20 s after "
+            f"({phases.reading_received_mb:.0f} MB read)")
+    return [attack("Foxglove: 40 clients never reading, then 50 reading", {"log": ran}, note)]
+
+
 # ----------------------------------------------------------------------------- all of them
 def door_attacks(folder: Path | None = None) -> list[Attack]:
     """Every attack of issue 38, in a fresh folder; one row each."""
     folder = folder or Path(tempfile.mkdtemp(prefix="bench-doors-"))
     rows = []
-    for part in (device_file_attacks,):
+    for part in (device_file_attacks, foxglove_attacks):
         part_folder = folder / part.__name__
         part_folder.mkdir()
         rows += part(part_folder)
