@@ -327,12 +327,110 @@ def foxglove_attacks(folder: Path) -> list[Attack]:
     return [attack("Foxglove: 40 clients never reading, then 50 reading", {"log": ran}, note)]
 
 
+# ---------------------------------------------------------------------- a ROS 2 image flood
+
+
+@dataclass
+class FloodOutcome:
+    """The bridge's memory (MB) through an image flood: before, its peak, ``settle_s`` after;
+    images offered; its log."""
+
+    before_mb: float
+    peak_mb: float
+    after_mb: float
+    #: of ``after_mb``, shared memory (the bridge's publishing pools, by design)
+    after_shared_mb: float
+    images: int
+    log: str
+
+
+def bridge_under_flood(folder: Path, seconds: float = 10.0, width: int = 1920,
+                       height: int = 1080, settle_s: float = 10.0) -> FloodOutcome:
+    """`gngdt ros2` while a ROS 2 camera (gngdt's own node, as bench_ros2) floods it with colour
+    and depth images of ``width`` x ``height`` and their CameraInfo as fast as it can for
+    ``seconds``, then nothing for ``settle_s``."""
+    import numpy as np
+    from procstat import gngdt, status_mb, wait_until
+
+    from gngdt.core.sensor.geometry import CameraIntrinsics
+    from gngdt.io.ros2 import messages as m
+    from gngdt.io.ros2.node import Ros2Node
+    from gngdt.schemas.wire import BRIDGE, DEFAULT_CAMERA, alive_key
+    from gngdt.services.plumbing.session import (
+        client_config,
+        free_tcp_port,
+        open_config,
+        router_config,
+    )
+
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_config(router_config([endpoint]), what="router")
+    session = open_config(client_config([endpoint]))
+    log = folder / "ros2.log"
+    bridge = gngdt("ros2", "--zenoh-connect", endpoint, log=log)
+    node = None
+    try:
+        wait_until(lambda: any(True for _ in session.liveliness().get(
+            alive_key(DEFAULT_CAMERA, BRIDGE), timeout=1.0)), 60, "the bridge")
+        node = Ros2Node(session, "flood")
+        topics = {"info": ("/camera/camera/color/camera_info", m.CAMERA_INFO),
+                  "color": ("/camera/camera/color/image_raw", m.IMAGE),
+                  "depth": ("/camera/camera/aligned_depth_to_color/image_raw", m.IMAGE)}
+        publishers = {name: node.create_publisher(topic, kind, m.type_hash(kind))
+                      for name, (topic, kind) in topics.items()}
+        wait_until(lambda: all(p.has_subscribers for p in publishers.values()), 30,
+                   "the bridge's subscriptions")
+        camera = CameraIntrinsics(width, height, 0.8 * width, 0.8 * width, width / 2,
+                                  height / 2)
+        rng = np.random.default_rng(0)
+        color = rng.integers(0, 256, (height, width, 3), dtype=np.uint8)
+        depth = rng.integers(500, 4000, (height, width), dtype=np.uint16)
+        time.sleep(2.0)
+        before = status_mb(bridge.pid, "VmRSS")
+        images, deadline = 0, time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            stamp = time.time_ns()
+            publishers["info"].publish(m.encode_camera_info(m.CameraInfo(stamp, "optical",
+                                                                         camera)), stamp)
+            for name, pixels, encoding in (("color", color, "rgb8"), ("depth", depth, "16UC1")):
+                publishers[name].publish(m.encode_image(pixels, encoding, stamp_ns=stamp,
+                                                        frame_id="optical"), stamp)
+                images += 1
+        time.sleep(settle_s)
+        outcome = FloodOutcome(before, status_mb(bridge.pid, "VmHWM"),
+                               status_mb(bridge.pid, "VmRSS"),
+                               status_mb(bridge.pid, "RssShmem"), images, "")
+    finally:
+        if node is not None:
+            node.close()
+        bridge.send_signal(signal.SIGINT)
+        try:
+            bridge.wait(30)
+        except subprocess.TimeoutExpired:
+            bridge.kill()
+            bridge.wait()
+        session.close()
+        router.close()
+    outcome.log = log.read_text(errors="replace")
+    return outcome
+
+
+def flood_attacks(folder: Path) -> list[Attack]:
+    """The ROS 2 bridge flooded with 1920x1080 images for 10 s: its peak, and 10 s after."""
+    outcome = bridge_under_flood(folder)
+    ran = Ran(0, outcome.peak_mb, outcome.log)
+    return [attack("ROS 2 image flood (1920x1080, 10 s)", {"ros2": ran},
+                   f"{outcome.images} images; RSS {outcome.before_mb:.0f} MB before, "
+                   f"{outcome.after_mb:.0f} MB 10 s after ({outcome.after_shared_mb:.0f} MB "
+                   "of it its shared-memory publishing pools)")]
+
+
 # ----------------------------------------------------------------------------- all of them
 def door_attacks(folder: Path | None = None) -> list[Attack]:
     """Every attack of issue 38, in a fresh folder; one row each."""
     folder = folder or Path(tempfile.mkdtemp(prefix="bench-doors-"))
     rows = []
-    for part in (device_file_attacks, foxglove_attacks):
+    for part in (device_file_attacks, foxglove_attacks, flood_attacks):
         part_folder = folder / part.__name__
         part_folder.mkdir()
         rows += part(part_folder)

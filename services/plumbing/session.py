@@ -345,6 +345,10 @@ SHARED_MEMORY_MIN_BYTES = 64 * 1024
 SHARED_MEMORY_POOL_PAYLOADS = 8
 #: the smallest pool a publisher makes, bytes
 SHARED_MEMORY_MIN_POOL_BYTES = 4 * 1024 * 1024
+#: and the largest (unless GNGDT_SHM_POOL_MB says): eight 4K colour images would take 200 MB
+#: and a 4K stream's three pools 570 MB of a ROS 2 bridge's 1.5 GB peak under a flood; beyond
+#: the pool, payloads go over the network
+SHARED_MEMORY_MAX_POOL_BYTES = 64 * 1024 * 1024
 #: what a process lacking shared memory needs (mlock of its pool, room in /dev/shm)
 _SHARED_MEMORY_HINT = ("raise its locked-memory limit (ulimit -l; Docker: --ulimit memlock=-1 or "
                        "cap_add IPC_LOCK) and give /dev/shm room (Docker: --shm-size or ipc: host)")
@@ -358,7 +362,8 @@ class SharedMemoryPublisher:
     (``transport/shared_memory/enabled``, zenoh's default; ``false`` in the session's and the
     router's configuration turns it off). A payload of ``SHARED_MEMORY_MIN_BYTES`` or more is
     then copied once into this publisher's pool (``ShmProvider``, made at the first such payload
-    with room for ``SHARED_MEMORY_POOL_PAYLOADS`` of it) and only a reference crosses the router
+    with room for ``SHARED_MEMORY_POOL_PAYLOADS`` of it, at most ``SHARED_MEMORY_MAX_POOL_BYTES``)
+    and only a reference crosses the router
     to subscribers on the same host; zenoh turns it back into bytes on any link that has no
     shared memory (another host). When the pool cannot be made (locked-memory limit, a small
     /dev/shm) or is full (subscribers still hold its payloads), the payload goes over the
@@ -423,8 +428,9 @@ class SharedMemoryPublisher:
             import zenoh.shm as shm
 
             if self._provider is None:
-                pool = self._pool_bytes or max(SHARED_MEMORY_MIN_POOL_BYTES,
-                                               SHARED_MEMORY_POOL_PAYLOADS * size)
+                pool = self._pool_bytes or min(max(SHARED_MEMORY_MIN_POOL_BYTES,
+                                                   SHARED_MEMORY_POOL_PAYLOADS * size),
+                                               max(SHARED_MEMORY_MAX_POOL_BYTES, size))
                 self._provider = shm.ShmProvider.default_backend(pool)
                 log.debug("%s: shared-memory pool of %.1f MB", self.key_expr, pool / 1e6)
             # collect what subscribers released, compact, else give up: never block a publisher
