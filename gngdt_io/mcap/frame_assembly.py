@@ -41,6 +41,11 @@ class DecodedImage:
 BadFrameHandler = Callable[[RecordingError], None]
 
 
+class CameraRefused(RecordingError):
+    """The camera the user gave (--camera-json) cannot be this recording's: it ends the
+    reading, as no frame can be read with it."""
+
+
 class FrameAssembler:
     """Pairs colour and depth, attaches calibration and labels, and checks sizes."""
 
@@ -179,6 +184,8 @@ class FrameAssembler:
         """The frame, or nothing when it is bad and bad frames are skipped (index still used)."""
         try:
             yield self._frame(color, depth, labels)
+        except CameraRefused:
+            raise  # the user's camera: every frame would be refused, not one bad frame
         except RecordingError as error:
             self.next_index += 1
             self.skip_or_raise(error)
@@ -188,7 +195,8 @@ class FrameAssembler:
             try:
                 return self.camera.intrinsics(width, height)
             except ValueError as error:
-                raise self.error(f"--camera-json refused: {error}") from None
+                raise CameraRefused(self.path, self.next_index,
+                                    f"--camera-json refused: {error}") from None
         assert self.calibration is not None
         return self.calibration
 

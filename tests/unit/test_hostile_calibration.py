@@ -160,6 +160,10 @@ def test_camera_json_for_a_recording_with_absurd_values_is_refused(tmp_path: Pat
     recording = write_recording(tmp_path / "good.mcap", [GOOD])
     with pytest.raises(RecordingError, match=r"--camera-json refused: .*principal point cy"):
         list(read_frames(recording, camera=camera))
+    skipped: list[RecordingError] = []  # not a bad frame to skip: no frame can be read with it
+    with pytest.raises(RecordingError, match=r"--camera-json refused"):
+        list(read_frames(recording, camera=camera, on_bad_frame=skipped.append))
+    assert not skipped
 
 
 def test_assumed_default_intrinsics_are_scaled_to_the_images(tmp_path: Path, caplog) -> None:
