@@ -23,6 +23,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from hostile_inputs import input_attacks
 from hostile_trust import GNGDT, Attack, Ran, attack, line_with, run
 
 # ----------------------------------------------------------------- RealSense files, made odd
@@ -429,7 +430,7 @@ def flood_attacks(folder: Path) -> list[Attack]:
 def door_attacks(folder: Path | None = None) -> list[Attack]:
     """Every attack of issue 38, in a fresh folder; one row each."""
     folder = folder or Path(tempfile.mkdtemp(prefix="bench-doors-"))
-    rows = []
+    rows = input_attacks(folder)
     for part in (device_file_attacks, foxglove_attacks, flood_attacks):
         part_folder = folder / part.__name__
         part_folder.mkdir()
