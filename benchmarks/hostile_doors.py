@@ -237,22 +237,14 @@ class FoxglovePhases:
     log: str = ""
 
 
-def served_clients(pid: int, port: int) -> int:
-    """Established TCP connections of process ``pid`` on local ``port`` (from /proc)."""
-    inodes = set()
-    for descriptor in Path(f"/proc/{pid}/fd").iterdir():
-        try:
-            target = os.readlink(descriptor)
-        except OSError:
-            continue
-        if target.startswith("socket:["):
-            inodes.add(target[8:-1])
+def served_clients(port: int) -> int:
+    """Established TCP connections accepted on local ``port`` of this machine (the server's
+    ends: a client's own end has an ephemeral local port), from /proc."""
     count = 0
     for table in ("tcp", "tcp6"):
-        for line in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
+        for line in Path(f"/proc/net/{table}").read_text().splitlines()[1:]:
             columns = line.split()
-            local_port = int(columns[1].rsplit(":", 1)[1], 16)
-            if local_port == port and columns[3] == "01" and columns[9] in inodes:
+            if int(columns[1].rsplit(":", 1)[1], 16) == port and columns[3] == "01":
                 count += 1
     return count
 
@@ -283,7 +275,7 @@ def foxglove_under_clients(folder: Path, recording: Path, stalled: int, reading:
         phases.before_mb = status_mb(logger.pid, "VmRSS")
         sockets = [stalled_foxglove_client(port) for _ in range(stalled)]
         time.sleep(hold_s)
-        phases.stalled_left = served_clients(logger.pid, port)
+        phases.stalled_left = served_clients(port)
         phases.stalled_peak_mb = status_mb(logger.pid, "VmHWM")
         for sock in sockets:
             sock.close()
