@@ -266,11 +266,15 @@ def source_options(args: argparse.Namespace) -> SourceOptions:
 
 
 class CapturePublisher:
-    """The capture's publishers, declared once; every put carries the frame's attachment."""
+    """The capture's publishers, declared once; every put carries the frame's attachment.
+    ``paced``: a file read frame by frame (every cloud must arrive); ``pool_bytes``: their
+    shared-memory pools' size (`declare_publisher`)."""
 
-    def __init__(self, session: zenoh.Session, camera: str, paced: bool = False) -> None:
+    def __init__(self, session: zenoh.Session, camera: str, paced: bool = False,
+                 pool_bytes: int | None = None) -> None:
         def declare(name: str, encoding: str, latest_wins: bool) -> SharedMemoryPublisher:
-            return declare_publisher(session, topic(camera, name), encoding, latest_wins)
+            return declare_publisher(session, topic(camera, name), encoding, latest_wins,
+                                     pool_bytes)
 
         self.camera = camera
         self.color = declare("color", ENCODING_RAW_IMAGE, latest_wins=True)
@@ -278,7 +282,7 @@ class CapturePublisher:
         self.calibration = declare("calibration", ENCODING_CALIBRATION, latest_wins=False)
         # paced (a file read frame by frame): every cloud must arrive, the learner waits for it
         self.points = declare_publisher(session, topic(camera, "points"), ENCODING_POINT_CLOUD,
-                                        latest_wins=not paced, large=True)
+                                        latest_wins=not paced, large=True, pool_bytes=pool_bytes)
         self.tf = declare("tf", ENCODING_FRAME_TRANSFORM, latest_wins=False)
         self.eos = declare("eos", ENCODING_STREAM_END, latest_wins=False)
         self._last_intrinsics: CameraIntrinsics | None = None
@@ -453,7 +457,7 @@ def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
     of stream; the replay (what was read, what went wrong). A file is paced by its learner
     (`gngdt.services.pacing`) unless ``--realtime``."""
     paced = not source.live and not args.realtime
-    publisher = CapturePublisher(session, args.cam, paced)
+    publisher = CapturePublisher(session, args.cam, paced, args.environment.shm_pool_bytes)
     token = session.liveliness().declare_token(alive_key(args.cam, CAPTURE))
     with lifecycle.graceful() as stop:
         replay = Replay(source, args.loop, stop)

@@ -22,6 +22,8 @@ STATE_VERSION = 5  # 2: persistent node ids (``ids``, a fourth counter); 3: util
 #: largest counter (steps, node ids, samples offered, ...) a state may hold: far below 2**63,
 #: so that the counters can go on counting for ever without overflowing an int64
 MAX_STATE_COUNTER = 2**62
+#: a node normal is a unit vector (or zero before it is estimated); float32 rounding aside
+NORMAL_TOLERANCE = 1e-3
 #: float dtypes of a state's arrays (float16 loses what was learned; others are not ours)
 _FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
@@ -178,6 +180,10 @@ def _node_arrays(state: dict[str, np.ndarray], n: int, dim: int,
     for key in _FLOAT_ARRAYS:
         if not np.isfinite(arrays[key]).all():
             raise ValueError(f"state[{key!r}] contains NaN or inf")
+    if (arrays["err"] < 0).any():
+        raise ValueError("state['err'] must be non-negative (accumulated squared distances)")
+    if (np.linalg.norm(arrays[NOR], axis=1) > 1.0 + NORMAL_TOLERANCE).any():
+        raise ValueError("state['nor'] holds vectors longer than a unit normal")
     _check_adjacency(n, arrays)
     arrays["ids"], counters[K.I_NEXT_ID] = _node_ids(state, n, int(counters[K.I_NEXT_ID]))
     # states saved before win counts: every node mature (a young node's rate is 1 / wins)

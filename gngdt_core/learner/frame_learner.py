@@ -52,6 +52,7 @@ from gngdt.core.odometry.map_odometry import TrackerParams
 from gngdt.core.odometry.pose_checks import PoseChecker, PoseLimits
 from gngdt.core.parameters import Flag, Interval, OneOf, Settings, param
 from gngdt.core.segmentation.network import SegmentationParams
+from gngdt.core.sensor.depth import NOT_A_SCENE, implausible_start
 from gngdt.core.sensor.geometry import CameraIntrinsics, apply_pose
 
 log = logging.getLogger(__name__)
@@ -71,7 +72,6 @@ SETTLED_CHANGE = 0.01
 #: largest cloud a learner accepts by default (the wire's own limit, schemas' MAX_CLOUD_POINTS);
 #: not capture's point cap (``--max-points``), which thins a frame's cloud
 DEFAULT_MAX_CLOUD_POINTS = 2_000_000
-
 
 def _pose_limit(name: str) -> Any:
     """A learner option ``pose_<name>`` declared as `PoseLimits` declares ``name``."""
@@ -121,6 +121,7 @@ class LearnerOptions(Settings):
                                     "publish the foxglove scene every this many learned frames; "
                                     "0: never")
     pose_workspace_m: float = _pose_limit("workspace_m")
+    pose_workspace_around: str = _pose_limit("workspace_around")
     pose_rotation_tolerance: float = _pose_limit("rotation_tolerance")
     pose_max_speed_m_s: float = _pose_limit("max_speed_m_s")
     pose_max_turn_deg_s: float = _pose_limit("max_turn_deg_s")
@@ -300,9 +301,13 @@ class FrameLearner:
         `Outcome.POSED` with the pose in ``odom``, or `Outcome.LOST_TRACKING` and why (each
         counted). `learn` takes the result (``located``)."""
         located = self.tracking.locate(positions, colors, camera, stamp_ns)
-        if located.pose is None:
-            self.lost_reasons[located.problem] += 1
-            return self._not_learned(Outcome.LOST_TRACKING, located.problem)
+        problem, reason = located.problem, located.problem
+        if located.first and (implausible := implausible_start(positions, camera)):
+            self.tracking.reset()  # the next cloud may start the map instead
+            problem, reason = implausible, NOT_A_SCENE
+        if located.pose is None or (located.first and problem):
+            self.lost_reasons[reason] += 1
+            return self._not_learned(Outcome.LOST_TRACKING, problem)
         self.counters.count(Outcome.POSED)
         novelty = 1.0 if located.result is None else 1.0 - located.result.overlap
         return FrameResult(Outcome.POSED, located.pose, TRACKED_FRAME, True, novelty=novelty)

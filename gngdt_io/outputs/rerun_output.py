@@ -186,7 +186,9 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
         rec.stdout(default_blueprint=initial)
         return rec, "stdout", None, None
     if args.serve:
-        server = ViewerServer(split_bind(args.bind, 0)[0], args.grpc_port, args.web_port)
+        binary = getattr(getattr(args, "environment", None), "rerun_cli_path", None)
+        server = ViewerServer(split_bind(args.bind, 0)[0], args.grpc_port, args.web_port,
+                              binary=binary)
         try:
             server.wait_ready()
         except OSError:

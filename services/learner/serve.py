@@ -180,7 +180,8 @@ class LearnerService:
     """One camera's learner on a zenoh session: its subscribers, publishers and queryable."""
 
     def __init__(self, session: zenoh.Session, camera: str, config: LearnerConfig,
-                 learner: FrameLearner, checkpoint: Path | None = None) -> None:
+                 learner: FrameLearner, checkpoint: Path | None = None,
+                 pool_bytes: int | None = None) -> None:
         import zenoh
 
         self.camera = camera
@@ -203,16 +204,19 @@ class LearnerService:
         self.tracker: TrackerThread | None = None
         self._eos = session.declare_subscriber(topic(camera, "eos"), self._on_eos)
         self._topology = declare_publisher(session, topic(camera, "topology"),
-                                           ENCODING_TOPOLOGY, latest_wins=True)
+                                           ENCODING_TOPOLOGY, latest_wins=True,
+                                           pool_bytes=pool_bytes)
         self._status = declare_publisher(session, topic(camera, "learner/status"),
                                          ENCODING_STATUS, latest_wins=False)
         self._ack = declare_publisher(session, topic(camera, "learner/ack"), ENCODING_FRAME_ACK,
                                       latest_wins=False)
         # latest-wins views: a consumer that never reads must not hold the learner back
         self._objects = declare_publisher(session, topic(camera, "objects"),
-                                          ENCODING_SCENE_UPDATE, latest_wins=True)
+                                          ENCODING_SCENE_UPDATE, latest_wins=True,
+                                          pool_bytes=pool_bytes)
         self._scene = declare_publisher(session, topic(camera, "scene"),
-                                        ENCODING_SCENE_UPDATE, latest_wins=True)
+                                        ENCODING_SCENE_UPDATE, latest_wins=True,
+                                        pool_bytes=pool_bytes)
         self._queryable = session.declare_queryable(topic(camera, "topology"), self.latest.reply)
         self._token = session.liveliness().declare_token(alive_key(camera, LEARNER))
         options = self.options
@@ -490,7 +494,8 @@ class LearnerService:
 def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner,
           session: zenoh.Session) -> int:
     """Learn on ``session`` until stopped; checkpoint on the way out."""
-    service = LearnerService(session, args.cam, config, learner, args.checkpoint)
+    service = LearnerService(session, args.cam, config, learner, args.checkpoint,
+                             args.environment.shm_pool_bytes)
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
              config.options.samples_per_frame)
     try:

@@ -267,9 +267,10 @@ def publish_bad_input(sdk, driver: CameraDriver, color: np.ndarray, depth: np.nd
                       counted: Callable[[int], None]) -> None:
     """Seven messages the bridge must refuse: three of garbage on the colour key, a yuv422
     image, a frame over 640x480 (colour and depth), an uncalibrated CameraInfo. Each (or each
-    frame's) waited for until ``counted`` sees the status count it: the bridge holds at most 8
-    samples, and a burst beyond that, on a machine too busy to keep up, would be dropped
-    (counted as such) before being refused."""
+    frame's) waited for until ``counted`` sees the status count it (the first six as
+    malformed, the CameraInfo as a refused calibration): the bridge holds at most 8 samples,
+    and a burst beyond that, on a machine too busy to keep up, would be dropped (counted as
+    such) before being refused."""
     noise = sdk.ZenohSession.get_instance().session
     for count, garbage in enumerate((b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3), 1):
         noise.put(driver.publishers[COLOR].keyexpr, garbage)
@@ -331,7 +332,8 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
                 return {kv.key: kv.value for kv in ours[0].values} if ours else {}
 
             def counted(bad: int) -> None:
-                wait_for(lambda: int(status_values().get("camera/images/malformed", 0)) >= bad,
+                wait_for(lambda: int(status_values().get("camera/images/malformed", 0))
+                         + int(status_values().get("camera/calibrations_refused", 0)) >= bad,
                          30, f"{bad} bad messages counted in the status")
 
             try:
@@ -346,7 +348,8 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
                     time.sleep(0.2)
                 # 3 garbage, yuv422, the big colour and depth, the uncalibrated CameraInfo:
                 # each counted once, and no good frame since
-                assert int(status_values()["camera/images/malformed"]) == 7
+                assert int(status_values()["camera/images/malformed"]) == 6
+                assert int(status_values()["camera/calibrations_refused"]) == 1
             finally:
                 driver.close()
                 tf.close()
