@@ -8,8 +8,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from processes import log_text
-from realsense_recordings import require_pyrealsense
+from helpers.processes import log_text
+from helpers.realsense import require_pyrealsense
 
 require_pyrealsense()
 

@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
-from foxglove_client import FoxgloveClient
+from helpers.foxglove_client import FoxgloveClient
 from hostile_doors import foxglove_under_clients, stalled_foxglove_client
 
 from gngdt.io.outputs.foxglove import FoxgloveOutput

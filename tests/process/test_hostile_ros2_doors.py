@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import log_text, wait_for
-from ros2_sdk import message_class, sdk_session
+from helpers.processes import log_text, wait_for
+from helpers.ros2_sdk import message_class, sdk_session
 
 from gngdt.schemas.topology import decode_topology
 from gngdt.services.plumbing.session import client_config, open_config

@@ -13,9 +13,9 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+from helpers.processes import log_text
 from hostile_doors import bridge_under_flood
 from hostile_trust import run_credentials
-from processes import log_text
 
 
 @pytest.mark.timeout(300)

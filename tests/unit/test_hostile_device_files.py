@@ -11,7 +11,7 @@ import sqlite3
 from pathlib import Path
 
 import pytest
-from realsense_recordings import require_pyrealsense
+from helpers.realsense import require_pyrealsense
 
 require_pyrealsense()
 
