@@ -73,15 +73,15 @@ class ReferenceGNGDT:
         ref.next_id = int(model._istate[I_NEXT_ID])
         ref.has_col = COL in model.properties_
         ref.n_steps = model.n_steps_
-        a = model._arrays
+        net = model._network
         for i in range(model.n_nodes_):
-            ref.adjacency.append([int(j) for j in a["nbr"][i, : a["deg"][i]]])
+            ref.adjacency.append([int(j) for j in net.nbr[i, : net.deg[i]]])
             for k, j in enumerate(ref.adjacency[i]):
                 if i < j:
-                    bits = int(a["emask"][i, k])
+                    bits = int(net.emask[i, k])
                     props = {POS} | {name for name, bit in ((COL, COL_BIT), (NOR, NOR_BIT))
                                        if bits & bit and name in model.properties_}
-                    ref.edges[(i, j)] = Edge(int(a["age"][i, k]), props)
+                    ref.edges[(i, j)] = Edge(int(net.age[i, k]), props)
         return ref
 
     # ------------------------------------------------------------------ helpers

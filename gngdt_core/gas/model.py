@@ -69,9 +69,8 @@ class GrowingGas:
         self._dim = 0
         self._has_col = False
         self.n_invalid_ = 0
-        self._arrays: dict[str, np.ndarray] = {}
-        self._istate = np.zeros(5, dtype=np.int64)
-        self._fstate = np.array([1.0, 0.0, 0.0, 1.0])
+        #: the network (no nodes' room until the first batch fixes the dimension)
+        self._network = K.Network.allocate(0, 2)
         #: the last batch's camera pose (None: the model's frame is the camera's)
         self._camera_pose: np.ndarray | None = None
         #: stored normals are eq. 16 of the current positions (refreshed after the last step)
@@ -83,30 +82,25 @@ class GrowingGas:
         self._coverage = SurfaceCoverage(resolution) if resolution else None
 
     def _allocate(self, dim: int, has_col: bool) -> None:
-        cap = self._params["max_nodes"]
-        table = 1 << max(10, int(2 * cap - 1).bit_length())
         self._dim = dim
         self._has_col = has_col
-        self._arrays = {
-            POS: np.zeros((cap, dim)),
-            COL: np.zeros((cap, 3)),
-            NOR: np.zeros((cap, 3)),
-            "err": np.zeros(cap),
-            "nbr": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
-            "age": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
-            "emask": np.zeros((cap, K.MAX_DEGREE), dtype=np.uint8),
-            "rev": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
-            "deg": np.zeros(cap, dtype=np.int32),
-            "ids": np.zeros(cap, dtype=np.int64),
-            "util": np.zeros(cap),
-            "judged": np.zeros(cap, dtype=np.uint8),
-            "wins": np.zeros(cap),
-            "ghead": np.full(table, -1, dtype=np.int32),
-            "gnext": np.full(cap, -1, dtype=np.int32),
-            "gprev": np.full(cap, -1, dtype=np.int32),
-            "gbucket": np.full(cap, -1, dtype=np.int64),
-            "gcell": np.zeros((cap, 3), dtype=np.int64),
-        }
+        self._network = K.Network.allocate(self._params["max_nodes"], dim, self._istate,
+                                           self._fstate)
+
+    @property
+    def _istate(self) -> np.ndarray:
+        """(5,) int64 counters (`kernels.layout.Network.istate`)."""
+        return self._network.istate
+
+    @property
+    def _fstate(self) -> np.ndarray:
+        """(4,) float64 lazy scales and grid state (`kernels.layout.Network.fstate`)."""
+        return self._network.fstate
+
+    @property
+    def _arrays(self) -> dict[str, np.ndarray]:
+        """The network's arrays by field name (`kernels.layout.Network`)."""
+        return self._network._asdict()
 
     @property
     def _forgets(self) -> bool:
@@ -224,15 +218,9 @@ class GrowingGas:
                fparams: np.ndarray, iparams: np.ndarray) -> None:
         """Steps 1-9 for the rows ``order`` of ``samples`` (model frame), with eq. 16 and eqs.
         4/9 refreshed every ``normal_refresh_steps`` steps when that is set."""
-        a = self._arrays
         kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
         for part in self._refresh_parts(order):
-            learn(samples, kernel_colors, part,
-                  a[POS], a[COL], a[NOR], a["err"],
-                  a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                  a["util"], a["judged"], a["wins"],
-                  a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                  self._istate, self._fstate, fparams, iparams)
+            learn(samples, kernel_colors, part, self._network, fparams, iparams)
             if self._params.get("normal_refresh_steps"):
                 self.refresh_normals()
 
@@ -265,27 +253,28 @@ class GrowingGas:
     def refresh_normals(self) -> None:
         """Recompute eq. 16 for every node, then eqs. 4/9 for every edge, from the current nodes
         (``normal_refresh_steps`` does this periodically while learning)."""
-        if not self._arrays:
-            return
         fparams, iparams = self._kernel_parameters()
-        a = self._arrays
-        n = self.n_nodes_
         if iparams[K.Q_HAS_NOR]:
-            SK.refresh_normals(n, a[POS], a[NOR], a["nbr"], a["deg"], fparams[K.P_MU],
-                               bool(iparams[K.Q_ORIENT]), fparams[K.P_VX], fparams[K.P_VY],
-                               fparams[K.P_VZ])
-        SK.refresh_property_bits(n, a[COL], a[NOR], a["nbr"], a["emask"], a["rev"], a["deg"],
-                                 bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
-                                 fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
+            self._refresh_normals(self._network, fparams, iparams)
+        SK.refresh_property_bits(self._network, bool(iparams[K.Q_HAS_COL]),
+                                 bool(iparams[K.Q_HAS_NOR]), fparams[K.P_TAU_COL],
+                                 fparams[K.P_TAU_NOR])
         self._normals_fresh = bool(iparams[K.Q_HAS_NOR])
+
+    @staticmethod
+    def _refresh_normals(net: K.Network, fparams: np.ndarray, iparams: np.ndarray) -> None:
+        """Eq. 16 for every node of ``net`` (its ``nor`` written) with the kernel parameters."""
+        SK.refresh_normals(net, fparams[K.P_MU], bool(iparams[K.Q_ORIENT]), fparams[K.P_VX],
+                           fparams[K.P_VY], fparams[K.P_VZ])
 
     def _see(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None,
              memory: SampleMemory | None) -> None:
         """What this batch's sensor saw (`gngdt.core.sensor.view.see_batch`): the nodes forgetting
         judges, the samples of ``memory`` (rehearsal) it saw through."""
         if self._forgets or memory is not None:
-            see_batch(camera_samples, camera_pose, self._arrays[POS], self.n_nodes_,
-                      self._arrays["judged"] if self._forgets else None, self._dim,
+            net = self._network
+            see_batch(camera_samples, camera_pose, net.pos, self.n_nodes_,
+                      net.judged if self._forgets else None, self._dim,
                       self._fstate[K.F_SPACING], self._params["view_depth_margin"], memory)
 
     def _check_consistent(self, dim: int, has_col: bool) -> None:
@@ -298,15 +287,15 @@ class GrowingGas:
     def _initialise(self, samples: np.ndarray, sample_colors: np.ndarray | None) -> None:
         """Step 0: two nodes on two random samples (``samples`` (2, D)), connected in every
         property with age 0."""
-        a = self._arrays
+        net = self._network
         for node in (0, 1):
-            a[POS][node] = samples[node]
+            net.pos[node] = samples[node]
             if sample_colors is not None:
-                a[COL][node] = sample_colors[node]
+                net.col[node] = sample_colors[node]
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
-        add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
-        a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
-        a["wins"][:2] = 1.0
+        add_edge(net, 0, 1, all_bits)
+        net.ids[:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
+        net.wins[:2] = 1.0
         self._istate[K.I_NEXT_ID] += 2
         self._istate[K.I_NODES] = 2
 
@@ -330,25 +319,20 @@ class GrowingGas:
     def properties_(self) -> tuple[str, ...]:
         return (POS,)
 
-    def _node_array(self, name: str, width: int) -> np.ndarray:
-        if not self._arrays:
-            return np.zeros((0, width))
-        return self._arrays[name][: self.n_nodes_].copy()
-
     @property
     def positions_(self) -> np.ndarray:
-        """(n_nodes, D) float64 node positions, in the input's units."""
-        return self._node_array(POS, max(self._dim, 2))
+        """(n_nodes, D) float64 node positions, in the input's units (D = 2 before any)."""
+        return self._network.pos[: self.n_nodes_].copy()
 
     @property
     def colors_(self) -> np.ndarray:
         """(n_nodes, 3) float64 node colours on the input's scale (zeros if none learned)."""
-        return self._node_array(COL, 3)
+        return self._network.col[: self.n_nodes_].copy()
 
     @property
     def normals_(self) -> np.ndarray:
         """(n_nodes, 3) float64 unit normals; (0, 0, 0) where undefined or not learned."""
-        return self._node_array(NOR, 3)
+        return self._network.nor[: self.n_nodes_].copy()
 
     @property
     def node_ids_(self) -> np.ndarray:
@@ -357,16 +341,12 @@ class GrowingGas:
         A node keeps its id for its whole life although its index changes (a deletion moves the
         last node into the hole); every new node gets an id never used before in this model.
         """
-        if not self._arrays:
-            return np.zeros(0, dtype=np.int64)
-        return self._arrays["ids"][: self.n_nodes_].copy()
+        return self._network.ids[: self.n_nodes_].copy()
 
     @property
     def errors_(self) -> np.ndarray:
         """(n_nodes,) float64 accumulated errors with all decay applied."""
-        if not self._arrays:
-            return np.zeros(0)
-        return self._arrays["err"][: self.n_nodes_] * self._fstate[K.F_ERROR_SCALE]
+        return self._network.err[: self.n_nodes_] * self._fstate[K.F_ERROR_SCALE]
 
     def edges(self, *props: str) -> np.ndarray:
         """(E, 2) int64 node-index pairs ``i < j`` of the named topologies combined.
@@ -387,8 +367,7 @@ class GrowingGas:
     def _edges_with(self, mask: int) -> np.ndarray:
         if self.n_nodes_ == 0:
             return np.zeros((0, 2), dtype=np.int64)
-        a = self._arrays
-        return queries.edge_pairs(a["nbr"], a["emask"], a["deg"], self.n_nodes_, mask)
+        return queries.edge_pairs(self._network, mask)
 
     def clusters(self, *props: str, min_size: int = 1) -> np.ndarray:
         """(n_nodes,) int32 connected-component labels of the named topologies combined.
@@ -410,7 +389,7 @@ class GrowingGas:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
         query = queries.checked_query(positions, self._dim)
         use_grid = self._dim == 3 and self._MODE == K.MODE_GNGDT
-        winners, distances = queries.nearest_winners(query, self._grid_arrays(), use_grid)
+        winners, distances = queries.nearest_winners(query, self._network, use_grid)
         return (winners, distances) if return_distance else winners
 
     def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
@@ -430,13 +409,7 @@ class GrowingGas:
             raise ValueError("the model has no nodes yet: call fit or partial_fit first")
         if self._dim != 3 or self._MODE != K.MODE_GNGDT:
             raise ValueError("label_pixels needs a GNG-DT network of 3D positions")
-        return queries.label_pixels(points, node_labels, self._grid_arrays())
-
-    def _grid_arrays(self) -> queries.NodeGrid:
-        """Node positions, count and spatial grid, as the nearest-node kernels take them."""
-        a = self._arrays
-        return (a[POS], self.n_nodes_, a["ghead"], a["gnext"],
-                bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL])
+        return queries.label_pixels(points, node_labels, self._network)
 
     def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
         """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
@@ -544,16 +517,14 @@ class GNGDT(GrowingGas):
     def judged_(self) -> np.ndarray:
         """(n_nodes,) bool: the nodes the last batch judged (forgetting on; else all False).
         Nodes inserted during the batch count as judged."""
-        if not self._arrays or not self._forgets:
+        if not self._forgets:
             return np.zeros(self.n_nodes_, dtype=bool)
-        return self._arrays["judged"][: self.n_nodes_].astype(bool)
+        return self._network.judged[: self.n_nodes_].astype(bool)
 
     @property
     def utilities_(self) -> np.ndarray:
         """(n_nodes,) float64 utilities with all decay applied (zeros when not forgetting)."""
-        if not self._arrays:
-            return np.zeros(0)
-        return self._arrays["util"][: self.n_nodes_] * self._fstate[K.F_UTIL_SCALE]
+        return self._network.util[: self.n_nodes_] * self._fstate[K.F_UTIL_SCALE]
 
     @property
     def properties_(self) -> tuple[str, ...]:
@@ -573,12 +544,9 @@ class GNGDT(GrowingGas):
             raise ValueError("normals need 3-D positions")
         if self._normals_fresh:  # refreshed after the last step (``normal_refresh_steps``)
             return self.normals_
-        a = self._arrays
-        normals = a[NOR].copy()
+        normals = self._network.nor.copy()
         fparams, iparams = self._kernel_parameters()
-        SK.refresh_normals(self.n_nodes_, a[POS], normals, a["nbr"], a["deg"],
-                           fparams[K.P_MU], bool(iparams[K.Q_ORIENT]), fparams[K.P_VX],
-                           fparams[K.P_VY], fparams[K.P_VZ])
+        self._refresh_normals(self._network._replace(nor=normals), fparams, iparams)
         return normals[: self.n_nodes_]
 
     def segmentation(self, params: SegmentationParams | None = None,

@@ -1,6 +1,6 @@
 """Read-only queries of a learned network: nearest nodes of points, pixel labels, edge lists.
 
-Pure functions over the estimator's arrays (layout in `kernels.layout`); the estimator's methods
+Pure functions over the estimator's network (`kernels.layout.Network`); the estimator's methods
 (`GNGDT.predict`, `label_pixels`, `edges`, `clusters`) validate their arguments and call them.
 Large batches are split over the CPUs (the nearest-node kernels release the GIL).
 """
@@ -15,6 +15,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from gngdt.core.kernels import segmentation as SK
+from gngdt.core.kernels.layout import I_NODES, Network
 
 #: a nearest-node batch is split over the CPUs when each part gets at least this many points
 #: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
@@ -22,11 +23,6 @@ PARALLEL_MIN_POINTS = 15_000
 #: `label_pixels` searches the nearest node at every LABEL_ANCHOR_STRIDE-th pixel of every
 #: LABEL_ANCHOR_STRIDE-th row, and fills the pixels between anchors that agree
 LABEL_ANCHOR_STRIDE = 4
-
-#: What the nearest-node kernels read of a network: node positions (cap, D) float64, the node
-#: count n, the spatial grid's ``ghead`` (T,) and ``gnext`` (cap,) int32, whether the grid is
-#: active, and its cell size (position units).
-NodeGrid = tuple[np.ndarray, int, np.ndarray, np.ndarray, bool, float]
 
 
 def split_range(n: int, min_part: int) -> list[int]:
@@ -58,37 +54,38 @@ def checked_query(positions: object, dim: int) -> np.ndarray:
     return query
 
 
-def nearest_nodes(points: np.ndarray, grid: NodeGrid) -> tuple[np.ndarray, np.ndarray]:
-    """Winners (N,) int32 and squared distances (N,) of (N, 3) contiguous points, through the
-    grid; large batches are split over the CPUs."""
+def nearest_nodes(points: np.ndarray, net: Network) -> tuple[np.ndarray, np.ndarray]:
+    """Winners (N,) int32 and squared distances (N,) of (N, 3) contiguous points among the
+    nodes of ``net`` (3-D, at least one node), through its grid; large batches are split over
+    the CPUs."""
     winners = np.empty(points.shape[0], dtype=np.int32)
     sq_distances = np.empty(points.shape[0])
-    arrays = (*grid, winners, sq_distances)
     in_parallel(points.shape[0], PARALLEL_MIN_POINTS,
-                lambda start, stop: SK.nearest_nodes(points, start, stop, *arrays))
+                lambda start, stop: SK.nearest_nodes(points, start, stop, net, winners,
+                                                     sq_distances))
     return winners, sq_distances
 
 
-def nearest_winners(query: np.ndarray, grid: NodeGrid, use_grid: bool
+def nearest_winners(query: np.ndarray, net: Network, use_grid: bool
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Winner (N,) int64 and distance (N,) float64 (position units) of each (N, D) query row:
     through the learner's grid when ``use_grid`` (3-D GNG-DT), else a k-d tree over the nodes."""
     if not use_grid:
-        distances, winners = cKDTree(grid[0][: grid[1]]).query(query, k=1)
+        distances, winners = cKDTree(net.pos[: net.istate[I_NODES]]).query(query, k=1)
     else:
-        winners, sq_distances = nearest_nodes(np.ascontiguousarray(query), grid)
+        winners, sq_distances = nearest_nodes(np.ascontiguousarray(query), net)
         distances = np.sqrt(sq_distances)
     return np.asarray(winners, dtype=np.int64), np.asarray(distances, dtype=np.float64)
 
 
-def label_pixels(points: np.ndarray, node_labels: np.ndarray, grid: NodeGrid) -> np.ndarray:
+def label_pixels(points: np.ndarray, node_labels: np.ndarray, net: Network) -> np.ndarray:
     """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1, 0 where the pixel
     has no point or its node has label -1 (see `GNGDT.label_pixels`).
 
     points: (H, W, 3) metres, an organized cloud in the network's frame; node_labels:
-    (n_nodes,) int. ValueError on other shapes.
+    (n_nodes,) int; net: a 3-D network with at least one node. ValueError on other shapes.
     """
-    n_nodes = grid[1]
+    n_nodes = int(net.istate[I_NODES])
     if points.ndim != 3 or points.shape[2] != 3:
         raise ValueError(f"points must have shape (H, W, 3), got {points.shape}")
     node_labels = np.asarray(node_labels, dtype=np.int32)
@@ -106,16 +103,16 @@ def label_pixels(points: np.ndarray, node_labels: np.ndarray, grid: NodeGrid) ->
         in_parallel(points.shape[0], min_rows,
                     lambda start, stop, anchors=anchors: SK.label_pixels(
                         points, valid, node_labels, LABEL_ANCHOR_STRIDE, anchors,
-                        start, stop, *grid, out))
+                        start, stop, net, out))
     return out
 
 
-def edge_pairs(nbr: np.ndarray, emask: np.ndarray, deg: np.ndarray, n: int,
-               mask: int) -> np.ndarray:
-    """(E, 2) int64 node-index pairs ``i < j`` of the edges of nodes ``0..n-1`` that have every
-    property bit of ``mask``; nbr, emask: (cap, MAX_DEGREE), deg: (cap,) (see `kernels.layout`)."""
-    nbr = nbr[:n]
-    used = np.arange(nbr.shape[1]) < deg[:n, None]
+def edge_pairs(net: Network, mask: int) -> np.ndarray:
+    """(E, 2) int64 node-index pairs ``i < j`` of the edges of ``net`` that have every property
+    bit of ``mask``."""
+    n = int(net.istate[I_NODES])
+    nbr = net.nbr[:n]
+    used = np.arange(nbr.shape[1]) < net.deg[:n, None]
     rows = np.broadcast_to(np.arange(n)[:, None], nbr.shape)
-    keep = used & ((emask[:n] & mask) == mask) & (nbr > rows)
+    keep = used & ((net.emask[:n] & mask) == mask) & (nbr > rows)
     return np.stack([rows[keep], nbr[keep]], axis=1).astype(np.int64)
