@@ -272,9 +272,13 @@ def nearest_two_grid(net, n, x0, x1, x2, dim, cell_size, inv_cell):
     if dim > 2:
         first_cells = FIRST_CELLS_3D
         margin = min(near_x, near_y, near_z)
+        far_gap = min(far_x, far_y, far_z)
     else:
         first_cells = FIRST_CELLS_2D
         margin = min(near_x, near_y)
+        far_gap = min(far_x, far_y)
+    # the first cells with offsets 0 or +1 only: the query's cell and those toward its near faces
+    near_block = 1 << dim
     cell2 = cell_size * cell_size
     # a cell is skipped when (its gap in cells)^2 > best2 * prune
     prune = (1.0 + BOUND_SLACK) / cell2
@@ -283,6 +287,11 @@ def nearest_two_grid(net, n, x0, x1, x2, dim, cell_size, inv_cell):
     s1 = -1
     s2 = -1
     for e in range(first_cells.shape[0]):
+        if e == near_block:
+            # every cell left lies beyond a far face on some axis: when the nearest far face is
+            # pruned, so is each of them (best2 only shrinks), as the per-cell test would find
+            if far_gap * far_gap > best2 * prune:
+                break
         ox = first_cells[e, 0]
         oy = first_cells[e, 1]
         oz = first_cells[e, 2]
