@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
-from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels._numba import flush_tiny, inlined
 from gngdt.core.kernels.layout import MODE_GNG
 
 # Below this many nodes a brute-force winner search is cheaper than the grid.
@@ -87,7 +87,8 @@ def _crossed_cell(old, new, inv_cell):
 
 @inlined
 def _move_toward(net, i, x0, x1, x2, dim, rate, grid_on, inv_cell):
-    """Step 5 for a position: ``h_i += rate * (x - h_i)``, keeping node ``i``'s grid bucket.
+    """Step 5 for a position: ``h_i += rate * (x - h_i)`` (`flush_tiny`), keeping node ``i``'s
+    grid bucket.
 
     The grid invariant (each node is in the bucket of ``floor(h * inv_cell)``) lets the cell test
     compare the old and new coordinates instead of loading the stored cell.
@@ -95,15 +96,15 @@ def _move_toward(net, i, x0, x1, x2, dim, rate, grid_on, inv_cell):
     pos = net.pos
     old0 = pos[i, 0]
     old1 = pos[i, 1]
-    new0 = old0 + rate * (x0 - old0)
-    new1 = old1 + rate * (x1 - old1)
+    new0 = flush_tiny(old0 + rate * (x0 - old0))
+    new1 = flush_tiny(old1 + rate * (x1 - old1))
     pos[i, 0] = new0
     pos[i, 1] = new1
     crossed = grid_on and (_crossed_cell(old0, new0, inv_cell)
                            or _crossed_cell(old1, new1, inv_cell))
     if dim > 2:
         old2 = pos[i, 2]
-        new2 = old2 + rate * (x2 - old2)
+        new2 = flush_tiny(old2 + rate * (x2 - old2))
         pos[i, 2] = new2
         crossed = crossed or (grid_on and _crossed_cell(old2, new2, inv_cell))
     if crossed:

@@ -16,7 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
-from gngdt.core.kernels._numba import prefetch_row
+from gngdt.core.kernels._numba import flush_tiny, prefetch_row
 from gngdt.core.kernels.graph import add_edge, delete_node, find_slot, remove_edge
 from gngdt.core.kernels.grid import (
     GRID_CELL_SPACINGS,
@@ -298,17 +298,17 @@ def _learn_steps(samples, sample_colors, order, net, fparams, iparams, candidate
             rate = max(eta1, 1.0 / wins[s1])
         _move_toward(net, s1, x0, x1, x2, dim, rate, grid_on, inv_cell)
         if has_col:
-            col[s1, 0] += rate * (c0 - col[s1, 0])
-            col[s1, 1] += rate * (c1 - col[s1, 1])
-            col[s1, 2] += rate * (c2 - col[s1, 2])
+            col[s1, 0] = flush_tiny(col[s1, 0] + rate * (c0 - col[s1, 0]))
+            col[s1, 1] = flush_tiny(col[s1, 1] + rate * (c1 - col[s1, 1]))
+            col[s1, 2] = flush_tiny(col[s1, 2] + rate * (c2 - col[s1, 2]))
         # ... each neighbour in property o only along an edge of o. Step 6: ages.
         for k in range(deg[s1]):
             j = nbr[s1, k]
             _move_toward(net, j, x0, x1, x2, dim, eta2, grid_on, inv_cell)
             if has_col and (col_follows_pos or (emask[s1, k] & COL_BIT) != 0):
-                col[j, 0] += eta2 * (c0 - col[j, 0])
-                col[j, 1] += eta2 * (c1 - col[j, 1])
-                col[j, 2] += eta2 * (c2 - col[j, 2])
+                col[j, 0] = flush_tiny(col[j, 0] + eta2 * (c0 - col[j, 0]))
+                col[j, 1] = flush_tiny(col[j, 1] + eta2 * (c1 - col[j, 1]))
+                col[j, 2] = flush_tiny(col[j, 2] + eta2 * (c2 - col[j, 2]))
             age[s1, k] += 1
             age[j, rev[s1, k]] += 1
         # Step 7: delete old edges of s1, then nodes left without position edges

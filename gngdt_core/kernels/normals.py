@@ -9,7 +9,7 @@ import math
 
 from numba import njit
 
-from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels._numba import flush_tiny, inlined
 from gngdt.core.kernels.grid import _node_sq_dist, _sq_dist
 from gngdt.core.kernels.layout import COL_BIT, NOR_BIT, POS_BIT
 
@@ -82,9 +82,9 @@ def _orient(nor, pos, i, vx, vy, vz):
 
 @inlined
 def _set_normal(nor, i, x, y, z):
-    nor[i, 0] = x
-    nor[i, 1] = y
-    nor[i, 2] = z
+    nor[i, 0] = flush_tiny(x)
+    nor[i, 1] = flush_tiny(y)
+    nor[i, 2] = flush_tiny(z)
 
 
 @inlined
