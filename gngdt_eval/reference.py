@@ -47,7 +47,7 @@ class ReferenceGNGDT:
     """
 
     def __init__(self, **params: object) -> None:
-        self.params = GNGDT(**params)._params  # the same validation and defaults
+        self.params = GNGDT(**params).check_params()  # the same validation and defaults
         self.rng = np.random.default_rng(self.params["random_state"])
         self.positions = np.zeros((0, 0))
         self.colors = np.zeros((0, 3))
@@ -64,7 +64,7 @@ class ReferenceGNGDT:
     @classmethod
     def from_model(cls, model: GNGDT) -> ReferenceGNGDT:
         """A reference learner continuing from a fitted `GNGDT`'s nodes and edges."""
-        ref = cls(**{name: model._params[name] for name in type(model)._PARAM_NAMES})
+        ref = cls(**model.get_params())
         ref.positions = model.positions_
         ref.colors = model.colors_
         ref.normals = model.normals_

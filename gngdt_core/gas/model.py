@@ -20,12 +20,11 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 
-from gngdt.core.clustering import COL, NOR, POS, connected_component_labels
-from gngdt.core.gas import queries
+from gngdt.core.clustering import COL, NOR, POS
 from gngdt.core.gas.coverage import SurfaceCoverage
+from gngdt.core.gas.queries import NetworkQueries
 from gngdt.core.gas.rehearsal import SampleMemory
 from gngdt.core.gas.sampling import (
-    as_samples,
     batch_rows,
     check_batch,
     check_n_steps,
@@ -40,32 +39,51 @@ from gngdt.core.kernels import layout as K
 from gngdt.core.kernels import segmentation as SK
 from gngdt.core.kernels.graph import add_edge
 from gngdt.core.kernels.learning import learn
-from gngdt.core.metrics import quantization_error as _rms_error
-from gngdt.core.parameters import validate_parameters
+from gngdt.core.parameters import (
+    MAX_NODES_LIMIT,
+    Estimator,
+    Interval,
+    Point3,
+    estimator,
+    param,
+)
 from gngdt.core.segmentation.network import Segmentation, SegmentationParams, segment_network
 from gngdt.core.sensor.view import SensorView, rigid_inverse, see_batch
 
-_PROPERTY_BITS = {POS: K.POS_BIT, COL: K.COL_BIT, NOR: K.NOR_BIT}
 
-
-class GrowingGas:
-    """Shared machinery; see `GNGDT` for the public API."""
+@estimator
+class GrowingGas(NetworkQueries, Estimator):
+    """Shared machinery and the parameters all three estimators have (the paper's Table 1 and a
+    node budget); see `GNGDT` for the public API."""
 
     _MODE: ClassVar[int]
-    _PARAM_NAMES: ClassVar[tuple[str, ...]] = (
-        "max_nodes", "lambda_", "eta1", "eta2", "age_max", "alpha", "beta", "random_state",
-    )
+    #: parameters that shape the learner's state (its arrays' size, the random stream, the
+    #: rehearsal memory, the surface seen): fixed from the ``fit`` that starts a network
+    _STATE_PARAMS: ClassVar[tuple[str, ...]] = ("max_nodes", "random_state")
 
-    def __init__(self, **params: Any) -> None:
-        self._params = validate_parameters(params)
-        for name, value in self._params.items():
-            setattr(self, name, value)
-        self._reset()
+    max_nodes: int = param(1000, Interval(int, 2, MAX_NODES_LIMIT),
+                           "node budget (with resolution_m: the memory cap)")
+    lambda_: int = param(500, Interval(int, 1), "steps between node insertions (Step 8)")
+    eta1: float = param(0.025, Interval(float, 0.0, 1.0, closed="right"),
+                        "the winner's learning rate (Step 5)")
+    eta2: float = param(0.0003, Interval(float, 0.0, 1.0),
+                        "its neighbours' learning rate (Step 5), at most eta1")
+    age_max: int = param(88, Interval(int, 1), "age at which an edge goes (Step 7)")
+    alpha: float = param(0.5, Interval(float, 0.0, 1.0),
+                         "error decrease of the two nodes an insertion splits (Step 8)")
+    beta: float = param(0.0005, Interval(float, 0.0, 1.0, closed="left"),
+                        "error decay per step (Step 9)")
+    random_state: int | None = param(None, Interval(int, 0, optional=True),
+                                     "seed of the first nodes and the sampling order")
 
-    # ------------------------------------------------------------------ state
+    def __post_init__(self) -> None:
+        """An unfitted learner: no network yet, parameters unchecked until ``fit``."""
+        self._unfitted()
 
-    def _reset(self) -> None:
-        self._rng = np.random.default_rng(self._params["random_state"])
+    def _unfitted(self) -> None:
+        #: the checked parameters the current network learns with (None before ``fit``)
+        self._params: dict[str, Any] | None = None
+        self._rng: np.random.Generator | None = None
         self._dim = 0
         self._has_col = False
         self.n_invalid_ = 0
@@ -76,10 +94,52 @@ class GrowingGas:
         #: stored normals are eq. 16 of the current positions (refreshed after the last step)
         self._normals_fresh = False
         #: earlier batches' samples for rehearsal (``replay_share``; None: off)
-        self._memory = SampleMemory(self._params["replay_points"]) if self._replays else None
+        self._memory: SampleMemory | None = None
         #: the surface seen, at ``resolution_m`` (None: a fixed node budget)
-        resolution = self._params.get("resolution_m")
-        self._coverage = SurfaceCoverage(resolution) if resolution else None
+        self._coverage: SurfaceCoverage | None = None
+
+    def check_params(self) -> dict[str, Any]:
+        """The parameters checked and normalised (`Estimator.check_params`; 0 turns
+        ``utility_k`` and ``resolution_m`` off, as None: TOML has no None); ValueError naming
+        the first that is not valid, or eta2 above eta1."""
+        checked = super().check_params()
+        for name in ("utility_k", "resolution_m"):
+            if checked.get(name) == 0.0:
+                checked[name] = None
+        if checked["eta2"] > checked["eta1"]:
+            raise ValueError(f"eta2 ({checked['eta2']}) must not exceed eta1 ({checked['eta1']})")
+        return checked
+
+    # ------------------------------------------------------------------ state
+
+    def _start(self, params: dict[str, Any]) -> None:
+        """A new, empty network learning with the checked ``params``."""
+        self._unfitted()
+        self._params = params
+        self._rng = np.random.default_rng(params["random_state"])
+        if params.get("replay_share"):
+            self._memory = SampleMemory(params["replay_points"])
+        if params.get("resolution_m"):
+            self._coverage = SurfaceCoverage(params["resolution_m"])
+
+    def _settled_params(self) -> dict[str, Any]:
+        """The parameters checked for this batch: the first starts the network with them;
+        later ones may change how it learns, not what its state holds (`_STATE_PARAMS`)."""
+        params = self.check_params()
+        if self._params is None:
+            self._start(params)
+            return params
+        for name in self._STATE_PARAMS:
+            if params[name] != self._params[name]:
+                raise ValueError(f"{name} is {self._params[name]!r} in the network learned so "
+                                 f"far, not {params[name]!r}: fit learns a new network with it")
+        self._params = params
+        return params
+
+    @property
+    def _settings(self) -> dict[str, Any]:
+        """The parameters the network learns with (checked now, before the first batch)."""
+        return self.check_params() if self._params is None else self._params
 
     def _allocate(self, dim: int, has_col: bool) -> None:
         self._dim = dim
@@ -104,11 +164,7 @@ class GrowingGas:
 
     @property
     def _forgets(self) -> bool:
-        return self._params.get("utility_k") is not None
-
-    @property
-    def _replays(self) -> bool:
-        return bool(self._params.get("replay_share"))
+        return self._settings.get("utility_k") is not None
 
     def _kernel_parameters(self, camera_pose: np.ndarray | None = None
                            ) -> tuple[np.ndarray, np.ndarray]:
@@ -140,8 +196,9 @@ class GrowingGas:
 
     def fit(self, positions: Any, colors: Any = None, n_steps: int | None = None,
             camera_pose: Any = None) -> Self:
-        """Forget everything (the RNG is re-seeded from ``random_state``), then learn."""
-        self._reset()
+        """Forget everything (the RNG is re-seeded from ``random_state``), then learn with the
+        parameters as they are now; ValueError naming a parameter that is not valid."""
+        self._start(self.check_params())
         return self.partial_fit(positions, colors, n_steps, camera_pose)
 
     def partial_fit(self, positions: Any, colors: Any = None, n_steps: int | None = None,
@@ -158,7 +215,13 @@ class GrowingGas:
         the camera's place in this batch (``viewpoint`` is then given in the camera frame). Without
         it the model's frame is the batch's own. See `GNGDT` for forgetting, which judges nodes
         against this batch seen from this pose.
+
+        The parameters are checked first (ValueError naming one that is not valid); the first
+        batch starts a network with them, and a later one refuses a change of those that shape
+        its state (``max_nodes``, ``random_state``, the rehearsal memory's, ``resolution_m``:
+        `fit` starts a new network with them).
         """
+        self._settled_params()
         batch, batch_colors, finite_rows, n_invalid = check_batch(positions, colors)
         # rehearsal needs a fixed frame: without a pose, what was seen before is elsewhere now
         memory = self._memory if camera_pose is not None else None
@@ -312,7 +375,7 @@ class GrowingGas:
     @property
     def growth_limit_(self) -> int:
         """Nodes it may grow to now: ``max_nodes``, or one per cell seen (``resolution_m``)."""
-        cap = self._params["max_nodes"]
+        cap = self._settings["max_nodes"]
         return cap if self._coverage is None else min(cap, max(2, self._coverage.count))
 
     @property
@@ -348,82 +411,6 @@ class GrowingGas:
         """(n_nodes,) float64 accumulated errors with all decay applied."""
         return self._network.err[: self.n_nodes_] * self._fstate[K.F_ERROR_SCALE]
 
-    def edges(self, *props: str) -> np.ndarray:
-        """(E, 2) int64 node-index pairs ``i < j`` of the named topologies combined.
-
-        An edge is kept where every named property has it (``edges("col", "nor")``); no name
-        means "pos".
-        """
-        return self._edges_with(self._property_mask(props or (POS,)))
-
-    def _property_mask(self, props: tuple[str, ...]) -> int:
-        mask = 0
-        for prop in props:
-            if prop not in self.properties_:
-                raise ValueError(f"unknown property {prop!r}; this model has {self.properties_}")
-            mask |= _PROPERTY_BITS[prop]
-        return mask
-
-    def _edges_with(self, mask: int) -> np.ndarray:
-        if self.n_nodes_ == 0:
-            return np.zeros((0, 2), dtype=np.int64)
-        return queries.edge_pairs(self._network, mask)
-
-    def clusters(self, *props: str, min_size: int = 1) -> np.ndarray:
-        """(n_nodes,) int32 connected-component labels of the named topologies combined.
-
-        An edge is kept where every named property has it (``clusters("col", "nor")``); no name
-        means "pos". Labels 0..k-1 by decreasing cluster size; -1 for clusters below ``min_size``.
-        """
-        mask = self._property_mask(props or (POS,))
-        return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
-
-    def predict(self, positions: Any, return_distance: bool = False) -> Any:
-        """(N,) int64 index of the winner node (nearest by position) of each row; with
-        ``return_distance``, also (N,) float64 the distance to it (input units).
-
-        Rows in scan order (a depth image's pixels row by row) are fastest: each search starts
-        from the previous row's winner in the learner's own spatial grid.
-        """
-        if self.n_nodes_ == 0:
-            raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        query = queries.checked_query(positions, self._dim)
-        use_grid = self._dim == 3 and self._MODE == K.MODE_GNGDT
-        winners, distances = queries.nearest_winners(query, self._network, use_grid)
-        return (winners, distances) if return_distance else winners
-
-    def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
-        """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1; 0 where the
-        pixel has no point (NaN depth) or its node has label -1.
-
-        points: (H, W, 3) float32/float64 metres, an organized cloud: one point per pixel, in
-        the network's frame, x and y finite wherever z is (as deprojection gives them);
-        node_labels: (n_nodes,) int, e.g. ``segment()``. The nearest node is searched at every
-        ``queries.LABEL_ANCHOR_STRIDE``-th pixel of every such row (every 4th); a pixel between such
-        pixels that all agree takes their label without a search (a label region narrower than
-        the stride can be missed there), every other pixel is searched exactly. On the real
-        640x480 Kinect frames of ../shared/data/labelled 0.03-0.06 % of the pixels (at most
-        0.09 %) differ from ``node_labels[predict(...)]``, at under a third of its CPU time.
-        """
-        if self.n_nodes_ == 0:
-            raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        if self._dim != 3 or self._MODE != K.MODE_GNGDT:
-            raise ValueError("label_pixels needs a GNG-DT network of 3D positions")
-        return queries.label_pixels(points, node_labels, self._network)
-
-    def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
-        """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
-
-        Returns {"pos": r_pos} plus "col" when colours are given and learned. Rows with NaN/inf
-        are ignored.
-        """
-        samples, sample_colors, _ = as_samples(positions, colors)
-        winners = self.predict(samples)
-        result = {POS: _rms_error(samples, self.positions_, winners)}
-        if sample_colors is not None and self._has_col:
-            result[COL] = _rms_error(sample_colors, self.colors_, winners)
-        return result
-
     # ------------------------------------------------------------------ checkpoints
 
     def get_state(self) -> dict[str, np.ndarray]:
@@ -436,6 +423,7 @@ class GrowingGas:
         return restore(cls, state)
 
 
+@estimator
 class GNGDT(GrowingGas):
     """Growing Neural Gas with Different Topologies (Toda et al., Steps 0-10).
 
@@ -483,30 +471,36 @@ class GNGDT(GrowingGas):
     """
 
     _MODE = K.MODE_GNGDT
-    _PARAM_NAMES = (
-        *GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
-        "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
-        "view_depth_margin", "replay_share", "replay_points", "resolution_m",
-    )
+    _STATE_PARAMS = (*GrowingGas._STATE_PARAMS, "replay_share", "replay_points", "resolution_m")
 
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, tau_col: float = 10.0, tau_nor: float = 0.02,
-                 normal_mu: float | None = None,
-                 viewpoint: tuple[float, float, float] | None = (0.0, 0.0, 0.0),
-                 normal_angle_deg: float | None = None, normal_refresh_steps: int | None = None,
-                 utility_k: float | None = None, utility_decay: float = 1e-4,
-                 view_depth_margin: float = 0.05, replay_share: float = 0.0,
-                 replay_points: int = 40_000, resolution_m: float | None = None,
-                 random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, tau_col=tau_col,
-                         tau_nor=tau_nor, normal_mu=normal_mu, viewpoint=viewpoint,
-                         normal_angle_deg=normal_angle_deg,
-                         normal_refresh_steps=normal_refresh_steps, utility_k=utility_k,
-                         utility_decay=utility_decay, view_depth_margin=view_depth_margin,
-                         replay_share=replay_share, replay_points=replay_points,
-                         resolution_m=resolution_m, random_state=random_state)
+    tau_col: float = param(10.0, Interval(float, 0.0, closed="neither"),
+                           "colour distance below which an edge is a colour edge (eq. 4)")
+    tau_nor: float = param(0.02, Interval(float, 0.0, closed="neither"),
+                           "normal distance below which an edge is a normal edge (eq. 9)")
+    normal_mu: float | None = param(None, Interval(float, 0.0, closed="neither", optional=True),
+                                    "eq. 16's weight scale (None: mean neighbour distance)")
+    viewpoint: tuple[float, float, float] | None = param(
+        (0.0, 0.0, 0.0), Point3(optional=True),
+        "the point normals face, in the camera frame (None: not oriented)")
+    normal_angle_deg: float | None = param(
+        None, Interval(float, 0.0, 90.0, closed="right", optional=True),
+        "the normal threshold as an angle (replaces tau_nor)")
+    normal_refresh_steps: int | None = param(None, Interval(int, 1, optional=True),
+                                             "steps between refreshing every normal")
+    # 0 turns forgetting off, like None (params files, TOML, have no None)
+    utility_k: float | None = param(None, Interval(float, 0.0, optional=True),
+                                    "forgetting (GNG-U): error to utility ratio that removes")
+    utility_decay: float = param(1e-4, Interval(float, 0.0, 1.0, closed="left"),
+                                 "utility decay per step of a node in view")
+    view_depth_margin: float = param(0.05, Interval(float, 0.0, 10.0),
+                                     "depth tolerance of 'in view', as a share of the depth")
+    replay_share: float = param(0.0, Interval(float, 0.0, 1.0, closed="left"),
+                                "share of a posed batch's steps learning remembered samples")
+    replay_points: int = param(40_000, Interval(int, 1, MAX_NODES_LIMIT),
+                               "samples the rehearsal memory holds")
+    # metres: one node per cell of this size of the surface seen (None or 0: the fixed budget)
+    resolution_m: float | None = param(None, Interval(float, 0.0, optional=True),
+                                       "one node per cell of this size seen (metres)")
 
     @property
     def n_forgotten_(self) -> int:

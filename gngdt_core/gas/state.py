@@ -38,11 +38,14 @@ def snapshot(model: Any) -> dict[str, np.ndarray]:
     (np.savez-safe)."""
     n = model.n_nodes_
     net = model._network
+    params = model._settings
+    # an unfitted model draws nothing before its first batch: a generator as fit would seed it
+    rng = model._rng if model._rng is not None else np.random.default_rng(params["random_state"])
     state: dict[str, np.ndarray] = {
         "model": np.array(type(model).__name__),
         "version": np.array(STATE_VERSION, dtype=np.int64),
-        "params": np.array(json.dumps(model._params)),
-        "rng_state": np.array(json.dumps(model._rng.bit_generator.state)),
+        "params": np.array(json.dumps(params)),
+        "rng_state": np.array(json.dumps(rng.bit_generator.state)),
         "dim": np.array(model._dim, dtype=np.int64),
         "has_colors": np.array(int(model._has_col), dtype=np.int64),
         "n_invalid": np.array(model.n_invalid_, dtype=np.int64),
@@ -114,10 +117,11 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         raise ValueError(f"state params/rng_state are not valid JSON: {exc}") from exc
     if not isinstance(params, dict):
         raise ValueError(f"state params must be a JSON object, got {type(params).__name__}")
-    unknown = set(params) - set(cls._PARAM_NAMES)
+    unknown = set(params) - set(cls._get_param_names())
     if unknown:
         raise ValueError(f"state params has unknown parameters {sorted(unknown)}")
     model = cls(**params)
+    model._start(model.check_params())
     try:
         model._rng.bit_generator.state = rng_state
     except (TypeError, ValueError, KeyError) as exc:
