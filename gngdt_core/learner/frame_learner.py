@@ -197,6 +197,7 @@ class FrameLearner:
                 self.stream.model_ = model
         elif model is None:
             model = GNGDT(**{"random_state": seed, **config.model})
+            model.check_params()  # a bad parameter is refused now, not at the first frame
         self._model = model
         #: the network's parameters are settled (a resumed network keeps its own)
         self._model_chosen = model is not None and model.n_steps_ > 0
@@ -355,9 +356,8 @@ class FrameLearner:
         if count == 0 or model is None or model.n_nodes_ == 0:
             return Ghosts()
         chosen = positions[self._rng.choice(len(positions), size=count, replace=False)]
-        margin = getattr(model, "view_depth_margin", 0.05)
         seen, ghost = ghost_nodes(model.positions_, chosen, pose,
-                                  self.options.ghost_distance_m, margin)
+                                  self.options.ghost_distance_m, model.view_depth_margin)
         return Ghosts(int(seen.sum()), float(ghost.sum() / seen.sum()) if seen.any() else 0.0)
 
     def placed(self, positions: np.ndarray) -> np.ndarray:

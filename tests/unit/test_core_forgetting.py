@@ -61,11 +61,12 @@ def test_camera_pose_is_validated():
         model.partial_fit(points, camera_pose=np.eye(3))
     with pytest.raises(ValueError, match="3-D"):
         model.partial_fit(points[:, :2], camera_pose=np.eye(4))
-    assert GNGDT(utility_k=0).utility_k is None  # 0 = off, as None (TOML has no None)
+    # 0 = off, as None (TOML has no None)
+    assert GNGDT(utility_k=0).check_params()["utility_k"] is None
     for bad in ({"utility_k": -1.0}, {"utility_decay": 1.0},
                 {"view_depth_margin": -0.1}):
         with pytest.raises(ValueError, match=next(iter(bad))):
-            GNGDT(**bad)
+            GNGDT(**bad).check_params()
 
 
 def old_place_nodes(model: GNGDT, old_place: np.ndarray, frame: cKDTree) -> int:

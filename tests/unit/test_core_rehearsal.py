@@ -123,4 +123,4 @@ def test_rehearsal_continues_exactly_from_a_checkpoint_and_is_off_by_default():
 def test_rehearsal_parameters_are_validated():
     for bad in ({"replay_share": 1.0}, {"replay_share": -0.1}, {"replay_points": 0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
-            GNGDT(**bad)
+            GNGDT(**bad).check_params()
