@@ -1,8 +1,14 @@
 """Learning speed of GNG-DT (3-D position + colour + normal) once the node count has saturated.
 
-Prints steps/s of the numba kernel at 100, 1,000 and 10,000 nodes, of the readable NumPy
-per-step reference on the same saturated networks (fewer steps), their ratio, and the numba
-first-call compile time (cold cache, in a subprocess) and cached load time.
+Prints steps/s of the numba kernel at 100, 1,000 and 10,000 nodes (thread CPU time, the median
+of ``--repeat`` runs), of the readable NumPy per-step reference on the same saturated networks
+(fewer steps), their ratio, and the numba first-call compile time (cold cache, in a subprocess)
+and cached load time.
+
+With ``--cpp PATH`` (a build of ``benchmarks/gng_cpp_driver.cpp``: gng_collection's plain C++
+GNG, built outside the repository as that file says) the same sizes are timed in C++ on Data2's
+positions in the same run, and the ratio printed: with strict IEEE floats and with subnormals
+flushed to zero (as a -ffast-math build runs). gngdt never depends on it.
 
 Then forgetting (``utility_k``) and the learner's whole profile (forgetting and rehearsal,
 ``replay_share``) at 1,000 nodes against the same network without either, in the same run: on
@@ -11,7 +17,7 @@ frame with the frame's camera pose, on virtual Kinect frames of the walking came
 (``tabletop_walk``, 320x240); the per-frame time includes judging which nodes the sensor could
 see and, with rehearsal, keeping the memory (carving, drawing, offering).
 
-    python benchmarks/bench_core.py [--quick]
+    python benchmarks/bench_core.py [--quick] [--repeat 3] [--cpp PATH]
 """
 
 from __future__ import annotations
@@ -58,10 +64,43 @@ def saturated_model(positions: np.ndarray, colors: np.ndarray, n_nodes: int) -> 
 
 
 def steps_per_second(learner: GNGDT | ReferenceGNGDT, positions: np.ndarray,
-                     colors: np.ndarray, n_steps: int) -> float:
-    start = time.perf_counter()
-    learner.partial_fit(positions, colors, n_steps=n_steps)
-    return n_steps / (time.perf_counter() - start)
+                     colors: np.ndarray, n_steps: int, repeat: int = 1) -> float:
+    """Median steps/s (thread CPU time: other work on the machine does not count) of
+    ``repeat`` calls of ``n_steps`` steps each, the learner going on from call to call."""
+    rates = []
+    for _ in range(repeat):
+        start = time.thread_time()
+        learner.partial_fit(positions, colors, n_steps=n_steps)
+        rates.append(n_steps / (time.thread_time() - start))
+    return float(np.median(rates))
+
+
+def cpp_steps_per_second(driver: str, positions: np.ndarray, sizes: dict[int, int],
+                         flush_subnormals: bool) -> dict[int, float]:
+    """Steps/s of gng_collection's C++ GNG (``driver``, a build of gng_cpp_driver.cpp) on the
+    3-D ``positions`` for each node budget in ``sizes`` (nodes -> timed steps)."""
+    with tempfile.NamedTemporaryFile(suffix=".f32") as points:
+        positions.astype(np.float32).tofile(points.name)
+        out = subprocess.run([driver, points.name, str(int(flush_subnormals)),
+                              *(f"{nodes}:{steps}" for nodes, steps in sizes.items())],
+                             check=True, capture_output=True, text=True).stdout
+    rates = [float(line.split(":")[1].split()[0]) for line in out.splitlines()]
+    return dict(zip(sizes, rates, strict=True))
+
+
+def cpp_comparison(driver: str, positions: np.ndarray, rates: dict[int, float],
+                   fast_steps: int) -> None:
+    """gngdt's steps/s beside the C++ GNG's at each size, strict IEEE and subnormals flushed."""
+    # the C++ search is brute force (O(nodes) a step): fewer steps at the larger sizes
+    sizes = {nodes: max(30_000, fast_steps * 100 // nodes) for nodes in rates}
+    ieee = cpp_steps_per_second(driver, positions, sizes, flush_subnormals=False)
+    ftz = cpp_steps_per_second(driver, positions, sizes, flush_subnormals=True)
+    print("beside gng_collection's plain C++ GNG (one topology, positions only), same run:")
+    print(f"{'nodes':>7} {'gngdt steps/s':>15} {'C++ steps/s':>13} {'ratio':>7} "
+          f"{'C++ FTZ steps/s':>16} {'ratio':>7}")
+    for nodes, rate in rates.items():
+        print(f"{nodes:>7} {rate:>15,.0f} {ieee[nodes]:>13,.0f} {rate / ieee[nodes]:>7.2f} "
+              f"{ftz[nodes]:>16,.0f} {rate / ftz[nodes]:>7.2f}")
 
 
 def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
@@ -113,6 +152,11 @@ def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="fewer steps (smoke run)")
+    parser.add_argument("--repeat", type=int, default=3,
+                        help="timed runs per size; the median is printed")
+    parser.add_argument("--cpp", metavar="PATH",
+                        help="a build of benchmarks/gng_cpp_driver.cpp: time gng_collection's "
+                             "C++ GNG beside gngdt")
     args = parser.parse_args()
     fast_steps = 300_000 if args.quick else 3_000_000
     naive_steps = 300 if args.quick else 2_000
@@ -125,12 +169,16 @@ def main() -> None:
     positions, colors, _ = make_data2(random_state=0)
     print(f"data: Data2, {len(positions)} points, 3-D position + colour (+ normal topology)")
     print(f"{'nodes':>7} {'numba steps/s':>15} {'numpy steps/s':>15} {'ratio':>8}")
+    rates = {}
     for n_nodes in (100, 1_000, 10_000):
         model = saturated_model(positions, colors, n_nodes)
         reference = ReferenceGNGDT.from_model(model)
-        fast = steps_per_second(model, positions, colors, fast_steps)
+        rates[n_nodes] = steps_per_second(model, positions, colors, fast_steps, args.repeat)
         naive = steps_per_second(reference, positions, colors, naive_steps)
-        print(f"{n_nodes:>7} {fast:>15,.0f} {naive:>15,.0f} {fast / naive:>8,.0f}")
+        print(f"{n_nodes:>7} {rates[n_nodes]:>15,.0f} {naive:>15,.0f} "
+              f"{rates[n_nodes] / naive:>8,.0f}")
+    if args.cpp:
+        cpp_comparison(args.cpp, positions, rates, fast_steps)
     forgetting_speed(positions, colors, fast_steps, 20 if args.quick else 60)
 
 

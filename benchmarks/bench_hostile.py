@@ -28,6 +28,13 @@ of Infinity, images claiming 10^10 pixels, a FIFO, NaN camera parameters, 8x8 fr
 in the wrong unit. Per attack: exit codes, peak RSS, whether a traceback reached the user, and
 what was recorded that a role may not publish. Target: no process above 1 GB, no traceback,
 nothing recorded that a role may not publish.
+
+Then issue 38's attacks on the new doors (``hostile_doors.py``, ``hostile_inputs.py``; ``--only
+issue38``): calibrations with absurd finite values (a recording's, camera.json, --camera-json),
+/tf stamped 2038, a 100 m jump 25 s later, noise frames with --track, a checkpoint's colours at
+1e300, GNGDT_SHM_POOL_MB=inf, a run killed with SIGKILL, odd RealSense files, 40 Foxglove
+clients that never read then 50 that do (the logger's peak and memory after), a ROS 2 image
+flood (the bridge's). Same targets.
 """
 
 from __future__ import annotations
@@ -46,6 +53,7 @@ import numpy as np
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
+from hostile_doors import door_attacks  # noqa: E402  (benchmarks/, beside this script)
 from hostile_recordings import (  # noqa: E402  (benchmarks/, beside this script)
     lz4_chunk_hiding_its_size,
     overlapping_chunks,
@@ -388,11 +396,11 @@ def main() -> None:
     import argparse
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--only", choices=("issue15", "issue24"),
-                        help="run only issue 15's services and recordings, or issue 24's "
-                        "attacks (default: both)")
+    parser.add_argument("--only", choices=("issue15", "issue24", "issue38"),
+                        help="run only issue 15's services and recordings, issue 24's or issue "
+                        "38's attacks (default: all)")
     args = parser.parse_args()
-    if args.only != "issue24":
+    if args.only in (None, "issue15"):
         folder = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
         endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
         peaks = Peaks()
@@ -403,9 +411,12 @@ def main() -> None:
         time.sleep(0.2)
         peaks.stop()
         print_report(folder, run, capture_rows, peaks.peaks)
-    if args.only != "issue15":
+    if args.only in (None, "issue24"):
         print("\nissue 24's attacks:", flush=True)
         print_trust(trust_attacks())
+    if args.only in (None, "issue38"):
+        print("\nissue 38's attacks:", flush=True)
+        print_trust(door_attacks(), "issue 38 attack")
 
 
 if __name__ == "__main__":

@@ -540,10 +540,10 @@ def trust_attacks(folder: Path | None = None) -> list[Attack]:
     return rows
 
 
-def print_trust(rows: list[Attack]) -> bool:
+def print_trust(rows: list[Attack], title: str = "issue 24 attack") -> bool:
     """The table; True when every target is met (no process above 1 GB, no traceback reaching
     a user, nothing recorded that a role may not publish)."""
-    print(f"\n{'issue 24 attack':<62}{'exit codes':<26}{'peak RSS':>9}  tb  note")
+    print(f"\n{title:<62}{'exit codes':<26}{'peak RSS':>9}  tb  note")
     for row in rows:
         codes = " ".join(f"{name} {code}" for name, code in row.codes.items())
         note = row.note if row.forbidden is None else f"forged recorded: {row.forbidden}; " \

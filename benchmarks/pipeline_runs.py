@@ -29,8 +29,8 @@ from procstat import REPO_ROOT, cpu_seconds, status_mb
 
 from gngdt.schemas.wire import ALL_KEYS, FrameStamp
 from gngdt.services.plumbing import lifecycle
+from gngdt.services.plumbing.environment import SHARED_MEMORY_POOL_ENV
 from gngdt.services.plumbing.session import (
-    SHARED_MEMORY_POOL_ENV,
     client_config,
     free_tcp_port,
     open_config,

@@ -1,16 +1,19 @@
-"""Every parameter declared once: its type, range and default, validated in one place.
+"""Every parameter declared once: its type, range and default together, validated in one place.
 
-scikit-learn's idea (``_parameter_constraints``): an estimator's constructor signature gives the
-defaults and a table of constraints gives type and range (`MODEL_CONSTRAINTS`, for `GNGDT`,
-`GNG` and `GNGW`); a group of settings that is not an estimator (segmentation, frame schedule,
-learner options) is a frozen dataclass whose fields are declared with `param`, default and
-constraint together, and validated by `check_fields`. `from_mapping` builds such a group from a
-TOML table. Profiles (TOML files) only override these declarations; `gngdt.io.profiles` reads
-them, and `gngdt learn --print-params` shows the effective values and where each came from.
+scikit-learn's layout: an estimator (`GNGDT`, `GNG`, `GNGW`; the base `Estimator`, made with
+`estimator`) declares each hyper-parameter as a `param` field, default, constraint and meaning in
+one line; its constructor stores the values unchanged, ``fit``/``partial_fit`` validate them
+(`Estimator.check_params`), and ``get_params``/``set_params`` read and change them, so
+``sklearn.base.clone`` works (gngdt never imports scikit-learn). A group of settings that is not an
+estimator (segmentation, frame schedule, learner options) is a frozen dataclass of `param` fields
+(`Settings`), validated when made; `from_mapping` builds such a group from a TOML table. Profiles
+(TOML files) only override these declarations; `gngdt.io.profiles` reads them, and `gngdt learn
+--print-params` shows the effective values and where each came from.
 """
 
 from __future__ import annotations
 
+import inspect
 import math
 import numbers
 from dataclasses import dataclass, field, fields
@@ -122,53 +125,6 @@ class Flag:
 
 Constraint = Interval | Point3 | OneOf | Numbers | Flag
 
-#: the estimators' hyper-parameters (`GNGDT`, `GNG`, `GNGW`; defaults in their signatures)
-MODEL_CONSTRAINTS: dict[str, Constraint] = {
-    "max_nodes": Interval(int, 2, MAX_NODES_LIMIT),
-    "lambda_": Interval(int, 1),
-    "age_max": Interval(int, 1),
-    "eta1": Interval(float, 0.0, 1.0, closed="right"),
-    "eta2": Interval(float, 0.0, 1.0),
-    "alpha": Interval(float, 0.0, 1.0),
-    "beta": Interval(float, 0.0, 1.0, closed="left"),
-    "tau_col": Interval(float, 0.0, closed="neither"),
-    "tau_nor": Interval(float, 0.0, closed="neither"),
-    "normal_mu": Interval(float, 0.0, closed="neither", optional=True),
-    "viewpoint": Point3(optional=True),
-    "normal_angle_deg": Interval(float, 0.0, 90.0, closed="right", optional=True),
-    "normal_refresh_steps": Interval(int, 1, optional=True),
-    # 0 turns forgetting off, like None (params files, TOML, have no None)
-    "utility_k": Interval(float, 0.0, optional=True),
-    "utility_decay": Interval(float, 0.0, 1.0, closed="left"),
-    "view_depth_margin": Interval(float, 0.0, 10.0),
-    "replay_share": Interval(float, 0.0, 1.0, closed="left"),
-    "replay_points": Interval(int, 1, MAX_NODES_LIMIT),
-    # metres: one node per cell of this size of the surface seen (None or 0: the fixed budget)
-    "resolution_m": Interval(float, 0.0, optional=True),
-    "w_pos": Interval(float, 0.0, closed="neither"),
-    "w_col": Interval(float, 0.0),
-    "random_state": Interval(int, 0, optional=True),
-}
-
-
-def validate_parameters(params: dict[str, Any]) -> dict[str, Any]:
-    """Every hyper-parameter in ``params`` checked against `MODEL_CONSTRAINTS`, normalised.
-
-    Raises ValueError naming the offending parameter (an unknown one included).
-    """
-    checked = {}
-    for name, value in params.items():
-        if name not in MODEL_CONSTRAINTS:
-            raise ValueError(f"unknown parameter {name!r}")
-        checked[name] = MODEL_CONSTRAINTS[name].check(name, value)
-    for name in ("utility_k", "resolution_m"):  # 0 turns it off (TOML has no None)
-        if checked.get(name) == 0.0:
-            checked[name] = None
-    if "eta1" in checked and checked.get("eta2", 0.0) > checked["eta1"]:
-        raise ValueError(f"eta2 ({checked['eta2']}) must not exceed eta1 ({checked['eta1']})")
-    return checked
-
-
 def param(default: Any, constraint: Constraint, doc: str = "") -> Any:
     """A dataclass field declaring one setting: default, constraint and meaning together."""
     return field(default=default, metadata={"constraint": constraint, "doc": doc})
@@ -221,3 +177,55 @@ def from_mapping(cls: type[SettingsT], values: dict[str, Any], what: str) -> Set
     if unknown:
         raise ValueError(f"unknown {what}(s) {unknown}; known: {sorted(known)}")
     return cls(**values)
+
+
+class Estimator:
+    """Base of the estimators, scikit-learn's layout without scikit-learn: hyper-parameters are
+    `param` fields of a subclass made with `estimator`; the generated constructor stores them
+    unchanged, `check_params` validates them (``fit`` and ``partial_fit`` call it), and
+    `get_params`/`set_params` read and change them (``sklearn.base.clone`` uses these)."""
+
+    #: parameter name -> its constraint, read from the fields by `estimator`
+    _parameter_constraints: ClassVar[dict[str, Constraint]] = {}
+
+    @classmethod
+    def _get_param_names(cls) -> list[str]:
+        """The constructor's parameter names, sorted (as scikit-learn reads them)."""
+        return sorted(name for name in inspect.signature(cls.__init__).parameters
+                      if name != "self")
+
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """Parameter name -> value as given (``deep``: there are no nested estimators)."""
+        return {name: getattr(self, name) for name in self._get_param_names()}
+
+    def set_params(self, **params: Any) -> Self:
+        """Change parameters (validated at the next ``fit`` or ``partial_fit``); ValueError
+        naming an unknown one."""
+        valid = self._get_param_names()
+        for name in params:
+            if name not in valid:
+                raise ValueError(f"invalid parameter {name!r} for {type(self).__name__}; "
+                                 f"valid parameters: {valid}")
+        for name, value in params.items():
+            setattr(self, name, value)
+        return self
+
+    def check_params(self) -> dict[str, Any]:
+        """Every parameter checked against its constraint and normalised (an integral float
+        of an int parameter as int, a point as a tuple); ValueError naming the first that is
+        out of range. Subclasses add checks across parameters."""
+        return {name: constraint.check(name, getattr(self, name))
+                for name, constraint in self._parameter_constraints.items()}
+
+
+EstimatorT = TypeVar("EstimatorT", bound=type)
+
+
+def estimator(cls: EstimatorT) -> EstimatorT:
+    """Class decorator of an `Estimator` subclass: a keyword-only dataclass of its `param`
+    fields (compared by identity, as estimators are), ``_parameter_constraints`` read from
+    them."""
+    cls = dataclass(eq=False, kw_only=True)(cls)
+    cls._parameter_constraints = {item.name: item.metadata["constraint"]
+                                  for item in fields(cls)}
+    return cls

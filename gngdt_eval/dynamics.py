@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from gngdt.core.clustering import POS
+from gngdt.core.gas.model import GNGDT
 from gngdt.core.learner.frame_learner import LearnerOptions
 
 #: a point of the world sample is seen through (and dropped) when the current frame measures a
@@ -156,7 +157,7 @@ class DynamicsSettings:
     #: status measures it
     ghost_distance_m: float = LearnerOptions.ghost_distance_m
     #: depth tolerance of "could have seen", as the model's default
-    view_depth_margin: float = 0.05
+    view_depth_margin: float = GNGDT.view_depth_margin
     #: points kept in the world sample (half fit k-means, half score both)
     world_sample: int = 40_000
     #: k-means on the world sample every this many frames (and on the last)

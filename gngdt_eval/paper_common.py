@@ -13,6 +13,8 @@ import os
 from dataclasses import dataclass, field
 
 from gngdt.core.clustering import BY_COLOUR_AND_NORMAL, COL, NOR, POS
+from gngdt.core.gas.baselines import GNGW
+from gngdt.core.gas.model import GNGDT
 from gngdt.core.learner.frame_learner import LearnerOptions
 
 METHODS = ("GNG", "GNG-W", "GNG-DT")
@@ -23,18 +25,14 @@ DATASETS = ("Data1", "Data2")
 SCALES = (1.0, 10.0, 0.1, 0.01)
 RECTANGLES = ("C1", "C2", "C3", "C4")
 
-#: Table 1 of the paper (shared by all three methods; tau_* only concern GNG-DT).
+#: Table 1 of the paper (shared by all three methods; tau_* only concern GNG-DT): the
+#: estimators' defaults
 PAPER_PARAMETERS: dict[str, float] = {
-    "lambda_": 500,
-    "eta1": 0.025,
-    "eta2": 0.0003,
-    "age_max": 88,
-    "alpha": 0.5,
-    "beta": 0.0005,
+    name: getattr(GNGDT, name) for name in ("lambda_", "eta1", "eta2", "age_max", "alpha", "beta")
 }
-GNGDT_THRESHOLDS: dict[str, float] = {"tau_col": 10.0, "tau_nor": 0.02}
-#: Section 3.1.1: GNG-W weights, from the paper's reference [47].
-GNGW_WEIGHTS: dict[str, float] = {"w_pos": 0.8, "w_col": 0.2}
+GNGDT_THRESHOLDS: dict[str, float] = {name: getattr(GNGDT, name) for name in ("tau_col", "tau_nor")}
+#: Section 3.1.1: GNG-W weights, from the paper's reference [47] (GNG-W's defaults).
+GNGW_WEIGHTS: dict[str, float] = {name: getattr(GNGW, name) for name in ("w_pos", "w_col")}
 
 Cell = tuple[float, float]  # (mean, std) as published
 

@@ -124,11 +124,9 @@ def _learner_default(name: str) -> Any:
 
 
 def _gngdt_default(name: str) -> Any:
-    import inspect
-
     from gngdt.core import GNGDT
 
-    return inspect.signature(GNGDT.__init__).parameters[name].default
+    return getattr(GNGDT, name)
 
 
 @dataclass

@@ -47,7 +47,7 @@ class ReferenceGNGDT:
     """
 
     def __init__(self, **params: object) -> None:
-        self.params = GNGDT(**params)._params  # the same validation and defaults
+        self.params = GNGDT(**params).check_params()  # the same validation and defaults
         self.rng = np.random.default_rng(self.params["random_state"])
         self.positions = np.zeros((0, 0))
         self.colors = np.zeros((0, 3))
@@ -64,7 +64,7 @@ class ReferenceGNGDT:
     @classmethod
     def from_model(cls, model: GNGDT) -> ReferenceGNGDT:
         """A reference learner continuing from a fitted `GNGDT`'s nodes and edges."""
-        ref = cls(**{name: model._params[name] for name in type(model)._PARAM_NAMES})
+        ref = cls(**model.get_params())
         ref.positions = model.positions_
         ref.colors = model.colors_
         ref.normals = model.normals_
@@ -73,15 +73,15 @@ class ReferenceGNGDT:
         ref.next_id = int(model._istate[I_NEXT_ID])
         ref.has_col = COL in model.properties_
         ref.n_steps = model.n_steps_
-        a = model._arrays
+        net = model._network
         for i in range(model.n_nodes_):
-            ref.adjacency.append([int(j) for j in a["nbr"][i, : a["deg"][i]]])
+            ref.adjacency.append([int(j) for j in net.nbr[i, : net.deg[i]]])
             for k, j in enumerate(ref.adjacency[i]):
                 if i < j:
-                    bits = int(a["emask"][i, k])
+                    bits = int(net.emask[i, k])
                     props = {POS} | {name for name, bit in ((COL, COL_BIT), (NOR, NOR_BIT))
                                        if bits & bit and name in model.properties_}
-                    ref.edges[(i, j)] = Edge(int(a["age"][i, k]), props)
+                    ref.edges[(i, j)] = Edge(int(net.age[i, k]), props)
         return ref
 
     # ------------------------------------------------------------------ helpers

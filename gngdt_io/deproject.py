@@ -14,7 +14,8 @@ import numpy as np
 from gngdt.core.parameters import Interval, Settings, param
 from gngdt.core.sensor.depth import veil_pixels
 from gngdt.io.frame import CameraIntrinsics, Frame
-from gngdt.schemas.clouds import MAX_CLOUD_POINTS
+from gngdt.io.pack_points import kept_pixels, pack_pixels
+from gngdt.schemas.clouds import MAX_CLOUD_POINTS, cloud_to_wire, cloud_wire_buffer
 
 #: the point cap of the clouds `gngdt run` learns from (capture's ``--max-points`` under run, and
 #: `gngdt eval recording`'s, so both learn the same clouds): a uniform random subset, as the
@@ -150,10 +151,9 @@ class Deprojector:
                 f"colour image {color.shape[1]}x{color.shape[0]} does not match "
                 f"depth {depth_mm.shape[1]}x{depth_mm.shape[0]}"
             )
-        z = depth_mm.reshape(-1).astype(np.float32) * np.float32(0.001)
-        # NaN compares False, so it is dropped with the out-of-range depths.
-        valid = np.flatnonzero((z >= max(self.min_depth_m, 1e-6)) & (z <= self.max_depth_m))
-        return z, valid
+        # NaN compares False, so it is dropped with the out-of-range depths (one compiled pass)
+        return kept_pixels(np.ascontiguousarray(depth_mm).reshape(-1),
+                           max(self.min_depth_m, 1e-6), self.max_depth_m)
 
 
 def voxel_keys(positions: np.ndarray, voxel_size_m: float) -> np.ndarray:
@@ -249,6 +249,35 @@ class FrameToCloud:
             positions, colors = cap_points(positions, colors, self._max_points, self._rng)
         assert colors is not None
         return positions, colors
+
+    def to_wire(self, frame: Frame, *, timestamp_ns: int, frame_id: str,
+                pose: np.ndarray | None) -> tuple[bytearray, int]:
+        """The frame's cloud serialised (`gngdt.schemas.clouds.cloud_to_wire` of what calling it
+        gives, byte for byte, the same draws of the point cap) and its point count. Without a
+        voxel grid the kept pixels are deprojected straight into the buffer
+        (`gngdt.io.pack_points`): no arrays of points in between."""
+        if self.options.voxel_size_m is not None:
+            positions, colors = self(frame)
+            return cloud_to_wire(positions, colors, timestamp_ns=timestamp_ns,
+                                 frame_id=frame_id, pose=pose), len(positions)
+        deproject, intrinsics = self._deproject, frame.intrinsics
+        z, valid = deproject._depth_metres(self._depth(frame), frame.color, intrinsics)
+        if valid.size > self._max_points:  # the same draw as `with_pixels`
+            valid = valid.take(uniform_subset(valid.size, self._max_points, self._rng))
+        slope_x, slope_y = deproject.slopes_for(intrinsics)
+        wire, start = cloud_wire_buffer(valid.size, True, timestamp_ns=timestamp_ns,
+                                        frame_id=frame_id, pose=pose)
+        pack_pixels(z, slope_x, slope_y, np.asarray(frame.color, dtype=np.uint8).reshape(-1, 3),
+                    valid, np.frombuffer(wire, dtype=np.uint8, offset=start))
+        return wire, valid.size
+
+    @staticmethod
+    def warm_up() -> None:
+        """Load the compiled deprojection kernels (numba's cache, or compile them) now, not on
+        the first frame."""
+        kept_pixels(np.zeros(1, np.uint16), 0.1, 10.0)
+        pack_pixels(np.ones(1, np.float32), np.ones(1, np.float32), np.ones(1, np.float32),
+                    np.zeros((1, 3), np.uint8), np.zeros(1, np.int64), np.zeros(15, np.uint8))
 
     def with_pixels(self, frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """As calling it (the same draws of the point cap), with the (N,) int64 flat pixel

@@ -57,20 +57,34 @@ class CameraParameters:
     distortion: tuple[float, ...] = ()
     width: int | None = None
     height: int | None = None
+    #: the image size fx, fy, cx, cy are for when they are a format's defaults (assumed):
+    #: images of another size get them scaled (a 320x240 Kinect image is the 640x480 one halved)
+    scaled_from: tuple[int, int] | None = None
 
     def intrinsics(self, width: int, height: int) -> CameraIntrinsics:
-        return CameraIntrinsics(
-            width=width,
-            height=height,
-            fx=self.fx,
-            fy=self.fy,
-            cx=self.cx,
-            cy=self.cy,
+        """The camera's intrinsics for images of ``width`` x ``height``; ValueError saying why
+        when they cannot be a camera's (`CameraIntrinsics.problem`: sizes that differ from
+        the images', an implausible field of view, a principal point far off the image)."""
+        scale_x, scale_y = 1.0, 1.0
+        if self.scaled_from is not None:
+            scale_x, scale_y = width / self.scaled_from[0], height / self.scaled_from[1]
+        intrinsics = CameraIntrinsics(
+            width=self.width or width,
+            height=self.height or height,
+            fx=self.fx * scale_x,
+            fy=self.fy * scale_y,
+            cx=self.cx * scale_x,
+            cy=self.cy * scale_y,
             distortion=self.distortion,
         )
+        problem = intrinsics.problem((width, height))
+        if problem:
+            raise ValueError(problem)
+        return intrinsics
 
     def problem(self) -> str:
-        """Why these parameters cannot be a camera's (not finite, not positive), or ""."""
+        """Why these parameters cannot be a camera's (not finite, not positive; with width and
+        height, anything `CameraIntrinsics.problem` refuses), or ""."""
         values = (self.fx, self.fy, self.cx, self.cy, self.depth_scale, *self.distortion)
         if not all(math.isfinite(value) for value in values):
             return "fx, fy, cx, cy, depth_scale and the distortion must be finite numbers"
@@ -78,11 +92,17 @@ class CameraParameters:
             return "fx, fy and depth_scale must be positive"
         if any(size is not None and size <= 0 for size in (self.width, self.height)):
             return "width and height must be positive"
+        if self.width is not None and self.height is not None:
+            try:
+                self.intrinsics(self.width, self.height)
+            except ValueError as error:
+                return str(error)
         return ""
 
 
 #: Defaults per format: TUM freiburg1 (the TUM benchmark's published calibration) and the
 #: PrimeSense/Kinect v1 defaults used by PCL's OpenNI grabber and by Open3D's Redwood loaders.
+#: Both are for 640x480 images, and scaled to images of another size.
 DEFAULT_CAMERAS: dict[str, CameraParameters] = {
     "tum": CameraParameters(
         fx=517.3,
@@ -91,9 +111,12 @@ DEFAULT_CAMERAS: dict[str, CameraParameters] = {
         cy=255.3,
         depth_scale=5000.0,
         distortion=(0.2624, -0.9531, -0.0054, 0.0026, 1.1633),
+        scaled_from=(640, 480),
     ),
-    "pcl-tiff": CameraParameters(fx=525.0, fy=525.0, cx=320.0, cy=240.0, depth_scale=1000.0),
-    "redwood": CameraParameters(fx=525.0, fy=525.0, cx=319.5, cy=239.5, depth_scale=1000.0),
+    "pcl-tiff": CameraParameters(fx=525.0, fy=525.0, cx=320.0, cy=240.0, depth_scale=1000.0,
+                                 scaled_from=(640, 480)),
+    "redwood": CameraParameters(fx=525.0, fy=525.0, cx=319.5, cy=239.5, depth_scale=1000.0,
+                                scaled_from=(640, 480)),
 }
 
 
@@ -137,7 +160,10 @@ def load_camera(
     path = Path(camera_json) if camera_json is not None else Path(directory) / "camera.json"
     if camera_json is None and not path.is_file():
         return defaults
-    return _checked(path, replace(defaults, **_camera_values(path)))
+    values = _camera_values(path)
+    if {"fx", "fy", "cx", "cy"} & values.keys():  # the file's pixels, not the defaults'
+        values["scaled_from"] = None
+    return _checked(path, replace(defaults, **values))
 
 
 #: each layout's own depth units, said beside an assumed depth_scale
@@ -414,16 +440,16 @@ def iter_image_frames(
                 index,
                 f"depth {depth.shape[1]}x{depth.shape[0]} does not match colour {width}x{height}",
             )
-        frame_intrinsics = intrinsics or camera.intrinsics(width, height)
-        expected = (camera.width or width, camera.height or height)
+        problem = ""
         if intrinsics is not None:
-            expected = (intrinsics.width, intrinsics.height)
-        if expected != (width, height):
-            raise RecordingError(
-                pair.color,
-                index,
-                f"camera parameters are for {expected[0]}x{expected[1]}, image is {width}x{height}",
-            )
+            frame_intrinsics, problem = intrinsics, intrinsics.problem((width, height))
+        else:
+            try:
+                frame_intrinsics = camera.intrinsics(width, height)
+            except ValueError as error:
+                problem = str(error)
+        if problem:
+            raise RecordingError(pair.color, index, f"camera parameters refused: {problem}")
         yield Frame(
             index=index,
             timestamp_ns=pair.timestamp_ns,

@@ -21,8 +21,8 @@ from gngdt.io.deproject import Deprojector
 from gngdt.io.frame import Frame
 
 #: command-line option -> the `PoseLimits` field it sets
-POSE_LIMIT_OPTIONS = {"workspace_m": "workspace_m", "max_speed": "max_speed_m_s",
-                      "max_turn_rate": "max_turn_deg_s"}
+POSE_LIMIT_OPTIONS = {"workspace_m": "workspace_m", "workspace_around": "workspace_around",
+                      "max_speed": "max_speed_m_s", "max_turn_rate": "max_turn_deg_s"}
 
 
 #: what the pose limits are for, to title their options
@@ -31,16 +31,25 @@ POSE_LIMITS_TITLE = ("camera poses (a frame whose pose breaks these, or contradi
 
 
 def add_pose_limit_arguments(group: Any) -> None:
-    """``--workspace-m``, ``--max-speed`` and ``--max-turn-rate``: what a camera pose may be
-    (into ``group``, a parser or an argument group)."""
+    """``--workspace-m``, ``--workspace-around``, ``--max-speed`` and ``--max-turn-rate``: what
+    a camera pose may be (into ``group``, a parser or an argument group)."""
+    from gngdt.core.odometry.pose_checks import MAX_INTERVAL_S, MIN_INTERVAL_S, WORKSPACE_AROUND
+
     defaults = PoseLimits()
     group.add_argument("--workspace-m", type=float, metavar="M",
-                       help="a camera farther than this from the fixed frame's origin has a "
-                       f"wrong pose (default {defaults.workspace_m:g} m)")
+                       help="a camera farther than this along any axis from the workspace's "
+                       "centre (--workspace-around) has a wrong pose, the first one too "
+                       f"(default {defaults.workspace_m:g} m)")
+    group.add_argument("--workspace-around", choices=WORKSPACE_AROUND,
+                       help="the workspace box's centre: the fixed frame's origin, or the "
+                       "first accepted camera (a map frame whose origin is far from where the "
+                       f"camera works; default {defaults.workspace_around})")
     group.add_argument("--max-speed", type=float, metavar="M_PER_S",
                        help="fastest camera move between two frames (default "
-                       f"{defaults.max_speed_m_s:g} m/s; at least 0.1 s is assumed between "
-                       "two frames)")
+                       f"{defaults.max_speed_m_s:g} m/s; at least {MIN_INTERVAL_S:g} s is "
+                       f"assumed between two frames, at most {MAX_INTERVAL_S:g} s: a camera "
+                       "is never farther than its top speed times that from the last accepted "
+                       "frame)")
     group.add_argument("--max-turn-rate", type=float, metavar="DEG_PER_S",
                        help="fastest camera turn between two frames (default "
                        f"{defaults.max_turn_deg_s:g} degrees/s)")

@@ -205,7 +205,7 @@ def _tables(document: dict[str, Any], path: Path) -> dict[str, dict[str, Any] | 
 
 def _check_model(model: dict[str, Any], source: str) -> None:
     try:
-        GNGDT(**model)
+        GNGDT(**model).check_params()
     except (TypeError, ValueError) as error:
         raise ValueError(f"{source}: {error}") from error
 

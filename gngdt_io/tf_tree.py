@@ -58,6 +58,8 @@ class _Link:
 
     parent: str
     static: bool
+    #: the tree's lookup count when a lookup last used this link (0: never)
+    used: int = 0
     #: stamps (S,) in ns and (S, 7) translation + quaternion (x, y, z, w) rows, as added
     _stamps: array = field(default_factory=lambda: array("q"))
     _values: array = field(default_factory=lambda: array("d"))
@@ -87,14 +89,36 @@ class _Link:
         """Drop the samples older than ``stamp_ns``, keeping the newest one; how many went."""
         if self.static or len(self) < 2:
             return 0
-        stamps, values = self.samples()
+        stamps, _ = self.samples()
         keep = min(int(np.searchsorted(stamps, stamp_ns)), len(stamps) - 1)
-        if keep == 0:
+        return self._keep(slice(keep, None)) if keep else 0
+
+    def forget_outside(self, start_ns: int, end_ns: int) -> int:
+        """Drop the samples stamped outside [start_ns, end_ns] (all of them, possibly); how
+        many went."""
+        if self.static or not len(self):
             return 0
-        self._stamps = array("q", stamps[keep:].tobytes())
-        self._values = array("d", values[keep:].tobytes())
+        stamps, _ = self.samples()
+        first = int(np.searchsorted(stamps, start_ns))
+        end = int(np.searchsorted(stamps, end_ns, side="right"))
+        return self._keep(slice(first, max(first, end)))
+
+    def discard(self, stamps_ns: np.ndarray) -> int:
+        """Drop the samples stamped at any of ``stamps_ns``; how many went."""
+        stamps, _ = self.samples()
+        return self._keep(~np.isin(stamps, stamps_ns))
+
+    def newest_ns(self) -> int:
+        return int(self.samples()[0][-1])
+
+    def _keep(self, kept: slice | np.ndarray) -> int:
+        """Keep the sorted samples ``kept`` (a slice or a mask); how many went."""
+        stamps, values = self.samples()
+        before = len(stamps)
+        self._stamps = array("q", stamps[kept].tobytes())
+        self._values = array("d", values[kept].tobytes())
         self._sorted = None
-        return keep
+        return before - len(self._stamps)
 
     def at(self, stamp_ns: int, max_extrapolation_ns: int, child: str) -> np.ndarray:
         """(4, 4) parent_from_child at ``stamp_ns``."""
@@ -125,11 +149,16 @@ class TransformTree:
     """Transforms between named frames over time; see the module docstring."""
 
     def __init__(self, max_extrapolation_ns: int = DEFAULT_MAX_EXTRAPOLATION_NS,
-                 max_links: int = MAX_LINKS) -> None:
+                 max_links: int = MAX_LINKS, evict: bool = False) -> None:
         self.max_extrapolation_ns = int(max_extrapolation_ns)
         self.max_links = int(max_links)
+        #: a full tree makes room for a new link by dropping the one lookups used least
+        #: recently (a live /tf: a flood of made-up frames cannot lock the camera's out);
+        #: else the new link is refused (a recording: its first links are kept)
+        self.evict = evict
         self._links: dict[str, _Link] = {}  # child -> link to its parent
         self.samples = 0  # samples held, over every link
+        self._lookups = 0
 
     def __len__(self) -> int:
         return len(self._links)
@@ -154,6 +183,8 @@ class TransformTree:
         q = unit_quaternion(quaternion, what)
         link = self._links.get(child)
         if link is None:
+            if len(self._links) >= self.max_links and self.evict:
+                self._evict_least_used()
             if len(self._links) >= self.max_links:
                 raise TransformError(f"{what}: more than {self.max_links} frames (a robot has "
                                      "a few dozen)")
@@ -173,6 +204,44 @@ class TransformTree:
         newest one): a live ``/tf`` stream is held over a window, not for ever."""
         for link in self._links.values():
             self.samples -= link.forget_before(stamp_ns)
+
+    def forget_stale(self, window_ns: int) -> None:
+        """Drop each dynamic link's samples older than its own newest one minus ``window_ns``:
+        links are held over a window each, so that one link stamped far ahead (a forgery,
+        another clock) costs no other link its samples."""
+        for link in self._links.values():
+            if not link.static and len(link):
+                self.samples -= link.forget_before(link.newest_ns() - window_ns)
+
+    def forget_outside(self, start_ns: int, end_ns: int) -> int:
+        """Drop the dynamic samples stamped outside [start_ns, end_ns] (the window around the
+        time poses are looked up at); a link left with none goes, so its child may take
+        another parent. How many samples went."""
+        dropped = 0
+        for child, link in list(self._links.items()):
+            gone = link.forget_outside(start_ns, end_ns)
+            dropped += gone
+            if not link.static and not len(link):
+                del self._links[child]
+        self.samples -= dropped
+        return dropped
+
+    def discard(self, child: str, stamps_ns: np.ndarray) -> int:
+        """Drop the samples of ``child``'s link stamped at any of ``stamps_ns`` (a link left
+        with none goes); how many went."""
+        link = self._links.get(child)
+        if link is None:
+            return 0
+        gone = link.discard(stamps_ns)
+        self.samples -= gone
+        if not len(link):
+            del self._links[child]
+        return gone
+
+    def _evict_least_used(self) -> None:
+        """Drop the link lookups used least recently (the oldest of those never used)."""
+        child = min(self._links, key=lambda name: self._links[name].used)
+        self.samples -= len(self._links.pop(child))
 
     def _ancestors(self, frame: str) -> list[str]:
         """``frame`` and its parents up to its tree's root, in that order."""
@@ -209,10 +278,13 @@ class TransformTree:
                 f"(known frames: {', '.join(sorted(self.frames)) or 'none'})"
             )
 
+        self._lookups += 1
+
         def common_from(chain: list[str]) -> np.ndarray:
             matrix = np.eye(4)
             for child in chain[: chain.index(common)]:
                 link = self._links[child]
+                link.used = self._lookups
                 matrix = link.at(stamp_ns, self.max_extrapolation_ns, child) @ matrix
             return matrix
 

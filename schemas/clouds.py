@@ -112,13 +112,8 @@ def cloud_to_wire(
     serialised by protobuf, then ``data``'s tag, length and the packed points.
     """
     xyz, colors = _checked_cloud(positions, colors)
-    head = _cloud_header(colors is not None, timestamp_ns, frame_id, pose).SerializeToString()
-    stride = CLOUD_POINT_STRIDE if colors is not None else 12
-    size = len(xyz) * stride
-    prefix = _DATA_TAG + _varint(size) if size else b""  # proto3 leaves an empty field out
-    start = len(head) + len(prefix)
-    wire = bytearray(start + size)
-    wire[:start] = head + prefix
+    wire, start = cloud_wire_buffer(len(xyz), colors is not None, timestamp_ns=timestamp_ns,
+                                    frame_id=frame_id, pose=pose)
     if colors is None:
         np.frombuffer(wire, dtype="<f4", count=len(xyz) * 3, offset=start)[:] = xyz.ravel()
     else:
@@ -127,6 +122,19 @@ def cloud_to_wire(
         packed["rgb"] = colors
         del packed  # the buffer is handed on: no view of it stays behind
     return wire
+
+
+def cloud_wire_buffer(count: int, with_colors: bool, *, timestamp_ns: int, frame_id: str,
+                      pose: np.ndarray | None) -> tuple[bytearray, int]:
+    """A serialised PointCloud of ``count`` points whose packed points are still to be written:
+    (the buffer, where its points start); the points take the rest of it."""
+    head = _cloud_header(with_colors, timestamp_ns, frame_id, pose).SerializeToString()
+    size = count * (CLOUD_POINT_STRIDE if with_colors else 12)
+    prefix = _DATA_TAG + _varint(size) if size else b""  # proto3 leaves an empty field out
+    start = len(head) + len(prefix)
+    wire = bytearray(start + size)
+    wire[:start] = head + prefix
+    return wire, start
 
 
 #: the tag of PointCloud's ``data`` (length-delimited field 6): one byte

@@ -105,7 +105,7 @@ def edge_strips(pairs: np.ndarray, classes: np.ndarray
     mesh-like graph needs ~1.2 E points instead of 2 E (and a colour per polyline instead of per
     edge). At each node the edge ends of one class are paired up; following the pairs gives
     trails (from an unpaired end to another) and closed loops, which are cut at their smallest
-    end. Vectorised (pointer jumping: O(E log E)), no Python loop per edge.
+    end. Each trail walked once in a compiled pass (`gngdt.core.kernels.strips`).
 
     Returns ``nodes`` (P,) int64 node index of every polyline point, ``starts`` (S + 1,) int64
     offset of each polyline in ``nodes`` (and their end) and ``strip_classes`` (S,) int64.
@@ -118,44 +118,6 @@ def edge_strips(pairs: np.ndarray, classes: np.ndarray
     empty = np.zeros(0, dtype=np.int64)
     if len(pairs) == 0:
         return empty, np.zeros(1, dtype=np.int64), empty
-    # end h = 2 e + j of edge e sits at node pairs[e, j]; walking edge h >> 1 from end h to h ^ 1
-    # ("traversal h") arrives at end h ^ 1, and goes on from the end paired with it
-    ends = pairs.ravel()
-    end_classes = np.repeat(classes, 2)
-    order = np.lexsort((ends, end_classes))
-    same_node = ((ends[order][1:] == ends[order][:-1])
-                 & (end_classes[order][1:] == end_classes[order][:-1]))
-    index = np.arange(len(ends))
-    group_start = np.maximum.accumulate(np.where(np.r_[True, ~same_node], index, 0))
-    first = np.flatnonzero(((index - group_start) % 2 == 0)[:-1] & same_node)
-    partner = np.full(len(ends), -1, dtype=np.int64)
-    partner[order[first]] = order[first + 1]
-    partner[order[first + 1]] = order[first]
-    # the traversal before h: the one arriving at the end paired with h's start
-    before = np.where(partner >= 0, partner ^ 1, -1)
-    # closed loops have no first traversal: cut each at its smallest traversal
-    smallest, ancestor = index.copy(), before.copy()
-    for _ in range(int(np.ceil(np.log2(len(ends)))) + 1):
-        has = ancestor >= 0
-        smallest[has] = np.minimum(smallest[has], smallest[ancestor[has]])
-        ancestor[has] = ancestor[ancestor[has]]
-    before[(ancestor >= 0) & (smallest == index)] = -1
-    # rank of each traversal in its trail and the trail's first traversal (pointer jumping)
-    head = np.where(before >= 0, before, index)
-    rank = (before >= 0).astype(np.int64)
-    while True:
-        going = before[head] >= 0
-        if not going.any():
-            break
-        rank = np.where(going, rank + rank[head], rank)
-        head = np.where(going, head[head], head)
-    # every trail was found twice, once per direction: keep the one with the smaller head
-    kept = np.flatnonzero(head < head[index ^ 1])
-    kept = kept[np.lexsort((rank[kept], head[kept]))]
-    new_trail = np.r_[True, head[kept][1:] != head[kept][:-1]]
-    end_at = np.arange(len(kept)) + np.cumsum(new_trail)
-    nodes = np.empty(len(kept) + int(new_trail.sum()), dtype=np.int64)
-    nodes[end_at] = ends[kept ^ 1]
-    starts = end_at[new_trail] - 1
-    nodes[starts] = ends[kept[new_trail]]
-    return nodes, np.r_[starts, len(nodes)], classes[kept[new_trail] >> 1]
+    from gngdt.core.kernels.strips import chain_edges  # numba: only where edges are drawn
+
+    return chain_edges(pairs, classes)

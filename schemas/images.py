@@ -8,8 +8,6 @@ Decoded images are fresh, writable, C-contiguous arrays; decoders raise
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
@@ -172,23 +170,26 @@ def intrinsics_to_calibration(
 def intrinsics_from_k(
     width: int, height: int, k: list[float] | tuple[float, ...], distortion: tuple[float, ...]
 ) -> CameraIntrinsics:
-    """CameraIntrinsics from a row-major 3x3 K (foxglove CameraCalibration and ROS CameraInfo)."""
+    """CameraIntrinsics from a row-major 3x3 K (foxglove CameraCalibration and ROS CameraInfo);
+    MessageError unless they can be a camera's (`CameraIntrinsics.problem`: finite, a plausible
+    field of view, the principal point near the image)."""
     if len(k) != 9:
         raise MessageError(f"calibration K has {len(k)} values, expected 9")
     if width <= 0 or height <= 0:
         raise MessageError(f"calibration image size {width}x{height} is empty")
-    fx, fy, cx, cy = float(k[0]), float(k[4]), float(k[2]), float(k[5])
-    if not (fx > 0 and fy > 0 and math.isfinite(fx) and math.isfinite(fy)):
-        raise MessageError(f"calibration is uncalibrated or invalid: fx={fx}, fy={fy}")
-    return CameraIntrinsics(
+    intrinsics = CameraIntrinsics(
         width=int(width),
         height=int(height),
-        fx=fx,
-        fy=fy,
-        cx=cx,
-        cy=cy,
+        fx=float(k[0]),
+        fy=float(k[4]),
+        cx=float(k[2]),
+        cy=float(k[5]),
         distortion=tuple(float(value) for value in distortion),
     )
+    problem = intrinsics.problem()
+    if problem:
+        raise MessageError(f"calibration is uncalibrated or invalid: {problem}")
+    return intrinsics
 
 
 def calibration_to_intrinsics(message: CameraCalibration | bytes) -> CameraIntrinsics:

@@ -57,6 +57,7 @@ from gngdt.services.plumbing.session import (
     wait_for_subscribers,
 )
 from gngdt.services.plumbing.settings import OptionGroup, add_settings_argument
+from gngdt.services.replay_clock import DEFAULT_MAX_GAP_S, RecordedClock, ReplayClock
 
 if TYPE_CHECKING:
     import zenoh
@@ -78,8 +79,6 @@ EXAMPLES = """examples:
   gngdt capture session.db3                     # a RealSense recording (.db3 or legacy .bag)
 """
 
-#: longest wait between two frames at the recorded rate
-DEFAULT_MAX_GAP_S = 5.0
 #: a file read frame by frame: how long the learner may take a frame, and how long capture waits
 #: for a learner to appear before replaying without one
 DEFAULT_LEARNER_TIMEOUT_S = 60.0
@@ -269,11 +268,15 @@ def source_options(args: argparse.Namespace,
 
 
 class CapturePublisher:
-    """The capture's publishers, declared once; every put carries the frame's attachment."""
+    """The capture's publishers, declared once; every put carries the frame's attachment.
+    ``paced``: a file read frame by frame (every cloud must arrive); ``pool_bytes``: their
+    shared-memory pools' size (`declare_publisher`)."""
 
-    def __init__(self, session: zenoh.Session, camera: str, paced: bool = False) -> None:
+    def __init__(self, session: zenoh.Session, camera: str, paced: bool = False,
+                 pool_bytes: int | None = None) -> None:
         def declare(name: str, encoding: str, latest_wins: bool) -> SharedMemoryPublisher:
-            return declare_publisher(session, topic(camera, name), encoding, latest_wins)
+            return declare_publisher(session, topic(camera, name), encoding, latest_wins,
+                                     pool_bytes)
 
         self.camera = camera
         self.color = declare("color", ENCODING_RAW_IMAGE, latest_wins=True)
@@ -281,7 +284,7 @@ class CapturePublisher:
         self.calibration = declare("calibration", ENCODING_CALIBRATION, latest_wins=False)
         # paced (a file read frame by frame): every cloud must arrive, the learner waits for it
         self.points = declare_publisher(session, topic(camera, "points"), ENCODING_POINT_CLOUD,
-                                        latest_wins=not paced, large=True)
+                                        latest_wins=not paced, large=True, pool_bytes=pool_bytes)
         self.tf = declare("tf", ENCODING_FRAME_TRANSFORM, latest_wins=False)
         self.eos = declare("eos", ENCODING_STREAM_END, latest_wins=False)
         self._last_intrinsics: CameraIntrinsics | None = None
@@ -294,12 +297,14 @@ class CapturePublisher:
 
     def publish_frame(
         self, frame: Frame, stamp: FrameStamp, positions: np.ndarray | None,
-        colors: np.ndarray | None, sensor_time_ns: int | None = None
+        colors: np.ndarray | None, sensor_time_ns: int | None = None,
+        cloud: bytearray | None = None
     ) -> None:
         """Calibration (when new), colour, depth, the camera's pose (posed frames) and the
-        cloud unless ``positions`` is None; the cloud's own timestamp is ``sensor_time_ns``
-        (default the stamp's capture time): when the camera took it, which the learner's motion
-        and pose checks use."""
+        cloud (``positions`` and ``colors``, or ``cloud`` serialised already, `cloud_of`;
+        neither: images only); the cloud's own timestamp is ``sensor_time_ns`` (default the
+        stamp's capture time): when the camera took it, which the learner's motion and pose
+        checks use."""
         from gngdt.schemas.clouds import cloud_to_wire, pose_to_transform
         from gngdt.schemas.images import image_to_raw, intrinsics_to_calibration
 
@@ -315,7 +320,7 @@ class CapturePublisher:
         self.color.put(color.SerializeToString(), attachment=attachment)
         depth = image_to_raw(frame.depth, timestamp_ns=time_ns, frame_id=self.camera)
         self.depth.put(depth.SerializeToString(), attachment=attachment)
-        if positions is None:  # no pose for a frame of a posed recording: images only
+        if positions is None and cloud is None:  # no cloud (no pose at its time, no depth)
             return
         pose = frame.pose
         if pose is not None:  # fixed frame -> camera (the images' frame_id), before the cloud
@@ -323,10 +328,10 @@ class CapturePublisher:
                                           timestamp_ns=time_ns)
             self.tf.put(transform.SerializeToString(), attachment=attachment)
         # serialised straight into one buffer: megabytes copied once more, into shared memory
-        sensor_time_ns = time_ns if sensor_time_ns is None else sensor_time_ns
-        cloud = cloud_to_wire(positions, colors, timestamp_ns=sensor_time_ns,
-                              frame_id=self.camera if pose is None else pose.frame_id,
-                              pose=None if pose is None else pose.matrix)
+        if cloud is None:
+            cloud = cloud_to_wire(positions, colors, timestamp_ns=sensor_time_ns or time_ns,
+                                  frame_id=self.camera if pose is None else pose.frame_id,
+                                  pose=None if pose is None else pose.matrix)
         self.points.put(cloud, attachment=attachment)
 
     def publish_end(self, frames_sent: int, last_sequence: int, recording: str,
@@ -395,44 +400,6 @@ class Replay:
                 return
 
 
-class ReplayClock:
-    """Sleeps so that frames leave at their recorded spacing divided by ``rate``.
-
-    A gap between two frames longer than ``max_gap_s`` (after the rate) is shortened to it, with a
-    warning: a recording with a jump in its stamps must not stall the pipeline for days.
-    """
-
-    def __init__(self, rate: float | None, max_gap_s: float = DEFAULT_MAX_GAP_S) -> None:
-        if rate is not None and rate <= 0:
-            raise ValueError(f"--rate must be positive, got {rate}")
-        if max_gap_s <= 0:
-            raise ValueError(f"--max-gap must be positive, got {max_gap_s}")
-        self.rate = rate
-        self.max_gap_s = max_gap_s
-        self._due = 0.0
-        self._previous_ns: int | None = None
-
-    def wait_for(self, recorded_ns: int, stop: threading.Event, frame_index: int = 0) -> None:
-        if self.rate is None:
-            return
-        if self._previous_ns is None or recorded_ns < self._previous_ns:
-            # first frame, or a loop restarted the recording
-            self._due = time.monotonic()
-        else:
-            gap_s = (recorded_ns - self._previous_ns) * 1e-9 / self.rate
-            if gap_s > self.max_gap_s:
-                log.warning("frame %d is stamped %.3g s after the previous one; waiting %g s "
-                            "instead (--max-gap)", frame_index, gap_s, self.max_gap_s)
-                gap_s = self.max_gap_s
-            self._due += gap_s
-        self._previous_ns = recorded_ns
-        delay = self._due - time.monotonic()
-        if delay > 1.0:
-            log.info("waiting %.1f s for frame %d (its recorded time)", delay, frame_index)
-        while delay > 0 and not stop.wait(min(delay, 0.5)):  # short waits: see lifecycle
-            delay = self._due - time.monotonic()
-
-
 def main(args: argparse.Namespace) -> int:
     from gngdt.io.errors import RecordingError
     from gngdt.io.sources import open_source
@@ -442,6 +409,7 @@ def main(args: argparse.Namespace) -> int:
         args.recording = source_spec(args)
         source = open_source(args.recording, options=source_options(args, tally.bad_frame))
         to_cloud = frame_to_cloud(args)
+        to_cloud.warm_up()  # numba's kernels loaded before the first frame, not on it
         clock = ReplayClock(None if args.fast or source.live else args.rate, args.max_gap)
     except (ValueError, RecordingError) as error:
         log.error("%s", error)
@@ -461,7 +429,7 @@ def capture(args: argparse.Namespace, source: FrameSource, clock: ReplayClock,
     of stream; the replay (what was read, sent and refused, what went wrong). A file is paced by
     its learner (`gngdt.services.pacing`) unless ``--realtime``."""
     paced = not source.live and not args.realtime
-    publisher = CapturePublisher(session, args.cam, paced)
+    publisher = CapturePublisher(session, args.cam, paced, args.environment.shm_pool_bytes)
     token = session.liveliness().declare_token(alive_key(args.cam, CAPTURE))
     with lifecycle.graceful() as stop:
         replay = Replay(source, args.loop, stop, tally)
@@ -531,49 +499,40 @@ def publish(args: argparse.Namespace, replay: Replay, clock: ReplayClock, to_clo
         if stop.is_set():
             break
         capture_time_ns = time.time_ns()
-        sensor_time_ns = (None if sensor_clock is None
+        sensor_time_ns = (capture_time_ns if sensor_clock is None
                           else sensor_clock.stamp(frame.timestamp_ns))
         tally.check_depth(frame)
         try:
-            positions, colors = to_cloud(frame)
+            cloud, points = cloud_of(frame, to_cloud, args.cam, sensor_time_ns)
         except ValueError as error:
             tally.refuse(f"{args.recording}: frame {frame.index}", str(error))
             continue
         if frame.pose_error:  # the reader warned; the cloud would not fit the map
-            positions = colors = None
+            cloud, points = None, 0
             tally.no_cloud(f"frame {frame.index}", "no camera pose at its time")
-        elif len(positions) == 0:  # every pixel out of range: no depth, or another unit
-            positions = colors = None
+        elif points == 0:  # every pixel out of range: no depth, or another unit
+            cloud = None
             tally.no_cloud(f"frame {frame.index}", no_points_reason(to_cloud.options))
         if pacing is not None and not wait_taken(pacing, last_cloud, replay, stop):
             break
-        publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns),
-                                positions, colors, sensor_time_ns)
-        log.debug("frame %d: %d points", frames_sent, 0 if positions is None else len(positions))
-        last_cloud = frames_sent if positions is not None else last_cloud
+        publisher.publish_frame(frame, FrameStamp(frames_sent, capture_time_ns), None, None,
+                                cloud=cloud)
+        log.debug("frame %d: %d points", frames_sent, points)
+        last_cloud = frames_sent if cloud is not None else last_cloud
         frames_sent += 1
     if pacing is not None:  # the end of stream after the last frame's learning
         wait_taken(pacing, last_cloud, replay, stop)
     return frames_sent
 
 
-class RecordedClock:
-    """Sensor times of a file read frame by frame: the time the replay started plus each
-    frame's recorded time since the first frame, so that the learner's motion and pose checks
-    see the recording's own timing whatever the load (the attachments keep the time each frame
-    was sent: latency is measured from there)."""
-
-    def __init__(self) -> None:
-        self._start_ns = time.time_ns()
-        self._first_ns: int | None = None
-        self._last_ns = 0
-
-    def stamp(self, recorded_ns: int) -> int:
-        if self._first_ns is None or recorded_ns < self._first_ns:  # first, or a loop restarted
-            self._start_ns = max(time.time_ns(), self._last_ns + 1)
-            self._first_ns = recorded_ns
-        self._last_ns = self._start_ns + recorded_ns - self._first_ns
-        return self._last_ns
+def cloud_of(frame: Frame, to_cloud: FrameToCloud, camera: str,
+             sensor_time_ns: int) -> tuple[bytearray, int]:
+    """The frame's cloud serialised for the wire (its points deprojected straight into the
+    buffer) and its point count; in the camera frame ``camera``, or the pose's fixed frame."""
+    pose = frame.pose
+    return to_cloud.to_wire(frame, timestamp_ns=sensor_time_ns,
+                            frame_id=camera if pose is None else pose.frame_id,
+                            pose=None if pose is None else pose.matrix)
 
 
 def wait_taken(pacing: LearnerPacing, sequence: int, replay: Replay,

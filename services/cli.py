@@ -41,13 +41,17 @@ def first_paragraph(text: str) -> str:
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
-    """Options every subcommand accepts."""
+    """Options every subcommand accepts, and ``args.environment`` (`main` sets the one read
+    from the process's environment; parsed alone, an empty one)."""
+    from gngdt.services.plumbing.environment import Environment
+
     parser.add_argument(
         "--log-level",
         default="INFO",
         choices=["DEBUG", "INFO", "WARNING", "ERROR"],
         help="logging verbosity (default: INFO)",
     )
+    parser.set_defaults(environment=Environment())
 
 
 def gngdt_version() -> str:
@@ -107,12 +111,16 @@ def leaf_parsers(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParse
 
 def main(argv: list[str] | None = None) -> int:
     from gngdt.services.plumbing import lifecycle
+    from gngdt.services.plumbing.environment import read_environment
 
     # One try from the handlers' installation on: a stop signal raises KeyboardInterrupt
     # wherever start-up stands (inside install() once its first handler is set, or while logging
     # is configured), and one escaping main() made Python kill itself with SIGINT (exit -2).
     try:
-        lifecycle.install()  # first: a signal during the imports below must stop us too
+        # first: a signal during the imports below must stop us too (reading the environment
+        # imports nothing)
+        environment = read_environment()
+        lifecycle.install(environment.parent_pid)
         from gngdt.schemas.images import MAX_IMAGE_PIXELS
 
         # before OpenCV loads: the largest image it may decode, rather than its own 2**30
@@ -123,6 +131,9 @@ def main(argv: list[str] | None = None) -> int:
             level=getattr(logging, args.log_level),
             format="%(asctime)s %(levelname)s %(name)s: %(message)s",
         )
+        for problem in environment.problems:
+            logging.getLogger(__name__).warning("%s", problem)
+        args.environment = environment
         from gngdt.services.plumbing.session import ZenohSetupError
         from gngdt.services.plumbing.settings import apply_settings
 

@@ -287,11 +287,13 @@ class Take:
         self.seconds = seconds
         self.stop = stop
         self.error: RecordingError | None = None
+        self.frames = 0
 
     def __iter__(self) -> Iterator[Frame]:
         started = time.monotonic()
         try:
             for _, frame in self.source.frames():
+                self.frames += 1
                 yield frame
                 if self.stop.is_set() or (
                         self.seconds is not None and time.monotonic() - started >= self.seconds):
@@ -303,7 +305,8 @@ class Take:
 
 def record_realsense(source: Any, args: argparse.Namespace) -> int:
     """Record ``source`` (a `RealSenseSource`) into ``args.out``: 0, or 1 when the camera was
-    lost (the file then holds the frames before, complete)."""
+    lost (the file then holds the frames before, complete), or 2 when the source gave not a
+    single frame (a recording the SDK cannot read: the file's problem)."""
     from gngdt.services.plumbing import lifecycle
 
     if args.seconds is not None and args.seconds <= 0:
@@ -316,7 +319,9 @@ def record_realsense(source: Any, args: argparse.Namespace) -> int:
             write_recording(take, args)
     finally:
         source.close()
-    return 1 if take.error is not None else 0
+    if take.error is None:
+        return 0
+    return 1 if take.frames else 2
 
 
 def _realsense_source(args: argparse.Namespace) -> Any:

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from helpers.synthetic import render_small_recording
 from hypothesis import HealthCheck, settings
-from synthetic_recordings import render_small_recording
 
 from gngdt.services.plumbing.session import client_config, free_tcp_port, open_config, router_config
 

@@ -11,30 +11,22 @@ from __future__ import annotations
 
 from gngdt.core.gas.model import GrowingGas
 from gngdt.core.kernels import layout as K
+from gngdt.core.parameters import Interval, estimator, param
 
 
+@estimator
 class GNG(GrowingGas):
     """Plain GNG on the concatenated (position, colour) vector; one topology ("pos")."""
 
     _MODE = K.MODE_GNG
 
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, random_state=random_state)
 
-
+@estimator
 class GNGW(GrowingGas):
     """GNG with the weighted distance of eqs. 13-14 (paper defaults w_pos=0.8, w_col=0.2)."""
 
     _MODE = K.MODE_GNGW
-    _PARAM_NAMES = (*GrowingGas._PARAM_NAMES, "w_pos", "w_col")
 
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, w_pos: float = 0.8, w_col: float = 0.2,
-                 random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, w_pos=w_pos, w_col=w_col,
-                         random_state=random_state)
+    w_pos: float = param(0.8, Interval(float, 0.0, closed="neither"),
+                         "weight of the position distance (eqs. 13-14)")
+    w_col: float = param(0.2, Interval(float, 0.0), "weight of the colour distance (eqs. 13-14)")

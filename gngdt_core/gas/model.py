@@ -20,12 +20,11 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 
-from gngdt.core.clustering import COL, NOR, POS, connected_component_labels
-from gngdt.core.gas import queries
+from gngdt.core.clustering import COL, NOR, POS
 from gngdt.core.gas.coverage import SurfaceCoverage
+from gngdt.core.gas.queries import NetworkQueries
 from gngdt.core.gas.rehearsal import SampleMemory
 from gngdt.core.gas.sampling import (
-    as_samples,
     batch_rows,
     check_batch,
     check_n_steps,
@@ -40,81 +39,132 @@ from gngdt.core.kernels import layout as K
 from gngdt.core.kernels import segmentation as SK
 from gngdt.core.kernels.graph import add_edge
 from gngdt.core.kernels.learning import learn
-from gngdt.core.metrics import quantization_error as _rms_error
-from gngdt.core.parameters import validate_parameters
+from gngdt.core.parameters import (
+    MAX_NODES_LIMIT,
+    Estimator,
+    Interval,
+    Point3,
+    estimator,
+    param,
+)
 from gngdt.core.segmentation.network import Segmentation, SegmentationParams, segment_network
 from gngdt.core.sensor.view import SensorView, rigid_inverse, see_batch
 
-_PROPERTY_BITS = {POS: K.POS_BIT, COL: K.COL_BIT, NOR: K.NOR_BIT}
 
-
-class GrowingGas:
-    """Shared machinery; see `GNGDT` for the public API."""
+@estimator
+class GrowingGas(NetworkQueries, Estimator):
+    """Shared machinery and the parameters all three estimators have (the paper's Table 1 and a
+    node budget); see `GNGDT` for the public API."""
 
     _MODE: ClassVar[int]
-    _PARAM_NAMES: ClassVar[tuple[str, ...]] = (
-        "max_nodes", "lambda_", "eta1", "eta2", "age_max", "alpha", "beta", "random_state",
-    )
+    #: parameters that shape the learner's state (its arrays' size, the random stream, the
+    #: rehearsal memory, the surface seen): fixed from the ``fit`` that starts a network
+    _STATE_PARAMS: ClassVar[tuple[str, ...]] = ("max_nodes", "random_state")
 
-    def __init__(self, **params: Any) -> None:
-        self._params = validate_parameters(params)
-        for name, value in self._params.items():
-            setattr(self, name, value)
-        self._reset()
+    max_nodes: int = param(1000, Interval(int, 2, MAX_NODES_LIMIT),
+                           "node budget (with resolution_m: the memory cap)")
+    lambda_: int = param(500, Interval(int, 1), "steps between node insertions (Step 8)")
+    eta1: float = param(0.025, Interval(float, 0.0, 1.0, closed="right"),
+                        "the winner's learning rate (Step 5)")
+    eta2: float = param(0.0003, Interval(float, 0.0, 1.0),
+                        "its neighbours' learning rate (Step 5), at most eta1")
+    age_max: int = param(88, Interval(int, 1), "age at which an edge goes (Step 7)")
+    alpha: float = param(0.5, Interval(float, 0.0, 1.0),
+                         "error decrease of the two nodes an insertion splits (Step 8)")
+    beta: float = param(0.0005, Interval(float, 0.0, 1.0, closed="left"),
+                        "error decay per step (Step 9)")
+    random_state: int | None = param(None, Interval(int, 0, optional=True),
+                                     "seed of the first nodes and the sampling order")
 
-    # ------------------------------------------------------------------ state
+    def __post_init__(self) -> None:
+        """An unfitted learner: no network yet, parameters unchecked until ``fit``."""
+        self._unfitted()
 
-    def _reset(self) -> None:
-        self._rng = np.random.default_rng(self._params["random_state"])
+    def _unfitted(self) -> None:
+        #: the checked parameters the current network learns with (None before ``fit``)
+        self._params: dict[str, Any] | None = None
+        self._rng: np.random.Generator | None = None
         self._dim = 0
         self._has_col = False
         self.n_invalid_ = 0
-        self._arrays: dict[str, np.ndarray] = {}
-        self._istate = np.zeros(5, dtype=np.int64)
-        self._fstate = np.array([1.0, 0.0, 0.0, 1.0])
+        #: the network (no nodes' room until the first batch fixes the dimension)
+        self._network = K.Network.allocate(0, 2)
         #: the last batch's camera pose (None: the model's frame is the camera's)
         self._camera_pose: np.ndarray | None = None
         #: stored normals are eq. 16 of the current positions (refreshed after the last step)
         self._normals_fresh = False
         #: earlier batches' samples for rehearsal (``replay_share``; None: off)
-        self._memory = SampleMemory(self._params["replay_points"]) if self._replays else None
+        self._memory: SampleMemory | None = None
         #: the surface seen, at ``resolution_m`` (None: a fixed node budget)
-        resolution = self._params.get("resolution_m")
-        self._coverage = SurfaceCoverage(resolution) if resolution else None
+        self._coverage: SurfaceCoverage | None = None
+
+    def check_params(self) -> dict[str, Any]:
+        """The parameters checked and normalised (`Estimator.check_params`; 0 turns
+        ``utility_k`` and ``resolution_m`` off, as None: TOML has no None); ValueError naming
+        the first that is not valid, or eta2 above eta1."""
+        checked = super().check_params()
+        for name in ("utility_k", "resolution_m"):
+            if checked.get(name) == 0.0:
+                checked[name] = None
+        if checked["eta2"] > checked["eta1"]:
+            raise ValueError(f"eta2 ({checked['eta2']}) must not exceed eta1 ({checked['eta1']})")
+        return checked
+
+    # ------------------------------------------------------------------ state
+
+    def _start(self, params: dict[str, Any]) -> None:
+        """A new, empty network learning with the checked ``params``."""
+        self._unfitted()
+        self._params = params
+        self._rng = np.random.default_rng(params["random_state"])
+        if params.get("replay_share"):
+            self._memory = SampleMemory(params["replay_points"])
+        if params.get("resolution_m"):
+            self._coverage = SurfaceCoverage(params["resolution_m"])
+
+    def _settled_params(self) -> dict[str, Any]:
+        """The parameters checked for this batch: the first starts the network with them;
+        later ones may change how it learns, not what its state holds (`_STATE_PARAMS`)."""
+        params = self.check_params()
+        if self._params is None:
+            self._start(params)
+            return params
+        for name in self._STATE_PARAMS:
+            if params[name] != self._params[name]:
+                raise ValueError(f"{name} is {self._params[name]!r} in the network learned so "
+                                 f"far, not {params[name]!r}: fit learns a new network with it")
+        self._params = params
+        return params
+
+    @property
+    def _settings(self) -> dict[str, Any]:
+        """The parameters the network learns with (checked now, before the first batch)."""
+        return self.check_params() if self._params is None else self._params
 
     def _allocate(self, dim: int, has_col: bool) -> None:
-        cap = self._params["max_nodes"]
-        table = 1 << max(10, int(2 * cap - 1).bit_length())
         self._dim = dim
         self._has_col = has_col
-        self._arrays = {
-            POS: np.zeros((cap, dim)),
-            COL: np.zeros((cap, 3)),
-            NOR: np.zeros((cap, 3)),
-            "err": np.zeros(cap),
-            "nbr": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
-            "age": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
-            "emask": np.zeros((cap, K.MAX_DEGREE), dtype=np.uint8),
-            "rev": np.zeros((cap, K.MAX_DEGREE), dtype=np.int32),
-            "deg": np.zeros(cap, dtype=np.int32),
-            "ids": np.zeros(cap, dtype=np.int64),
-            "util": np.zeros(cap),
-            "judged": np.zeros(cap, dtype=np.uint8),
-            "wins": np.zeros(cap),
-            "ghead": np.full(table, -1, dtype=np.int32),
-            "gnext": np.full(cap, -1, dtype=np.int32),
-            "gprev": np.full(cap, -1, dtype=np.int32),
-            "gbucket": np.full(cap, -1, dtype=np.int64),
-            "gcell": np.zeros((cap, 3), dtype=np.int64),
-        }
+        self._network = K.Network.allocate(self._params["max_nodes"], dim, self._istate,
+                                           self._fstate)
+
+    @property
+    def _istate(self) -> np.ndarray:
+        """(5,) int64 counters (`kernels.layout.Network.istate`)."""
+        return self._network.istate
+
+    @property
+    def _fstate(self) -> np.ndarray:
+        """(4,) float64 lazy scales and grid state (`kernels.layout.Network.fstate`)."""
+        return self._network.fstate
+
+    @property
+    def _arrays(self) -> dict[str, np.ndarray]:
+        """The network's arrays by field name (`kernels.layout.Network`)."""
+        return self._network._asdict()
 
     @property
     def _forgets(self) -> bool:
-        return self._params.get("utility_k") is not None
-
-    @property
-    def _replays(self) -> bool:
-        return bool(self._params.get("replay_share"))
+        return self._settings.get("utility_k") is not None
 
     def _kernel_parameters(self, camera_pose: np.ndarray | None = None
                            ) -> tuple[np.ndarray, np.ndarray]:
@@ -146,8 +196,9 @@ class GrowingGas:
 
     def fit(self, positions: Any, colors: Any = None, n_steps: int | None = None,
             camera_pose: Any = None) -> Self:
-        """Forget everything (the RNG is re-seeded from ``random_state``), then learn."""
-        self._reset()
+        """Forget everything (the RNG is re-seeded from ``random_state``), then learn with the
+        parameters as they are now; ValueError naming a parameter that is not valid."""
+        self._start(self.check_params())
         return self.partial_fit(positions, colors, n_steps, camera_pose)
 
     def partial_fit(self, positions: Any, colors: Any = None, n_steps: int | None = None,
@@ -164,7 +215,13 @@ class GrowingGas:
         the camera's place in this batch (``viewpoint`` is then given in the camera frame). Without
         it the model's frame is the batch's own. See `GNGDT` for forgetting, which judges nodes
         against this batch seen from this pose.
+
+        The parameters are checked first (ValueError naming one that is not valid); the first
+        batch starts a network with them, and a later one refuses a change of those that shape
+        its state (``max_nodes``, ``random_state``, the rehearsal memory's, ``resolution_m``:
+        `fit` starts a new network with them).
         """
+        self._settled_params()
         batch, batch_colors, finite_rows, n_invalid = check_batch(positions, colors)
         # rehearsal needs a fixed frame: without a pose, what was seen before is elsewhere now
         memory = self._memory if camera_pose is not None else None
@@ -224,15 +281,9 @@ class GrowingGas:
                fparams: np.ndarray, iparams: np.ndarray) -> None:
         """Steps 1-9 for the rows ``order`` of ``samples`` (model frame), with eq. 16 and eqs.
         4/9 refreshed every ``normal_refresh_steps`` steps when that is set."""
-        a = self._arrays
         kernel_colors = sample_colors if sample_colors is not None else np.zeros((1, 3))
         for part in self._refresh_parts(order):
-            learn(samples, kernel_colors, part,
-                  a[POS], a[COL], a[NOR], a["err"],
-                  a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], a["ids"],
-                  a["util"], a["judged"], a["wins"],
-                  a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                  self._istate, self._fstate, fparams, iparams)
+            learn(samples, kernel_colors, part, self._network, fparams, iparams)
             if self._params.get("normal_refresh_steps"):
                 self.refresh_normals()
 
@@ -265,27 +316,28 @@ class GrowingGas:
     def refresh_normals(self) -> None:
         """Recompute eq. 16 for every node, then eqs. 4/9 for every edge, from the current nodes
         (``normal_refresh_steps`` does this periodically while learning)."""
-        if not self._arrays:
-            return
         fparams, iparams = self._kernel_parameters()
-        a = self._arrays
-        n = self.n_nodes_
         if iparams[K.Q_HAS_NOR]:
-            SK.refresh_normals(n, a[POS], a[NOR], a["nbr"], a["deg"], fparams[K.P_MU],
-                               bool(iparams[K.Q_ORIENT]), fparams[K.P_VX], fparams[K.P_VY],
-                               fparams[K.P_VZ])
-        SK.refresh_property_bits(n, a[COL], a[NOR], a["nbr"], a["emask"], a["rev"], a["deg"],
-                                 bool(iparams[K.Q_HAS_COL]), bool(iparams[K.Q_HAS_NOR]),
-                                 fparams[K.P_TAU_COL], fparams[K.P_TAU_NOR])
+            self._refresh_normals(self._network, fparams, iparams)
+        SK.refresh_property_bits(self._network, bool(iparams[K.Q_HAS_COL]),
+                                 bool(iparams[K.Q_HAS_NOR]), fparams[K.P_TAU_COL],
+                                 fparams[K.P_TAU_NOR])
         self._normals_fresh = bool(iparams[K.Q_HAS_NOR])
+
+    @staticmethod
+    def _refresh_normals(net: K.Network, fparams: np.ndarray, iparams: np.ndarray) -> None:
+        """Eq. 16 for every node of ``net`` (its ``nor`` written) with the kernel parameters."""
+        SK.refresh_normals(net, fparams[K.P_MU], bool(iparams[K.Q_ORIENT]), fparams[K.P_VX],
+                           fparams[K.P_VY], fparams[K.P_VZ])
 
     def _see(self, camera_samples: np.ndarray, camera_pose: np.ndarray | None,
              memory: SampleMemory | None) -> None:
         """What this batch's sensor saw (`gngdt.core.sensor.view.see_batch`): the nodes forgetting
         judges, the samples of ``memory`` (rehearsal) it saw through."""
         if self._forgets or memory is not None:
-            see_batch(camera_samples, camera_pose, self._arrays[POS], self.n_nodes_,
-                      self._arrays["judged"] if self._forgets else None, self._dim,
+            net = self._network
+            see_batch(camera_samples, camera_pose, net.pos, self.n_nodes_,
+                      net.judged if self._forgets else None, self._dim,
                       self._fstate[K.F_SPACING], self._params["view_depth_margin"], memory)
 
     def _check_consistent(self, dim: int, has_col: bool) -> None:
@@ -298,15 +350,15 @@ class GrowingGas:
     def _initialise(self, samples: np.ndarray, sample_colors: np.ndarray | None) -> None:
         """Step 0: two nodes on two random samples (``samples`` (2, D)), connected in every
         property with age 0."""
-        a = self._arrays
+        net = self._network
         for node in (0, 1):
-            a[POS][node] = samples[node]
+            net.pos[node] = samples[node]
             if sample_colors is not None:
-                a[COL][node] = sample_colors[node]
+                net.col[node] = sample_colors[node]
         all_bits = K.POS_BIT | K.COL_BIT | K.NOR_BIT
-        add_edge(a["nbr"], a["age"], a["emask"], a["rev"], a["deg"], 0, 1, all_bits)
-        a["ids"][:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
-        a["wins"][:2] = 1.0
+        add_edge(net, 0, 1, all_bits)
+        net.ids[:2] = self._istate[K.I_NEXT_ID] + np.arange(2)
+        net.wins[:2] = 1.0
         self._istate[K.I_NEXT_ID] += 2
         self._istate[K.I_NODES] = 2
 
@@ -323,133 +375,41 @@ class GrowingGas:
     @property
     def growth_limit_(self) -> int:
         """Nodes it may grow to now: ``max_nodes``, or one per cell seen (``resolution_m``)."""
-        cap = self._params["max_nodes"]
+        cap = self._settings["max_nodes"]
         return cap if self._coverage is None else min(cap, max(2, self._coverage.count))
 
     @property
     def properties_(self) -> tuple[str, ...]:
         return (POS,)
 
-    def _node_array(self, name: str, width: int) -> np.ndarray:
-        if not self._arrays:
-            return np.zeros((0, width))
-        return self._arrays[name][: self.n_nodes_].copy()
-
     @property
     def positions_(self) -> np.ndarray:
-        """(n_nodes, D) float64 node positions, in the input's units."""
-        return self._node_array(POS, max(self._dim, 2))
+        """(n_nodes, D) float64 node positions, in the input's units (D = 2 before any)."""
+        return self._network.pos[: self.n_nodes_].copy()
 
     @property
     def colors_(self) -> np.ndarray:
         """(n_nodes, 3) float64 node colours on the input's scale (zeros if none learned)."""
-        return self._node_array(COL, 3)
+        return self._network.col[: self.n_nodes_].copy()
 
     @property
     def normals_(self) -> np.ndarray:
         """(n_nodes, 3) float64 unit normals; (0, 0, 0) where undefined or not learned."""
-        return self._node_array(NOR, 3)
+        return self._network.nor[: self.n_nodes_].copy()
 
     @property
     def node_ids_(self) -> np.ndarray:
-        """(n_nodes,) int64 persistent node ids, row for row with the other node arrays: a node
-        keeps its id although its index changes (a deletion moves the last node into the hole);
-        a new node gets an id never used before in this model."""
-        if not self._arrays:
-            return np.zeros(0, dtype=np.int64)
-        return self._arrays["ids"][: self.n_nodes_].copy()
+        """(n_nodes,) int64 persistent node ids, row for row with the other node arrays.
+
+        A node keeps its id for its whole life although its index changes (a deletion moves the
+        last node into the hole); every new node gets an id never used before in this model.
+        """
+        return self._network.ids[: self.n_nodes_].copy()
 
     @property
     def errors_(self) -> np.ndarray:
         """(n_nodes,) float64 accumulated errors with all decay applied."""
-        if not self._arrays:
-            return np.zeros(0)
-        return self._arrays["err"][: self.n_nodes_] * self._fstate[K.F_ERROR_SCALE]
-
-    def edges(self, *props: str) -> np.ndarray:
-        """(E, 2) int64 node-index pairs ``i < j`` of the named topologies combined.
-
-        An edge is kept where every named property has it (``edges("col", "nor")``); no name
-        means "pos".
-        """
-        return self._edges_with(self._property_mask(props or (POS,)))
-
-    def _property_mask(self, props: tuple[str, ...]) -> int:
-        mask = 0
-        for prop in props:
-            if prop not in self.properties_:
-                raise ValueError(f"unknown property {prop!r}; this model has {self.properties_}")
-            mask |= _PROPERTY_BITS[prop]
-        return mask
-
-    def _edges_with(self, mask: int) -> np.ndarray:
-        if self.n_nodes_ == 0:
-            return np.zeros((0, 2), dtype=np.int64)
-        a = self._arrays
-        return queries.edge_pairs(a["nbr"], a["emask"], a["deg"], self.n_nodes_, mask)
-
-    def clusters(self, *props: str, min_size: int = 1) -> np.ndarray:
-        """(n_nodes,) int32 connected-component labels of the named topologies combined.
-
-        An edge is kept where every named property has it (``clusters("col", "nor")``); no name
-        means "pos". Labels 0..k-1 by decreasing cluster size; -1 for clusters below ``min_size``.
-        """
-        mask = self._property_mask(props or (POS,))
-        return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
-
-    def predict(self, positions: Any, return_distance: bool = False) -> Any:
-        """(N,) int64 index of the winner node (nearest by position) of each row; with
-        ``return_distance``, also (N,) float64 the distance to it (input units). Rows in scan
-        order (a depth image's pixels row by row) are fastest: each search starts from the
-        previous row's winner in the learner's own spatial grid."""
-        if self.n_nodes_ == 0:
-            raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        query = queries.checked_query(positions, self._dim)
-        use_grid = self._dim == 3 and self._MODE == K.MODE_GNGDT
-        winners, distances = queries.nearest_winners(query, self._grid_arrays(), use_grid)
-        return (winners, distances) if return_distance else winners
-
-    def frozen_predict(self) -> queries.Predict:
-        """`predict` with distances over a copy of the network now (it may learn on meanwhile)."""
-        return queries.frozen_predict(self._grid_arrays(), self._dim, self._MODE == K.MODE_GNGDT)
-
-    def label_pixels(self, points: np.ndarray, node_labels: np.ndarray) -> np.ndarray:
-        """(H, W) int32: each pixel's nearest node's ``node_labels`` entry + 1; 0 where the
-        pixel has no point (NaN depth) or its node has label -1.
-
-        points: (H, W, 3) float32/float64 metres, an organized cloud: one point per pixel, in
-        the network's frame, x and y finite wherever z is (as deprojection gives them);
-        node_labels: (n_nodes,) int, e.g. ``segment()``. The nearest node is searched at every
-        ``queries.LABEL_ANCHOR_STRIDE``-th pixel of every such row (every 4th); a pixel between such
-        pixels that all agree takes their label without a search (a label region narrower than
-        the stride can be missed there), every other pixel is searched exactly. On the real
-        640x480 Kinect frames of ../shared/data/labelled 0.03-0.06 % of the pixels (at most
-        0.09 %) differ from ``node_labels[predict(...)]``, at under a third of its CPU time.
-        """
-        if self.n_nodes_ == 0:
-            raise ValueError("the model has no nodes yet: call fit or partial_fit first")
-        if self._dim != 3 or self._MODE != K.MODE_GNGDT:
-            raise ValueError("label_pixels needs a GNG-DT network of 3D positions")
-        return queries.label_pixels(points, node_labels, self._grid_arrays())
-
-    def _grid_arrays(self) -> queries.NodeGrid:
-        """Node positions, count and spatial grid, as the nearest-node kernels take them."""
-        a = self._arrays
-        return (a[POS], self.n_nodes_, a["ghead"], a["gnext"],
-                bool(self._istate[K.I_GRID]), self._fstate[K.F_CELL])
-
-    def quantization_error(self, positions: Any, colors: Any = None) -> dict[str, float]:
-        """Eq. 17 per property: RMS distance of each sample to its (position) winner node.
-
-        Returns {"pos": r_pos} plus "col" when colours are given and learned. Rows with NaN/inf
-        are ignored.
-        """
-        samples, sample_colors, _ = as_samples(positions, colors)
-        winners = self.predict(samples)
-        result = {POS: _rms_error(samples, self.positions_, winners)}
-        if sample_colors is not None and self._has_col:
-            result[COL] = _rms_error(sample_colors, self.colors_, winners)
-        return result
+        return self._network.err[: self.n_nodes_] * self._fstate[K.F_ERROR_SCALE]
 
     # ------------------------------------------------------------------ checkpoints
 
@@ -463,6 +423,7 @@ class GrowingGas:
         return restore(cls, state)
 
 
+@estimator
 class GNGDT(GrowingGas):
     """Growing Neural Gas with Different Topologies (Toda et al., Steps 0-10).
 
@@ -510,30 +471,36 @@ class GNGDT(GrowingGas):
     """
 
     _MODE = K.MODE_GNGDT
-    _PARAM_NAMES = (
-        *GrowingGas._PARAM_NAMES, "tau_col", "tau_nor", "normal_mu", "viewpoint",
-        "normal_angle_deg", "normal_refresh_steps", "utility_k", "utility_decay",
-        "view_depth_margin", "replay_share", "replay_points", "resolution_m",
-    )
+    _STATE_PARAMS = (*GrowingGas._STATE_PARAMS, "replay_share", "replay_points", "resolution_m")
 
-    def __init__(self, max_nodes: int = 1000, lambda_: int = 500, eta1: float = 0.025,
-                 eta2: float = 0.0003, age_max: int = 88, alpha: float = 0.5,
-                 beta: float = 0.0005, tau_col: float = 10.0, tau_nor: float = 0.02,
-                 normal_mu: float | None = None,
-                 viewpoint: tuple[float, float, float] | None = (0.0, 0.0, 0.0),
-                 normal_angle_deg: float | None = None, normal_refresh_steps: int | None = None,
-                 utility_k: float | None = None, utility_decay: float = 1e-4,
-                 view_depth_margin: float = 0.05, replay_share: float = 0.0,
-                 replay_points: int = 40_000, resolution_m: float | None = None,
-                 random_state: int | None = None) -> None:
-        super().__init__(max_nodes=max_nodes, lambda_=lambda_, eta1=eta1, eta2=eta2,
-                         age_max=age_max, alpha=alpha, beta=beta, tau_col=tau_col,
-                         tau_nor=tau_nor, normal_mu=normal_mu, viewpoint=viewpoint,
-                         normal_angle_deg=normal_angle_deg,
-                         normal_refresh_steps=normal_refresh_steps, utility_k=utility_k,
-                         utility_decay=utility_decay, view_depth_margin=view_depth_margin,
-                         replay_share=replay_share, replay_points=replay_points,
-                         resolution_m=resolution_m, random_state=random_state)
+    tau_col: float = param(10.0, Interval(float, 0.0, closed="neither"),
+                           "colour distance below which an edge is a colour edge (eq. 4)")
+    tau_nor: float = param(0.02, Interval(float, 0.0, closed="neither"),
+                           "normal distance below which an edge is a normal edge (eq. 9)")
+    normal_mu: float | None = param(None, Interval(float, 0.0, closed="neither", optional=True),
+                                    "eq. 16's weight scale (None: mean neighbour distance)")
+    viewpoint: tuple[float, float, float] | None = param(
+        (0.0, 0.0, 0.0), Point3(optional=True),
+        "the point normals face, in the camera frame (None: not oriented)")
+    normal_angle_deg: float | None = param(
+        None, Interval(float, 0.0, 90.0, closed="right", optional=True),
+        "the normal threshold as an angle (replaces tau_nor)")
+    normal_refresh_steps: int | None = param(None, Interval(int, 1, optional=True),
+                                             "steps between refreshing every normal")
+    # 0 turns forgetting off, like None (params files, TOML, have no None)
+    utility_k: float | None = param(None, Interval(float, 0.0, optional=True),
+                                    "forgetting (GNG-U): error to utility ratio that removes")
+    utility_decay: float = param(1e-4, Interval(float, 0.0, 1.0, closed="left"),
+                                 "utility decay per step of a node in view")
+    view_depth_margin: float = param(0.05, Interval(float, 0.0, 10.0),
+                                     "depth tolerance of 'in view', as a share of the depth")
+    replay_share: float = param(0.0, Interval(float, 0.0, 1.0, closed="left"),
+                                "share of a posed batch's steps learning remembered samples")
+    replay_points: int = param(40_000, Interval(int, 1, MAX_NODES_LIMIT),
+                               "samples the rehearsal memory holds")
+    # metres: one node per cell of this size of the surface seen (None or 0: the fixed budget)
+    resolution_m: float | None = param(None, Interval(float, 0.0, optional=True),
+                                       "one node per cell of this size seen (metres)")
 
     @property
     def n_forgotten_(self) -> int:
@@ -544,16 +511,14 @@ class GNGDT(GrowingGas):
     def judged_(self) -> np.ndarray:
         """(n_nodes,) bool: the nodes the last batch judged (forgetting on; else all False).
         Nodes inserted during the batch count as judged."""
-        if not self._arrays or not self._forgets:
+        if not self._forgets:
             return np.zeros(self.n_nodes_, dtype=bool)
-        return self._arrays["judged"][: self.n_nodes_].astype(bool)
+        return self._network.judged[: self.n_nodes_].astype(bool)
 
     @property
     def utilities_(self) -> np.ndarray:
         """(n_nodes,) float64 utilities with all decay applied (zeros when not forgetting)."""
-        if not self._arrays:
-            return np.zeros(0)
-        return self._arrays["util"][: self.n_nodes_] * self._fstate[K.F_UTIL_SCALE]
+        return self._network.util[: self.n_nodes_] * self._fstate[K.F_UTIL_SCALE]
 
     @property
     def properties_(self) -> tuple[str, ...]:
@@ -573,12 +538,9 @@ class GNGDT(GrowingGas):
             raise ValueError("normals need 3-D positions")
         if self._normals_fresh:  # refreshed after the last step (``normal_refresh_steps``)
             return self.normals_
-        a = self._arrays
-        normals = a[NOR].copy()
+        normals = self._network.nor.copy()
         fparams, iparams = self._kernel_parameters()
-        SK.refresh_normals(self.n_nodes_, a[POS], normals, a["nbr"], a["deg"],
-                           fparams[K.P_MU], bool(iparams[K.Q_ORIENT]), fparams[K.P_VX],
-                           fparams[K.P_VY], fparams[K.P_VZ])
+        self._refresh_normals(self._network._replace(nor=normals), fparams, iparams)
         return normals[: self.n_nodes_]
 
     def segmentation(self, params: SegmentationParams | None = None,

@@ -22,23 +22,32 @@ STATE_VERSION = 5  # 2: persistent node ids (``ids``, a fourth counter); 3: util
 #: largest counter (steps, node ids, samples offered, ...) a state may hold: far below 2**63,
 #: so that the counters can go on counting for ever without overflowing an int64
 MAX_STATE_COUNTER = 2**62
+#: a node normal is a unit vector (or zero before it is estimated); float32 rounding aside
+NORMAL_TOLERANCE = 1e-3
 #: float dtypes of a state's arrays (float16 loses what was learned; others are not ours)
 _FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
+#: the network's arrays a state holds (the rows in use), by their `kernels.layout.Network`
+#: field names: float arrays (the node properties are named as their topologies, the format's
+#: keys since version 1), then the adjacency, then those that older states may lack
 _FLOAT_ARRAYS = (POS, COL, NOR, "err")
 _INT_ARRAYS = ("nbr", "age", "emask", "rev", "deg")
+_SAVED_ARRAYS = (*_FLOAT_ARRAYS, *_INT_ARRAYS, "ids", "util", "wins")
 
 
 def snapshot(model: Any) -> dict[str, np.ndarray]:
     """Everything needed to continue ``model`` (a `GrowingGas`) exactly, as numpy arrays only
     (np.savez-safe)."""
     n = model.n_nodes_
-    a = model._arrays
+    net = model._network
+    params = model._settings
+    # an unfitted model draws nothing before its first batch: a generator as fit would seed it
+    rng = model._rng if model._rng is not None else np.random.default_rng(params["random_state"])
     state: dict[str, np.ndarray] = {
         "model": np.array(type(model).__name__),
         "version": np.array(STATE_VERSION, dtype=np.int64),
-        "params": np.array(json.dumps(model._params)),
-        "rng_state": np.array(json.dumps(model._rng.bit_generator.state)),
+        "params": np.array(json.dumps(params)),
+        "rng_state": np.array(json.dumps(rng.bit_generator.state)),
         "dim": np.array(model._dim, dtype=np.int64),
         "has_colors": np.array(int(model._has_col), dtype=np.int64),
         "n_invalid": np.array(model.n_invalid_, dtype=np.int64),
@@ -53,10 +62,9 @@ def snapshot(model: Any) -> dict[str, np.ndarray]:
         state["memory_offered"] = np.array(model._memory.offered, dtype=np.int64)
     if model._coverage is not None:
         state["coverage_cells"] = model._coverage.cells()
-    for name in (POS, COL, NOR, "err", "nbr", "age", "emask", "rev", "deg", "ids",
-                 "util", "wins"):
-        if a:
-            state[name] = a[name][:n].copy()
+    if model._dim:  # an unfitted model has no node arrays
+        for name in _SAVED_ARRAYS:
+            state[name] = getattr(net, name)[:n].copy()
     return state
 
 
@@ -111,10 +119,11 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
         raise ValueError(f"state params/rng_state are not valid JSON: {exc}") from exc
     if not isinstance(params, dict):
         raise ValueError(f"state params must be a JSON object, got {type(params).__name__}")
-    unknown = set(params) - set(cls._PARAM_NAMES)
+    unknown = set(params) - set(cls._get_param_names())
     if unknown:
         raise ValueError(f"state params has unknown parameters {sorted(unknown)}")
     model = cls(**params)
+    model._start(model.check_params())
     try:
         model._rng.bit_generator.state = rng_state
     except (TypeError, ValueError, KeyError) as exc:
@@ -147,10 +156,11 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
 
     arrays = _node_arrays(state, n, dim, counters)
     model._allocate(dim, bool(has_col))
+    net = model._network
     for key, value in arrays.items():
-        model._arrays[key][:n] = value
-    model._istate[:] = counters
-    model._fstate[:] = scalars
+        getattr(net, key)[:n] = value
+    net.istate[:] = counters
+    net.fstate[:] = scalars
     if "camera_pose" in state:  # states saved before camera poses: the camera frame
         model._camera_pose = checked_pose(_array(state, "camera_pose", (4, 4), "f"), dim)
     if model._memory is not None:  # states saved before rehearsal: an empty memory
@@ -158,9 +168,7 @@ def restore(cls: type[Model], state: dict[str, np.ndarray]) -> Model:
     if model._coverage is not None and "coverage_cells" in state:  # else: none seen yet
         model._coverage.restore(state["coverage_cells"])
     if counters[K.I_GRID]:
-        a = model._arrays
-        grid_rebuild(a[POS], n, a["ghead"], a["gnext"], a["gprev"], a["gbucket"], a["gcell"],
-                     float(scalars[K.F_CELL]))
+        grid_rebuild(net, n, float(scalars[K.F_CELL]))
     return model
 
 
@@ -178,6 +186,10 @@ def _node_arrays(state: dict[str, np.ndarray], n: int, dim: int,
     for key in _FLOAT_ARRAYS:
         if not np.isfinite(arrays[key]).all():
             raise ValueError(f"state[{key!r}] contains NaN or inf")
+    if (arrays["err"] < 0).any():
+        raise ValueError("state['err'] must be non-negative (accumulated squared distances)")
+    if (np.linalg.norm(arrays[NOR], axis=1) > 1.0 + NORMAL_TOLERANCE).any():
+        raise ValueError("state['nor'] holds vectors longer than a unit normal")
     _check_adjacency(n, arrays)
     arrays["ids"], counters[K.I_NEXT_ID] = _node_ids(state, n, int(counters[K.I_NEXT_ID]))
     # states saved before win counts: every node mature (a young node's rate is 1 / wins)

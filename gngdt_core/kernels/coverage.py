@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from gngdt.core.kernels._numba import inlined
+
 EMPTY = -1
 KEY_BITS = 21
 KEY_OFFSET = 1 << (KEY_BITS - 1)
@@ -21,7 +23,7 @@ _KEY_MASK = (1 << KEY_BITS) - 1
 _GOLDEN = np.int64(-7046029254386353131)
 
 
-@njit(cache=True, inline="always")
+@inlined
 def _slot(key, mask):
     return (key * _GOLDEN >> 17) & mask
 

@@ -1,7 +1,7 @@
 """The adjacency with a fixed maximum degree: edge slots, edges, node deletion.
 
-Arrays: ``nbr``, ``age``, ``emask``, ``rev``, ``deg`` (see `layout`); deleting a node moves the
-last node's properties, edges and grid entry into its place.
+They work on a `layout.Network`'s ``nbr``, ``age``, ``emask``, ``rev`` and ``deg``; deleting a
+node moves the last node's properties, edges and grid entry into its place.
 """
 
 from __future__ import annotations
@@ -13,82 +13,89 @@ from gngdt.core.kernels.grid import _grid_rename, grid_remove
 
 
 @inlined
-def find_slot(nbr, deg, i, j):
+def find_slot(net, i, j):
     """Slot of neighbour ``j`` in row ``i``, or -1."""
-    for k in range(deg[i]):
-        if nbr[i, k] == j:
+    for k in range(net.deg[i]):
+        if net.nbr[i, k] == j:
             return k
     return -1
 
 
 @inlined
-def add_edge(nbr, age, emask, rev, deg, i, j, mask):
+def add_edge(net, i, j, mask):
     """Connect ``i`` and ``j`` with age 0 and property bits ``mask``; False on degree overflow."""
+    nbr = net.nbr
+    deg = net.deg
     ki = deg[i]
     kj = deg[j]
     if ki >= nbr.shape[1] or kj >= nbr.shape[1]:
         return False
     nbr[i, ki] = j
     nbr[j, kj] = i
-    age[i, ki] = 0
-    age[j, kj] = 0
-    emask[i, ki] = mask
-    emask[j, kj] = mask
-    rev[i, ki] = kj
-    rev[j, kj] = ki
+    net.age[i, ki] = 0
+    net.age[j, kj] = 0
+    net.emask[i, ki] = mask
+    net.emask[j, kj] = mask
+    net.rev[i, ki] = kj
+    net.rev[j, kj] = ki
     deg[i] = ki + 1
     deg[j] = kj + 1
     return True
 
 
 @inlined
-def _drop_slot(nbr, age, emask, rev, deg, i, k):
+def _drop_slot(net, i, k):
     """Remove slot ``k`` of row ``i`` only (the twin is handled by the caller)."""
-    last = deg[i] - 1
+    nbr = net.nbr
+    rev = net.rev
+    last = net.deg[i] - 1
     if k != last:
         nbr[i, k] = nbr[i, last]
-        age[i, k] = age[i, last]
-        emask[i, k] = emask[i, last]
+        net.age[i, k] = net.age[i, last]
+        net.emask[i, k] = net.emask[i, last]
         rev[i, k] = rev[i, last]
         rev[nbr[i, k], rev[i, k]] = k
-    deg[i] = last
+    net.deg[i] = last
 
 
 @inlined
-def remove_edge(nbr, age, emask, rev, deg, i, k):
+def remove_edge(net, i, k):
     """Delete the edge at slot ``k`` of node ``i`` (all properties), from both endpoints."""
-    j = nbr[i, k]
-    kj = rev[i, k]
-    _drop_slot(nbr, age, emask, rev, deg, i, k)
-    _drop_slot(nbr, age, emask, rev, deg, j, kj)
+    j = net.nbr[i, k]
+    kj = net.rev[i, k]
+    _drop_slot(net, i, k)
+    _drop_slot(net, j, kj)
 
 
 @njit(cache=True)
-def delete_node(i, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
-                ghead, gnext, gprev, gbucket, gcell):
-    """Delete isolated node ``i`` by moving the last node ``n-1`` into its slot. Returns n - 1."""
-    grid_remove(ghead, gnext, gprev, gbucket, i)
+def delete_node(net, i, n):
+    """Delete isolated node ``i`` of the ``n`` in use by moving the last node ``n-1`` into its
+    slot. Returns n - 1 (the index the moved node had)."""
+    grid_remove(net, i)
     last = n - 1
+    pos = net.pos
+    nbr = net.nbr
+    deg = net.deg
     if i != last:
         for a in range(pos.shape[1]):
             pos[i, a] = pos[last, a]
         for a in range(3):
-            col[i, a] = col[last, a]
-            nor[i, a] = nor[last, a]
-        err[i] = err[last]
-        ids[i] = ids[last]
-        util[i] = util[last]
-        judged[i] = judged[last]
-        wins[i] = wins[last]
+            net.col[i, a] = net.col[last, a]
+            net.nor[i, a] = net.nor[last, a]
+        net.err[i] = net.err[last]
+        net.ids[i] = net.ids[last]
+        net.util[i] = net.util[last]
+        net.judged[i] = net.judged[last]
+        net.wins[i] = net.wins[last]
         d = deg[last]
         for k in range(d):
             j = nbr[last, k]
             nbr[i, k] = j
-            age[i, k] = age[last, k]
-            emask[i, k] = emask[last, k]
-            rev[i, k] = rev[last, k]
-            nbr[j, rev[last, k]] = i
+            net.age[i, k] = net.age[last, k]
+            net.emask[i, k] = net.emask[last, k]
+            net.rev[i, k] = net.rev[last, k]
+            nbr[j, net.rev[last, k]] = i
         deg[i] = d
-        _grid_rename(ghead, gnext, gprev, gbucket, gcell, last, i)
+        _grid_rename(net, last, i)
     deg[last] = 0
     return last

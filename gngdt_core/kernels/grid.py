@@ -1,7 +1,7 @@
 """The spatial hash grid of node positions and the winner searches (Step 2).
 
-Arrays: ``ghead``, ``gnext``, ``gprev``, ``gbucket``, ``gcell`` (see `layout`). The grid gives
-the exact nearest two nodes by position; GNG and GNG-W search by brute force
+The grid is the `layout.Network`'s ``ghead``, ``gnext``, ``gprev``, ``gbucket`` and ``gcell``.
+It gives the exact nearest two nodes by position; GNG and GNG-W search by brute force
 (`nearest_two_weighted`).
 """
 
@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
-from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels._numba import flush_tiny, inlined
 from gngdt.core.kernels.layout import MODE_GNG
 
 # Below this many nodes a brute-force winner search is cheaper than the grid.
@@ -46,34 +46,37 @@ def _cell_of(pos, i, inv_cell):
 
 
 @inlined
-def grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell):
+def grid_insert(net, i, inv_cell):
     """Put node ``i`` (not in the grid) at the head of its cell's bucket."""
-    cx, cy, cz = _cell_of(pos, i, inv_cell)
-    b = _bucket(cx, cy, cz, ghead.shape[0] - 1)
-    gcell[i, 0] = cx
-    gcell[i, 1] = cy
-    gcell[i, 2] = cz
-    gbucket[i] = b
-    gprev[i] = -1
-    head = ghead[b]
-    gnext[i] = head
+    cx, cy, cz = _cell_of(net.pos, i, inv_cell)
+    b = _bucket(cx, cy, cz, net.ghead.shape[0] - 1)
+    net.gcell[i, 0] = cx
+    net.gcell[i, 1] = cy
+    net.gcell[i, 2] = cz
+    net.gbucket[i] = b
+    net.gprev[i] = -1
+    head = net.ghead[b]
+    net.gnext[i] = head
     if head >= 0:
-        gprev[head] = i
-    ghead[b] = i
+        net.gprev[head] = i
+    net.ghead[b] = i
 
 
 @inlined
-def grid_remove(ghead, gnext, gprev, gbucket, i):
-    b = gbucket[i]
+def grid_remove(net, i):
+    """Take node ``i`` out of its bucket (nothing when it is not in the grid)."""
+    gnext = net.gnext
+    gprev = net.gprev
+    b = net.gbucket[i]
     if b < 0:
         return
     if gprev[i] >= 0:
         gnext[gprev[i]] = gnext[i]
     else:
-        ghead[b] = gnext[i]
+        net.ghead[b] = gnext[i]
     if gnext[i] >= 0:
         gprev[gnext[i]] = gprev[i]
-    gbucket[i] = -1
+    net.gbucket[i] = -1
 
 
 @inlined
@@ -83,34 +86,39 @@ def _crossed_cell(old, new, inv_cell):
 
 
 @inlined
-def _move_toward(pos, i, x0, x1, x2, dim, rate, grid_on, ghead, gnext, gprev, gbucket, gcell,
-                 inv_cell):
-    """Step 5 for a position: ``h_i += rate * (x - h_i)``, keeping node ``i``'s grid bucket.
+def _move_toward(net, i, x0, x1, x2, dim, rate, grid_on, inv_cell):
+    """Step 5 for a position: ``h_i += rate * (x - h_i)`` (`flush_tiny`), keeping node ``i``'s
+    grid bucket.
 
     The grid invariant (each node is in the bucket of ``floor(h * inv_cell)``) lets the cell test
     compare the old and new coordinates instead of loading the stored cell.
     """
+    pos = net.pos
     old0 = pos[i, 0]
     old1 = pos[i, 1]
-    new0 = old0 + rate * (x0 - old0)
-    new1 = old1 + rate * (x1 - old1)
+    new0 = flush_tiny(old0 + rate * (x0 - old0))
+    new1 = flush_tiny(old1 + rate * (x1 - old1))
     pos[i, 0] = new0
     pos[i, 1] = new1
     crossed = grid_on and (_crossed_cell(old0, new0, inv_cell)
                            or _crossed_cell(old1, new1, inv_cell))
     if dim > 2:
         old2 = pos[i, 2]
-        new2 = old2 + rate * (x2 - old2)
+        new2 = flush_tiny(old2 + rate * (x2 - old2))
         pos[i, 2] = new2
         crossed = crossed or (grid_on and _crossed_cell(old2, new2, inv_cell))
     if crossed:
-        grid_remove(ghead, gnext, gprev, gbucket, i)
-        grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell)
+        grid_remove(net, i)
+        grid_insert(net, i, inv_cell)
 
 
 @njit(cache=True)
-def _grid_rename(ghead, gnext, gprev, gbucket, gcell, src, dst):
+def _grid_rename(net, src, dst):
     """Node ``src`` becomes node ``dst`` (``dst`` is not in the grid)."""
+    gnext = net.gnext
+    gprev = net.gprev
+    gbucket = net.gbucket
+    gcell = net.gcell
     gbucket[dst] = gbucket[src]
     gbucket[src] = -1
     if gbucket[dst] < 0:
@@ -123,28 +131,29 @@ def _grid_rename(ghead, gnext, gprev, gbucket, gcell, src, dst):
     if gprev[dst] >= 0:
         gnext[gprev[dst]] = dst
     else:
-        ghead[gbucket[dst]] = dst
+        net.ghead[gbucket[dst]] = dst
     if gnext[dst] >= 0:
         gprev[gnext[dst]] = dst
 
 
 @njit(cache=True)
-def grid_rebuild(pos, n, ghead, gnext, gprev, gbucket, gcell, cell_size):
+def grid_rebuild(net, n, cell_size):
     """Empty the grid and insert nodes ``0..n-1`` with a new ``cell_size``. O(n)."""
+    gbucket = net.gbucket
     for i in range(gbucket.shape[0]):
         b = gbucket[i]
         if b >= 0:
-            ghead[b] = -1
+            net.ghead[b] = -1
             gbucket[i] = -1
     inv_cell = 1.0 / cell_size
     for i in range(n):
-        grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell)
+        grid_insert(net, i, inv_cell)
 
 
 @njit(cache=True)
-def _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell):
+def _grid_insert_new(net, i, inv_cell):
     """`grid_insert` out of line, for the rare insertion of Step 8."""
-    grid_insert(pos, ghead, gnext, gprev, gbucket, gcell, i, inv_cell)
+    grid_insert(net, i, inv_cell)
 
 
 # --------------------------------------------------------------------------- winner search
@@ -232,7 +241,18 @@ def _scan_bucket(p, gnext, pos, x0, x1, x2, dim, s1, s2, best1, best2):
 
 
 @inlined
-def nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext, cell_size, inv_cell):
+def query_axis(q):
+    """One axis of a query ``q`` cells from the origin: its cell, whether the nearer face of
+    that cell is the upper one, and the gaps (in cells) from the query to the near and far
+    faces. The ring searches (`nearest_two_grid`, the segmentation's nearest node) start here."""
+    f = np.floor(q)
+    r = q - f
+    near = min(r, 1.0 - r)
+    return np.int64(f), r >= 0.5, near, 1.0 - near
+
+
+@inlined
+def nearest_two_grid(net, n, x0, x1, x2, dim, cell_size, inv_cell):
     """Exact nearest two by position from the grid; returns s1, s2 and their squared distances.
 
     Visits the query's cell and its ring-1 neighbours (likely nearest first), skipping every cell
@@ -240,38 +260,26 @@ def nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext, cell_size, inv_cell)
     same way) until no unvisited cell can hold a closer node. Falls back to brute force when the
     rings would cover more cells than there are nodes (a query far away from every node).
     """
+    ghead = net.ghead
+    gnext = net.gnext
+    pos = net.pos
     table_mask = ghead.shape[0] - 1
-    qx = x0 * inv_cell
-    qy = x1 * inv_cell
-    qz = x2 * inv_cell if dim > 2 else 0.0
-    fx = math.floor(qx)
-    fy = math.floor(qy)
-    fz = math.floor(qz)
-    cx = np.int64(fx)
-    cy = np.int64(fy)
-    cz = np.int64(fz)
-    # per axis: is the nearer face on the + side, and the gaps (in cells) to the near/far face
-    rx = qx - fx
-    ry = qy - fy
-    rz = qz - fz
-    up_x = rx >= 0.5
-    up_y = ry >= 0.5
-    up_z = rz >= 0.5
-    near_x = min(rx, 1.0 - rx)
-    near_y = min(ry, 1.0 - ry)
-    near_z = min(rz, 1.0 - rz)
-    far_x = 1.0 - near_x
-    far_y = 1.0 - near_y
-    far_z = 1.0 - near_z
+    cx, up_x, near_x, far_x = query_axis(x0 * inv_cell)
+    cy, up_y, near_y, far_y = query_axis(x1 * inv_cell)
+    cz, up_z, near_z, far_z = query_axis(x2 * inv_cell if dim > 2 else 0.0)
     step_x = 1 if up_x else -1
     step_y = 1 if up_y else -1
     step_z = 1 if up_z else -1
     if dim > 2:
         first_cells = FIRST_CELLS_3D
         margin = min(near_x, near_y, near_z)
+        far_gap = min(far_x, far_y, far_z)
     else:
         first_cells = FIRST_CELLS_2D
         margin = min(near_x, near_y)
+        far_gap = min(far_x, far_y)
+    # the first cells with offsets 0 or +1 only: the query's cell and those toward its near faces
+    near_block = 1 << dim
     cell2 = cell_size * cell_size
     # a cell is skipped when (its gap in cells)^2 > best2 * prune
     prune = (1.0 + BOUND_SLACK) / cell2
@@ -280,6 +288,11 @@ def nearest_two_grid(pos, n, x0, x1, x2, dim, ghead, gnext, cell_size, inv_cell)
     s1 = -1
     s2 = -1
     for e in range(first_cells.shape[0]):
+        if e == near_block:
+            # every cell left lies beyond a far face on some axis: when the nearest far face is
+            # pruned, so is each of them (best2 only shrinks), as the per-cell test would find
+            if far_gap * far_gap > best2 * prune:
+                break
         ox = first_cells[e, 0]
         oy = first_cells[e, 1]
         oz = first_cells[e, 2]

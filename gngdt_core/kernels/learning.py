@@ -1,11 +1,12 @@
 """The learning loop of the growing-gas learners: one loop for GNG-DT, GNG and GNG-W.
 
-Steps 1-9 per sample (`learn`), node insertion (Step 8) and forgetting (GNG-U's utility); the
-arrays and the indices into the state and parameter vectors are described in `layout`.
+Steps 1-9 per sample (`learn`), node insertion (Step 8) and forgetting (GNG-U's utility), on a
+`layout.Network`; its arrays and the indices into the state and parameter vectors are described
+in `layout`.
 
 Speed notes: a step takes well under a microsecond, so the per-step loop (`_learn_steps`) runs
 without numba's reference counting, its helpers are inlined at the numba IR level
-(``inline="always"``), and samples and nodes are read by index, never through array views.
+(`_numba.inlined`), and samples and nodes are read by index, never through array views.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import math
 import numpy as np
 from numba import njit
 
+from gngdt.core.kernels._numba import flush_tiny, prefetch_row
 from gngdt.core.kernels.graph import add_edge, delete_node, find_slot, remove_edge
 from gngdt.core.kernels.grid import (
     GRID_CELL_SPACINGS,
@@ -70,48 +72,60 @@ from gngdt.core.kernels.normals import _interpolate_normal, compute_normal, prop
 
 # Renormalise stored errors when the global decay factor falls below this.
 ERROR_SCALE_FLOOR = 1e-60
+# Steps between naming a sample's row to the cache (`prefetch_row`) and learning it.
+PREFETCH_AHEAD = 2
 
 
 @njit(cache=True, nogil=True)  # the tracker thread tracks meanwhile
-def learn(samples, sample_colors, order,
-          pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
-          ghead, gnext, gprev, gbucket, gcell,
-          istate, fstate, fparams, iparams):
-    """Run one learning step (Steps 1-9) per index in ``order`` (rows of ``samples``).
+def learn(samples, sample_colors, order, net, fparams, iparams):
+    """Run one learning step (Steps 1-9) of ``net`` per index in ``order`` (rows of ``samples``).
 
-    samples: (N, D) float64 positions; sample_colors: (N, 3) float64, or any (1, 3) placeholder
-    without colour (then never read). With forgetting on, ``judged`` marks the nodes the sensor
-    could see in this call (see the module docstring); nodes inserted during it are judged.
+    Parameters
+    ----------
+    samples : (N, D) float64
+        Positions, in the network's frame.
+    sample_colors : (N, 3) float64
+        Their colours, or any (1, 3) placeholder without colour (then never read).
+    order : (M,) int64
+        Rows of ``samples`` to learn, one step each, in this order.
+    net : layout.Network
+        The network, changed in place. With forgetting on, ``net.judged`` marks the nodes the
+        sensor could see in this call (see `layout`); nodes inserted during it are judged.
+    fparams : (15,) float64
+        The float parameters (``P_*`` indices in `layout`).
+    iparams : (9,) int64
+        The integer parameters (``Q_*`` indices in `layout`).
     """
     # scratch for Step 7 (the neighbours whose edge to s1 just expired) and for forgetting (a
     # node and its neighbours)
-    candidates = np.empty(nbr.shape[1] + 1, dtype=np.int64)
+    candidates = np.empty(net.nbr.shape[1] + 1, dtype=np.int64)
     forget = iparams[Q_FORGET] != 0
     if forget:  # utilities of the nodes not judged now: frozen, in true units, for this call
-        _rescale_unjudged(util, judged, istate[I_NODES], fstate[F_UTIL_SCALE])
-    _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
-                 ghead, gnext, gprev, gbucket, gcell,
-                 istate, fstate, fparams, iparams, candidates)
+        _rescale_unjudged(net, net.fstate[F_UTIL_SCALE])
+    _learn_steps(samples, sample_colors, order, net, fparams, iparams, candidates)
     if forget:
-        _rescale_unjudged(util, judged, istate[I_NODES], 1.0 / fstate[F_UTIL_SCALE])
+        _rescale_unjudged(net, 1.0 / net.fstate[F_UTIL_SCALE])
 
 
 @njit(cache=True)
-def _rescale_unjudged(util, judged, n, factor):
-    for i in range(n):
-        if judged[i] == 0:
-            util[i] *= factor
+def _rescale_unjudged(net, factor):
+    """Multiply the utility of every node not judged now by ``factor``."""
+    for i in range(net.istate[I_NODES]):
+        if net.judged[i] == 0:
+            net.util[i] *= factor
 
 
 @njit(cache=True)
-def forget_least_useful(n, err, util, judged, wins, error_scale, util_scale, utility_k,
-                        candidates, pos, col, nor, nbr, age, emask, rev, deg, ids,
-                        ghead, gnext, gprev, gbucket, gcell):
-    """GNG-U's removal among the judged nodes: the judged node ``l`` of least utility goes, with
-    its edges and any neighbour left without one, when ``max error > utility_k * U_l`` (true,
-    unscaled values). Returns (new n, nodes removed).
+def forget_least_useful(net, n, error_scale, util_scale, utility_k, candidates):
+    """GNG-U's removal among the judged nodes of the ``n`` in use: the judged node ``l`` of
+    least utility goes, with its edges and any neighbour left without one, when ``max error >
+    utility_k * U_l`` (true, unscaled values). ``candidates``: (MAX_DEGREE + 1,) int64 scratch.
+    Returns (new n, nodes removed).
     """
+    err = net.err
+    util = net.util
+    judged = net.judged
+    deg = net.deg
     max_err = 0.0
     least = -1
     least_util = np.inf
@@ -126,17 +140,16 @@ def forget_least_useful(n, err, util, judged, wins, error_scale, util_scale, uti
     n_candidates = 0
     while deg[least] > 0:
         k = deg[least] - 1
-        candidates[n_candidates] = nbr[least, k]
+        candidates[n_candidates] = net.nbr[least, k]
         n_candidates += 1
-        remove_edge(nbr, age, emask, rev, deg, least, k)
+        remove_edge(net, least, k)
     candidates[n_candidates] = least
     n_candidates += 1
     removed = 0
     for q in range(n_candidates):
         j = candidates[q]
         if deg[j] == 0 and n > 2:
-            last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids, util,
-                               judged, wins, ghead, gnext, gprev, gbucket, gcell)
+            last = delete_node(net, j, n)
             n -= 1
             removed += 1
             for q2 in range(q + 1, n_candidates):
@@ -150,11 +163,22 @@ def forget_least_useful(n, err, util, judged, wins, error_scale, util_scale, uti
 # would otherwise emit around each inlined helper is pure overhead (it cost ~40% of a step).
 # Without the runtime the function cannot allocate; numba refuses to compile it if it tries.
 @njit(cache=True, _nrt=False)
-def _learn_steps(samples, sample_colors, order,
-                 pos, col, nor, err, nbr, age, emask, rev, deg, ids, util, judged, wins,
-                 ghead, gnext, gprev, gbucket, gcell,
-                 istate, fstate, fparams, iparams, candidates):
+def _learn_steps(samples, sample_colors, order, net, fparams, iparams, candidates):
     """The body of `learn`; ``candidates`` (MAX_DEGREE + 1,) int64 scratch."""
+    pos = net.pos
+    col = net.col
+    err = net.err
+    nbr = net.nbr
+    age = net.age
+    emask = net.emask
+    rev = net.rev
+    deg = net.deg
+    ids = net.ids
+    util = net.util
+    judged = net.judged
+    wins = net.wins
+    istate = net.istate
+    fstate = net.fstate
     eta1 = fparams[P_ETA1]
     eta2 = fparams[P_ETA2]
     alpha = fparams[P_ALPHA]
@@ -196,7 +220,16 @@ def _learn_steps(samples, sample_colors, order,
     # steps since the last Step 8 (t % lam, counted instead of divided each step)
     phase = t % lam
 
-    for idx in order:
+    n_order = order.shape[0]
+    for q in range(n_order):
+        # the samples are visited in a random order: name the row PREFETCH_AHEAD steps on now,
+        # so that it is in the cache when its step reads it (a miss cost ~30% of a step)
+        if q + PREFETCH_AHEAD < n_order:
+            ahead = order[q + PREFETCH_AHEAD]
+            prefetch_row(samples, ahead)
+            if has_col:
+                prefetch_row(sample_colors, ahead)
+        idx = order[q]
         x0 = samples[idx, 0]
         x1 = samples[idx, 1]
         x2 = samples[idx, 2] if dim > 2 else 0.0
@@ -214,8 +247,8 @@ def _learn_steps(samples, sample_colors, order,
         # Step 2 (and the error of Step 3)
         if mode == MODE_GNGDT:
             if grid_on:
-                s1, s2, err_add, second = nearest_two_grid(pos, n, x0, x1, x2, dim, ghead,
-                                                           gnext, cell_size, inv_cell)
+                s1, s2, err_add, second = nearest_two_grid(net, n, x0, x1, x2, dim, cell_size,
+                                                           inv_cell)
             else:
                 s1, s2, err_add, second = nearest_two_brute(pos, n, x0, x1, x2, dim)
         else:
@@ -228,13 +261,12 @@ def _learn_steps(samples, sample_colors, order,
         # gets a node at its place, joined to its winner (as Marsland et al.'s GWR grows)
         if (grow_sq > 0.0 and err_add > grow_sq and n < max_nodes and mode == MODE_GNGDT
                 and deg[s1] < nbr.shape[1]):
-            n = _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, age,
-                                  emask, rev, deg, has_col, has_nor, tau_col, tau_nor, forget,
-                                  util, judged, wins, util_scale)
+            n = _insert_at_sample(net, n, s1, x0, x1, x2, c0, c1, c2, has_col, has_nor,
+                                  tau_col, tau_nor, forget, util_scale)
             ids[n - 1] = next_id
             next_id += 1
             if grid_on:
-                _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, inv_cell)
+                _grid_insert_new(net, n - 1, inv_cell)
         # Step 3
         err[s1] += err_add / error_scale
         # GNG-U: what the network would lose without s1, by what the sensor sees now
@@ -247,12 +279,12 @@ def _learn_steps(samples, sample_colors, order,
         else:
             spacing += 0.01 * (d12 - spacing)
         # Step 4
-        k12 = find_slot(nbr, deg, s1, s2)
+        k12 = find_slot(net, s1, s2)
         if k12 < 0:
-            if add_edge(nbr, age, emask, rev, deg, s1, s2, POS_BIT):
+            if add_edge(net, s1, s2, POS_BIT):
                 k12 = deg[s1] - 1
         if k12 >= 0:
-            mask = property_bits(col, nor, s1, s2, has_col, has_nor, tau_col, tau_nor)
+            mask = property_bits(net, s1, s2, has_col, has_nor, tau_col, tau_nor)
             age[s1, k12] = 0
             emask[s1, k12] = mask
             k21 = rev[s1, k12]
@@ -264,21 +296,19 @@ def _learn_steps(samples, sample_colors, order,
         if grow_sq > 0.0:
             wins[s1] += 1.0
             rate = max(eta1, 1.0 / wins[s1])
-        _move_toward(pos, s1, x0, x1, x2, dim, rate, grid_on, ghead, gnext, gprev, gbucket,
-                     gcell, inv_cell)
+        _move_toward(net, s1, x0, x1, x2, dim, rate, grid_on, inv_cell)
         if has_col:
-            col[s1, 0] += rate * (c0 - col[s1, 0])
-            col[s1, 1] += rate * (c1 - col[s1, 1])
-            col[s1, 2] += rate * (c2 - col[s1, 2])
+            col[s1, 0] = flush_tiny(col[s1, 0] + rate * (c0 - col[s1, 0]))
+            col[s1, 1] = flush_tiny(col[s1, 1] + rate * (c1 - col[s1, 1]))
+            col[s1, 2] = flush_tiny(col[s1, 2] + rate * (c2 - col[s1, 2]))
         # ... each neighbour in property o only along an edge of o. Step 6: ages.
         for k in range(deg[s1]):
             j = nbr[s1, k]
-            _move_toward(pos, j, x0, x1, x2, dim, eta2, grid_on, ghead, gnext, gprev, gbucket,
-                         gcell, inv_cell)
+            _move_toward(net, j, x0, x1, x2, dim, eta2, grid_on, inv_cell)
             if has_col and (col_follows_pos or (emask[s1, k] & COL_BIT) != 0):
-                col[j, 0] += eta2 * (c0 - col[j, 0])
-                col[j, 1] += eta2 * (c1 - col[j, 1])
-                col[j, 2] += eta2 * (c2 - col[j, 2])
+                col[j, 0] = flush_tiny(col[j, 0] + eta2 * (c0 - col[j, 0]))
+                col[j, 1] = flush_tiny(col[j, 1] + eta2 * (c1 - col[j, 1]))
+                col[j, 2] = flush_tiny(col[j, 2] + eta2 * (c2 - col[j, 2]))
             age[s1, k] += 1
             age[j, rev[s1, k]] += 1
         # Step 7: delete old edges of s1, then nodes left without position edges
@@ -288,14 +318,13 @@ def _learn_steps(samples, sample_colors, order,
             if age[s1, k] > age_max:
                 candidates[n_candidates] = nbr[s1, k]
                 n_candidates += 1
-                remove_edge(nbr, age, emask, rev, deg, s1, k)
+                remove_edge(net, s1, k)
             else:
                 k += 1
         for q in range(n_candidates):
             j = candidates[q]
             if deg[j] == 0:
-                last = delete_node(j, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
-                                   util, judged, wins, ghead, gnext, gprev, gbucket, gcell)
+                last = delete_node(net, j, n)
                 n -= 1
                 if s1 == last:
                     s1 = j
@@ -303,27 +332,23 @@ def _learn_steps(samples, sample_colors, order,
                     if candidates[q2] == last:
                         candidates[q2] = j
         if deg[s1] == 0:
-            delete_node(s1, n, pos, col, nor, err, nbr, age, emask, rev, deg, ids,
-                        util, judged, wins, ghead, gnext, gprev, gbucket, gcell)
+            delete_node(net, s1, n)
             n -= 1
         elif has_nor:
-            compute_normal(s1, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
+            compute_normal(net, s1, mu, orient, vx, vy, vz)
         # Step 8: insertion every lambda steps, until max_nodes
         if phase == 0:
             if forget:
-                n, removed = forget_least_useful(n, err, util, judged, wins, error_scale,
-                                                 util_scale, utility_k, candidates, pos, col,
-                                                 nor, nbr, age, emask, rev, deg, ids, ghead,
-                                                 gnext, gprev, gbucket, gcell)
+                n, removed = forget_least_useful(net, n, error_scale, util_scale, utility_k,
+                                                 candidates)
                 forgotten += removed
             if n < max_nodes:
-                n = _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
-                                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
-                                 forget, util, judged, wins, util_scale)
+                n = _insert_node(net, n, has_col, has_nor, tau_col, tau_nor, alpha, orient, vx,
+                                 vy, vz, forget, util_scale)
                 ids[n - 1] = next_id
                 next_id += 1
                 if grid_on:
-                    _grid_insert_new(pos, ghead, gnext, gprev, gbucket, gcell, n - 1, inv_cell)
+                    _grid_insert_new(net, n - 1, inv_cell)
             # keep grid cells about GRID_CELL_SPACINGS node spacings wide (amortised O(n) per
             # lambda steps); the cell size only affects speed, never the winners found
             target_cell = GRID_CELL_SPACINGS * spacing
@@ -334,7 +359,7 @@ def _learn_steps(samples, sample_colors, order,
             ):
                 cell_size = target_cell
                 inv_cell = 1.0 / cell_size
-                grid_rebuild(pos, n, ghead, gnext, gprev, gbucket, gcell, cell_size)
+                grid_rebuild(net, n, cell_size)
                 grid_on = True
         # Step 9, lazily: true error = stored error * error_scale
         error_scale *= 1.0 - beta
@@ -362,11 +387,14 @@ def _learn_steps(samples, sample_colors, order,
 
 
 @njit(cache=True)
-def _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, age, emask, rev,
-                      deg, has_col, has_nor, tau_col, tau_nor, forget, util, judged, wins,
-                      util_scale):
+def _insert_at_sample(net, n, s1, x0, x1, x2, c0, c1, c2, has_col, has_nor, tau_col, tau_nor,
+                      forget, util_scale):
     """A new node at the sample (x0, x1[, x2]) with its colour, joined to the winner ``s1``
     by an edge; it takes the winner's normal, error and (judged) utility. Returns n + 1."""
+    pos = net.pos
+    col = net.col
+    util = net.util
+    judged = net.judged
     r = n
     pos[r, 0] = x0
     pos[r, 1] = x1
@@ -376,12 +404,11 @@ def _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, ag
     col[r, 1] = c1 if has_col else col[s1, 1]
     col[r, 2] = c2 if has_col else col[s1, 2]
     for a in range(3):
-        nor[r, a] = nor[s1, a]
-    deg[r] = 0
-    add_edge(nbr, age, emask, rev, deg, s1, r,
-             property_bits(col, nor, s1, r, has_col, has_nor, tau_col, tau_nor))
-    err[r] = err[s1]
-    wins[r] = 1.0  # it stands for the one sample it was placed on
+        net.nor[r, a] = net.nor[s1, a]
+    net.deg[r] = 0
+    add_edge(net, s1, r, property_bits(net, s1, r, has_col, has_nor, tau_col, tau_nor))
+    net.err[r] = net.err[s1]
+    net.wins[r] = 1.0  # it stands for the one sample it was placed on
     if forget:
         util[r] = util[s1] if judged[s1] != 0 else util[s1] / util_scale
         judged[r] = 1
@@ -389,19 +416,25 @@ def _insert_at_sample(n, s1, x0, x1, x2, c0, c1, c2, pos, col, nor, err, nbr, ag
 
 
 @njit(cache=True)
-def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
-                 has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz,
-                 forget, util, judged, wins, util_scale):
-    """Step 8 i-vi: new node halfway between the max-error node and its max-error neighbour.
+def _insert_node(net, n, has_col, has_nor, tau_col, tau_nor, alpha, orient, vx, vy, vz, forget,
+                 util_scale):
+    """Step 8 i-vi: a new node ``n`` halfway between the max-error node and its max-error
+    neighbour. Returns n + 1.
 
     With forgetting, the new node is judged and takes the mean utility of the two (GNG-U).
     """
+    pos = net.pos
+    col = net.col
+    err = net.err
+    nbr = net.nbr
+    util = net.util
+    judged = net.judged
     u = 0
     for i in range(1, n):
         if err[i] > err[u]:
             u = i
     ku = 0
-    for k in range(1, deg[u]):
+    for k in range(1, net.deg[u]):
         if err[nbr[u, k]] > err[nbr[u, ku]]:
             ku = k
     f = nbr[u, ku]
@@ -410,17 +443,15 @@ def _insert_node(n, pos, col, nor, err, nbr, age, emask, rev, deg,
         pos[r, a] = 0.5 * (pos[u, a] + pos[f, a])
     for a in range(3):
         col[r, a] = 0.5 * (col[u, a] + col[f, a])
-    _interpolate_normal(nor, pos, u, f, r, orient, vx, vy, vz)
-    deg[r] = 0
-    remove_edge(nbr, age, emask, rev, deg, u, ku)
-    add_edge(nbr, age, emask, rev, deg, u, r,
-             property_bits(col, nor, u, r, has_col, has_nor, tau_col, tau_nor))
-    add_edge(nbr, age, emask, rev, deg, r, f,
-             property_bits(col, nor, r, f, has_col, has_nor, tau_col, tau_nor))
+    _interpolate_normal(net, u, f, r, orient, vx, vy, vz)
+    net.deg[r] = 0
+    remove_edge(net, u, ku)
+    add_edge(net, u, r, property_bits(net, u, r, has_col, has_nor, tau_col, tau_nor))
+    add_edge(net, r, f, property_bits(net, r, f, has_col, has_nor, tau_col, tau_nor))
     err[u] -= alpha * err[u]
     err[f] -= alpha * err[f]
     err[r] = 0.5 * (err[u] + err[f])
-    wins[r] = 1.0
+    net.wins[r] = 1.0
     if forget:
         scaled_u = util[u] if judged[u] != 0 else util[u] / util_scale
         scaled_f = util[f] if judged[f] != 0 else util[f] / util_scale

@@ -9,7 +9,7 @@ import math
 
 from numba import njit
 
-from gngdt.core.kernels._numba import inlined
+from gngdt.core.kernels._numba import flush_tiny, inlined
 from gngdt.core.kernels.grid import _node_sq_dist, _sq_dist
 from gngdt.core.kernels.layout import COL_BIT, NOR_BIT, POS_BIT
 
@@ -82,14 +82,15 @@ def _orient(nor, pos, i, vx, vy, vz):
 
 @inlined
 def _set_normal(nor, i, x, y, z):
-    nor[i, 0] = x
-    nor[i, 1] = y
-    nor[i, 2] = z
+    nor[i, 0] = flush_tiny(x)
+    nor[i, 1] = flush_tiny(y)
+    nor[i, 2] = flush_tiny(z)
 
 
 @inlined
-def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
-    """Eq. 16: normal of node ``i`` from its position neighbours, written to ``nor[i]``.
+def compute_normal(net, i, mu, orient, vx, vy, vz):
+    """Eq. 16: normal of node ``i`` of ``net`` from its position neighbours, written to
+    ``net.nor[i]``.
 
     As the paper: weighted centroid ``m = (h_i + sum w_j h_j) / (1 + sum w_j)`` with
     ``w_j = exp(-||h_i - h_j||^2 / mu^2)``; covariance ``sum_j (h_j - m)(h_j - m)^T`` over the
@@ -97,7 +98,10 @@ def compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
     means the scale-free default: ``mu`` = mean distance from ``i`` to its neighbours.
     Undefined (zero) with fewer than two neighbours.
     """
-    k_count = deg[i]
+    pos = net.pos
+    nor = net.nor
+    nbr = net.nbr
+    k_count = net.deg[i]
     if k_count < 2:
         _set_normal(nor, i, 0.0, 0.0, 0.0)
         return
@@ -190,19 +194,22 @@ def colours_close(col, i, j, tau):
 
 
 @inlined
-def property_bits(col, nor, i, j, has_col, has_nor, tau_col, tau_nor):
-    """Position bit plus the bits of the other properties whose eq. 4/9 test holds for (i, j)."""
+def property_bits(net, i, j, has_col, has_nor, tau_col, tau_nor):
+    """Position bit plus the bits of the other properties whose eq. 4/9 test holds for nodes
+    (i, j) of ``net``."""
     mask = POS_BIT
-    if has_col and colours_close(col, i, j, tau_col):
+    if has_col and colours_close(net.col, i, j, tau_col):
         mask |= COL_BIT
-    if has_nor and normals_close(nor, i, j, tau_nor):
+    if has_nor and normals_close(net.nor, i, j, tau_nor):
         mask |= NOR_BIT
     return mask
 
 
 @njit(cache=True)
-def _interpolate_normal(nor, pos, u, f, r, orient, vx, vy, vz):
-    """Normal of a new node: the sign-aligned mean of its parents' normals, renormalised."""
+def _interpolate_normal(net, u, f, r, orient, vx, vy, vz):
+    """Normal of a new node ``r``: the sign-aligned mean of its parents' (``u``, ``f``)
+    normals, renormalised."""
+    nor = net.nor
     sign = 1.0
     if nor[u, 0] * nor[f, 0] + nor[u, 1] * nor[f, 1] + nor[u, 2] * nor[f, 2] < 0.0:
         sign = -1.0
@@ -215,7 +222,7 @@ def _interpolate_normal(nor, pos, u, f, r, orient, vx, vy, vz):
         for a in range(3):
             nor[r, a] *= inv
         if orient:
-            _orient(nor, pos, r, vx, vy, vz)
+            _orient(nor, net.pos, r, vx, vy, vz)
     else:
         for a in range(3):
             nor[r, a] = 0.0

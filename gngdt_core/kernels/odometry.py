@@ -16,6 +16,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial.transform import Rotation
 
+from gngdt.core.kernels._numba import inlined
 from gngdt.core.sensor.geometry import rigid_inverse
 
 #: Rec. 601 luma weights: a colour's intensity, 0..1 for 0..255 channels
@@ -152,7 +153,7 @@ def node_gradients(positions: np.ndarray, normals: np.ndarray, values: np.ndarra
     return np.linalg.solve(a, b[..., None])[..., 0]
 
 
-@njit(cache=True, inline="always")
+@inlined
 def add_residual(q0, q1, q2, d0, d1, d2, w, r, jac, hessian, gradient):
     """Add one residual ``r`` with weight ``w`` to the upper triangle of ``hessian`` (6, 6) and
     to ``gradient`` (6,): its Jacobian over the twist is ``(q x d, d)``, q the point about the

@@ -1,8 +1,8 @@
 """Numba kernels over a learned network: fresh normals, property bits, nearest-node labelling;
 and over a depth image: veil pixels.
 
-They read the estimator's arrays (layout in `kernels.layout`) and write only their outputs; the
-learning loop never calls them.
+They read a network (`kernels.layout.Network`) and write only their outputs; the learning loop
+never calls them.
 """
 
 from __future__ import annotations
@@ -11,27 +11,28 @@ import numpy as np
 from numba import njit
 
 from gngdt.core.kernels._numba import inlined
-from gngdt.core.kernels.grid import BOUND_SLACK, _axis_gap, _bucket, _sq_dist
+from gngdt.core.kernels.grid import BOUND_SLACK, _axis_gap, _bucket, _sq_dist, query_axis
+from gngdt.core.kernels.layout import F_CELL, I_GRID, I_NODES
 from gngdt.core.kernels.normals import compute_normal, property_bits
 
 
 @njit(cache=True, nogil=True)
-def refresh_normals(n, pos, nor, nbr, deg, mu, orient, vx, vy, vz):
-    """Eq. 16 for every node ``0..n-1`` from the current positions, written to ``nor``."""
-    for i in range(n):
-        compute_normal(i, pos, nor, nbr, deg, mu, orient, vx, vy, vz)
+def refresh_normals(net, mu, orient, vx, vy, vz):
+    """Eq. 16 for every node of ``net`` from the current positions, written to ``net.nor``."""
+    for i in range(net.istate[I_NODES]):
+        compute_normal(net, i, mu, orient, vx, vy, vz)
 
 
 @njit(cache=True, nogil=True)
-def refresh_property_bits(n, col, nor, nbr, emask, rev, deg, has_col, has_nor, tau_col, tau_nor):
-    """Eqs. 4/9 for every edge of nodes ``0..n-1`` from the current colours and normals."""
-    for i in range(n):
-        for k in range(deg[i]):
-            j = nbr[i, k]
+def refresh_property_bits(net, has_col, has_nor, tau_col, tau_nor):
+    """Eqs. 4/9 for every edge of ``net`` from the current colours and normals."""
+    for i in range(net.istate[I_NODES]):
+        for k in range(net.deg[i]):
+            j = net.nbr[i, k]
             if j > i:
-                mask = property_bits(col, nor, i, j, has_col, has_nor, tau_col, tau_nor)
-                emask[i, k] = mask
-                emask[j, rev[i, k]] = mask
+                mask = property_bits(net, i, j, has_col, has_nor, tau_col, tau_nor)
+                net.emask[i, k] = mask
+                net.emask[j, net.rev[i, k]] = mask
 
 
 @inlined
@@ -47,35 +48,20 @@ def _nearest_brute(pos, n, x0, x1, x2):
 
 
 @inlined
-def _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess):
+def _nearest_grid(net, n, x0, x1, x2, cell_size, inv_cell, guess):
     """Exact nearest node by position from the grid, starting from node ``guess`` (or -1).
 
     Rings of cells around the query's cell are visited outward; a cell is skipped when its box
     is farther than the best distance so far, and the search stops when no unvisited ring can
     hold a closer node. A good guess (the previous pixel's winner) prunes almost every cell.
     """
+    pos = net.pos
+    ghead = net.ghead
+    gnext = net.gnext
     table_mask = ghead.shape[0] - 1
-    qx = x0 * inv_cell
-    qy = x1 * inv_cell
-    qz = x2 * inv_cell
-    fx = np.floor(qx)
-    fy = np.floor(qy)
-    fz = np.floor(qz)
-    cx = np.int64(fx)
-    cy = np.int64(fy)
-    cz = np.int64(fz)
-    rx = qx - fx
-    ry = qy - fy
-    rz = qz - fz
-    up_x = rx >= 0.5
-    up_y = ry >= 0.5
-    up_z = rz >= 0.5
-    near_x = min(rx, 1.0 - rx)
-    near_y = min(ry, 1.0 - ry)
-    near_z = min(rz, 1.0 - rz)
-    far_x = 1.0 - near_x
-    far_y = 1.0 - near_y
-    far_z = 1.0 - near_z
+    cx, up_x, near_x, far_x = query_axis(x0 * inv_cell)
+    cy, up_y, near_y, far_y = query_axis(x1 * inv_cell)
+    cz, up_z, near_z, far_z = query_axis(x2 * inv_cell)
     margin = min(near_x, near_y, near_z)
     prune = (1.0 + BOUND_SLACK) * inv_cell * inv_cell
     best = np.inf
@@ -117,31 +103,42 @@ def _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess):
 
 
 @njit(cache=True, nogil=True)
-def nearest_nodes(points, start, stop, pos, n, ghead, gnext, grid_on, cell_size, winners,
-                  sq_distances):
+def nearest_nodes(points, start, stop, net, winners, sq_distances):
     """Nearest node by position of points ``start..stop-1``, through the learner's hash grid.
 
     points: (N, 3) float32/float64, ideally in scan order (each search starts from the previous
-    point's winner); pos: (cap, 3) float64 node positions, nodes ``0..n-1`` (n >= 1). Writes
-    ``winners`` (N,) int32 and ``sq_distances`` (N,) float64 in that range. Exact; brute force
-    without a grid (few nodes). Releases the GIL, so threads can label disjoint ranges at once.
+    point's winner); net: a 3-D network with at least one node. Writes ``winners`` (N,) int32
+    and ``sq_distances`` (N,) float64 in that range. Exact; brute force without a grid (few
+    nodes). Releases the GIL, so threads can label disjoint ranges at once.
     """
-    inv_cell = 1.0 / cell_size if grid_on else 0.0
+    search = _search_of(net)
     guess = -1
     for q in range(start, stop):
-        s, d = _nearest(pos, n, np.float64(points[q, 0]), np.float64(points[q, 1]),
-                        np.float64(points[q, 2]), ghead, gnext, grid_on, cell_size, inv_cell,
-                        guess)
+        s, d = _nearest(net, search, np.float64(points[q, 0]), np.float64(points[q, 1]),
+                        np.float64(points[q, 2]), guess)
         winners[q] = s
         sq_distances[q] = d
         guess = s
 
 
 @inlined
-def _nearest(pos, n, x0, x1, x2, ghead, gnext, grid_on, cell_size, inv_cell, guess):
+def _search_of(net):
+    """What a nearest-node search reads of ``net`` once: its node count, whether the grid is
+    active, the grid's cell size and its inverse."""
+    grid_on = net.istate[I_GRID] != 0
+    cell_size = net.fstate[F_CELL]
+    return net.istate[I_NODES], grid_on, cell_size, 1.0 / cell_size if grid_on else 0.0
+
+
+@inlined
+def _nearest(net, search, x0, x1, x2, guess):
+    """Nearest node of ``net`` to (x0, x1, x2) and its squared distance: through the grid when
+    it is active (starting from node ``guess``, or -1), else by brute force; ``search`` is
+    `_search_of` the network."""
+    n, grid_on, cell_size, inv_cell = search
     if grid_on:
-        return _nearest_grid(pos, n, x0, x1, x2, ghead, gnext, cell_size, inv_cell, guess)
-    return _nearest_brute(pos, n, x0, x1, x2)
+        return _nearest_grid(net, n, x0, x1, x2, cell_size, inv_cell, guess)
+    return _nearest_brute(net.pos, n, x0, x1, x2)
 
 
 @inlined
@@ -163,8 +160,7 @@ def _agreed_label(out, valid, r0, r1, c0, c1):
 
 
 @njit(cache=True, nogil=True)
-def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_stop, pos, n, ghead,
-                 gnext, grid_on, cell_size, out):
+def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_stop, net, out):
     """Nearest node's label + 1 (0 where not ``valid``) of the pixels of rows
     ``row_start..row_stop-1``, in two passes over the whole image.
 
@@ -173,9 +169,10 @@ def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_sto
     away, in the image) include at least two valid ones, all of one label, takes it; any other
     is searched.
     points: (H, W, 3) float32/float64 metres; valid: (H, W) bool; node_labels: (n,) int32, -1 =
-    no label; out: (H, W) int32, written at the pass's pixels only.
+    no label; net: a 3-D network with at least one node; out: (H, W) int32, written at the
+    pass's pixels only.
     """
-    inv_cell = 1.0 / cell_size if grid_on else 0.0
+    search = _search_of(net)
     guess = -1
     height, width = valid.shape
     for r in range(row_start, row_stop):
@@ -198,9 +195,9 @@ def label_pixels(points, valid, node_labels, stride, anchors, row_start, row_sto
                 elif label >= 0:
                     out[r, c] = label
                 else:
-                    s, _ = _nearest(pos, n, np.float64(points[r, c, 0]),
+                    s, _ = _nearest(net, search, np.float64(points[r, c, 0]),
                                     np.float64(points[r, c, 1]), np.float64(points[r, c, 2]),
-                                    ghead, gnext, grid_on, cell_size, inv_cell, guess)
+                                    guess)
                     out[r, c] = node_labels[s] + 1
                     guess = s
 

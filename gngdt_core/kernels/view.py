@@ -24,6 +24,8 @@ import math
 import numpy as np
 from numba import njit
 
+from gngdt.core.kernels._numba import inlined
+
 #: points nearer than this (in the camera's z, input units) are not binned
 MIN_DEPTH = 1e-6
 #: the neighbourhood a node needs measured is at most this many cells out from its own
@@ -91,7 +93,7 @@ def measured_counts(zmax):
     return table
 
 
-@njit(cache=True, inline="always")
+@inlined
 def _cell_of(points, i, camera_from_model, u_min, v_min, inv_cell, rows, columns):
     """(row, column, depth) of ``points[i]`` (model frame) in the camera's grid; row -1 when
     it is behind the camera or off the grid."""
@@ -108,7 +110,7 @@ def _cell_of(points, i, camera_from_model, u_min, v_min, inv_cell, rows, columns
     return int(fv), int(fu), z
 
 
-@njit(cache=True, inline="always")
+@inlined
 def _all_measured(measured, row, column, ring):
     """Whether the cells within ``ring`` of (row, column) lie inside the grid and are all
     measured; measured: `measured_counts` of the grid."""

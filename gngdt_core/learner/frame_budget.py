@@ -109,12 +109,15 @@ class StepBudget:
 
     def next(self) -> Budget:
         """The budget of the next frame (also kept as ``last``)."""
-        if not self.share or not self._intervals or not self._speeds:
+        if not self._intervals or (self.share and not self._speeds):
             self.last = Budget(self.max_steps, 0.0, 0.0)
             return self.last
         interval = max(float(np.median(self._intervals)), self.min_interval_s)
         publish = float(np.median(self._publishing)) if self._publishing else 0.0
         period = min(max(interval, publish / PUBLISH_SHARE), MAX_PUBLISH_PERIOD_S)
+        if not self.share:  # every frame learned fully; publishing still kept to its share
+            self.last = Budget(self.max_steps, 0.0, interval, period)
+            return self.last
         seconds = max(0.0, interval * self.share - float(np.median(self._overheads))
                       - publish * interval / period)
         steps = int(float(np.median(self._speeds)) * seconds)

@@ -112,7 +112,8 @@ class StreamLearner:
         self.segmentation = segmentation or SegmentationParams()
         self.schedule = schedule or FrameSchedule()
         self.random_state = random_state
-        GNGDT(**self.model_params, random_state=random_state)  # validate now, not at frame 1
+        # validate now, not at frame 1
+        GNGDT(**self.model_params, random_state=random_state).check_params()
         self._rng = np.random.default_rng(random_state)
         self.model_: GNGDT | None = None
         self._on_large_surface: np.ndarray | None = None

@@ -5,10 +5,16 @@ wrong one (quaternions in another order, a world-to-camera transform, millimetre
 metres, a forged or absurd value) wrecks a map silently: every pose looks valid on its own. So
 each posed frame is checked, in this order, by `PoseChecker`:
 
-1. bounds: the camera within ``workspace_m`` of the fixed frame's origin, its rotation
+1. bounds: the camera within the workspace, a box of half-size ``workspace_m`` around the
+   fixed frame's origin (``workspace_around="origin"``: the first pose too) or around the first
+   accepted camera (``"first-camera"``: a map frame whose origin is anywhere), its rotation
    orthonormal (within ``rotation_tolerance``) and proper;
 2. motion: from the last accepted frame, no faster than ``max_speed_m_s`` and
-   ``max_turn_deg_s`` (by the frames' stamps, at least ``MIN_INTERVAL_S`` apart);
+   ``max_turn_deg_s`` (by the frames' stamps, at least ``MIN_INTERVAL_S`` apart), and however
+   long ago it was, no farther than ``max_speed_m_s`` times ``MAX_INTERVAL_S`` (a 100 m jump
+   25 s after the last accepted frame is not a camera's move, it is a forged pose). A camera
+   that really moved farther while no frame came is followed once ``REANCHOR_FRAMES`` frames
+   in a row, refused for their motion alone, move as a camera can from one to the next;
 3. depth: the frame's points, placed by its pose, against the surfaces of an earlier accepted
    frame (the reference: its points with normals, in the fixed frame): of the points that
    overlap it (a reference point within ``OVERLAP_DEPTH_SHARE`` of their depth), the median
@@ -35,7 +41,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from gngdt.core.parameters import Interval, Settings, param
+from gngdt.core.parameters import Interval, OneOf, Settings, param
 from gngdt.core.sensor.geometry import apply_pose, matrix_to_pose, pose_to_matrix, rigid_inverse
 
 __all__ = [
@@ -53,6 +59,15 @@ __all__ = [
 #: two frames are taken as at least this far apart in time (stamps jitter; a camera that sends
 #: two frames with one stamp still moves between them)
 MIN_INTERVAL_S = 0.1
+#: and at most this far: the farthest a camera may be from the last accepted frame is its top
+#: speed times this, however long ago that frame was
+MAX_INTERVAL_S = 1.0
+#: frames in a row, refused only for moving too far from the last accepted one but moving as a
+#: camera can from one to the next, after which the camera is followed there (a real move
+#: while no frame came); their depth is checked against a new reference from then on
+REANCHOR_FRAMES = 5
+#: where the workspace box is centred
+WORKSPACE_AROUND = ("origin", "first-camera")
 #: points of a frame kept as a reference, and points of a frame checked against it
 REFERENCE_POINTS = 5_000
 CHECKED_POINTS = 3_000
@@ -79,8 +94,11 @@ class PoseLimits(Settings):
     WHAT: ClassVar[str] = "pose limit"
 
     workspace_m: float = param(1000.0, Interval(float, 0.0, closed="neither"),
-                               "a camera farther than this from the fixed frame's origin "
-                               "(metres) has a wrong pose")
+                               "a camera farther than this along any axis from the workspace's "
+                               "centre (metres; workspace_around) has a wrong pose")
+    workspace_around: str = param("origin", OneOf(WORKSPACE_AROUND),
+                                  "the workspace box's centre: the fixed frame's origin (which "
+                                  "bounds the first pose too), or the first accepted camera")
     rotation_tolerance: float = param(1e-3, Interval(float, 0.0, 0.1, closed="right"),
                                       "largest entry of R R^T - I of a pose's rotation")
     max_speed_m_s: float = param(10.0, Interval(float, 0.0, closed="neither"),
@@ -108,14 +126,18 @@ class PoseVerdict:
         return not self.problem
 
 
-def bounds_problem(pose: np.ndarray, limits: PoseLimits) -> str:
-    """Why ``pose`` (4, 4) is out of bounds, or "" (see `PoseLimits`)."""
+def bounds_problem(pose: np.ndarray, limits: PoseLimits,
+                   centre: np.ndarray | None = None) -> str:
+    """Why ``pose`` (4, 4) is out of bounds, or "" (see `PoseLimits`); ``centre`` (3,): the
+    workspace box's (default the origin)."""
     pose = np.asarray(pose, dtype=np.float64)
     if pose.shape != (4, 4) or not np.isfinite(pose).all():
         return f"the pose is not a finite 4x4 transform (shape {pose.shape})"
-    distance = float(np.linalg.norm(pose[:3, 3]))
-    if distance > limits.workspace_m:
-        return (f"the camera is {distance:.3g} m from the fixed frame's origin, beyond the "
+    offset = pose[:3, 3] - (np.zeros(3) if centre is None else centre)
+    farthest = float(np.abs(offset).max())
+    if farthest > limits.workspace_m:
+        around = "the fixed frame's origin" if centre is None else "the first camera"
+        return (f"the camera is {farthest:.3g} m from {around} along an axis, beyond the "
                 f"workspace of {limits.workspace_m:g} m")
     rotation = pose[:3, :3]
     deviation = float(np.abs(rotation @ rotation.T - np.eye(3)).max())
@@ -135,8 +157,8 @@ def turn_angle_deg(first: np.ndarray, second: np.ndarray) -> float:
 
 def motion_problem(previous: np.ndarray, previous_ns: int | None, pose: np.ndarray,
                    stamp_ns: int | None, limits: PoseLimits) -> str:
-    """Why the move from ``previous`` to ``pose`` (both (4, 4)) is faster than a camera moves,
-    or ""; stamps in nanoseconds (None: ``MIN_INTERVAL_S`` apart)."""
+    """Why the move from ``previous`` to ``pose`` (both (4, 4)) is faster or farther than a
+    camera moves, or ""; stamps in nanoseconds (None: ``MIN_INTERVAL_S`` apart)."""
     seconds = MIN_INTERVAL_S
     if previous_ns is not None and stamp_ns is not None:
         seconds = max(abs(stamp_ns - previous_ns) * 1e-9, MIN_INTERVAL_S)
@@ -144,6 +166,11 @@ def motion_problem(previous: np.ndarray, previous_ns: int | None, pose: np.ndarr
     if moved > limits.max_speed_m_s * seconds:
         return (f"the camera moved {moved:.3g} m in {seconds:.3g} s since the last accepted "
                 f"frame, faster than {limits.max_speed_m_s:g} m/s")
+    farthest = limits.max_speed_m_s * MAX_INTERVAL_S
+    if moved > farthest:
+        return (f"the camera moved {moved:.3g} m since the last accepted frame ({seconds:.3g} s "
+                f"ago), farther than the {farthest:g} m it may move between two frames "
+                f"({limits.max_speed_m_s:g} m/s for at most {MAX_INTERVAL_S:g} s)")
     turned = turn_angle_deg(previous, pose)
     if turned > limits.max_turn_deg_s * seconds:
         return (f"the camera turned {turned:.0f} degrees in {seconds:.3g} s since the last "
@@ -244,6 +271,12 @@ class PoseChecker:
         self.reference: SurfaceReference | None = None
         self._last_pose: np.ndarray | None = None
         self._last_ns: int | None = None
+        #: the workspace box's centre (None: the origin; else the first accepted camera's)
+        self._centre: np.ndarray | None = None
+        #: the frames refused in a row for their motion alone, each moving as a camera can from
+        #: the one before: (pose, stamp) of the latest, and how many
+        self._moved_run: tuple[np.ndarray, int | None] | None = None
+        self._moved_count = 0
         self.checked = 0
         self.rejected = 0
         self.last_problem = ""
@@ -262,15 +295,26 @@ class PoseChecker:
             return verdict
         if self.reference is None or verdict.overlap is None or verdict.overlap < RENEW_OVERLAP:
             self.reference = SurfaceReference.of(camera_points, pose) or self.reference
+        if self._last_pose is None and self.limits.workspace_around == "first-camera":
+            self._centre = pose[:3, 3].copy()
         self._last_pose, self._last_ns = pose, stamp_ns
+        self._moved_run, self._moved_count = None, 0
         return verdict
 
     def _judge(self, camera_points: np.ndarray, pose: np.ndarray,
                stamp_ns: int | None) -> PoseVerdict:
         limits = self.limits
-        problem = bounds_problem(pose, limits)
-        if not problem and self._last_pose is not None:
+        centre = self._centre
+        if centre is None and limits.workspace_around == "first-camera":
+            centre = pose[:3, 3]  # the first camera: the box is centred on it
+        problem = bounds_problem(pose, limits, centre)
+        if problem:
+            self._moved_run, self._moved_count = None, 0
+        elif self._last_pose is not None:
             problem = motion_problem(self._last_pose, self._last_ns, pose, stamp_ns, limits)
+            if problem and self._moved_on(pose, stamp_ns):
+                self.reference = None  # a new place: judged against its own surfaces
+                return PoseVerdict("")
         if problem or self.reference is None:
             return PoseVerdict(problem)
         seen = self.reference.compare(camera_points, pose)
@@ -291,11 +335,28 @@ class PoseChecker:
         return PoseVerdict("", residual, overlap)
 
 
-def points_beyond_workspace(points: np.ndarray, limits: PoseLimits) -> int:
-    """How many of ``points`` (N, 3) lie beyond the workspace (or are not finite)."""
+    def _moved_on(self, pose: np.ndarray, stamp_ns: int | None) -> bool:
+        """Note a frame refused for its motion alone; True when it is the
+        ``REANCHOR_FRAMES``-th in a row to move as a camera can from the one before (the
+        camera really went there while no frame came)."""
+        run = self._moved_run
+        if run is not None and not motion_problem(run[0], run[1], pose, stamp_ns, self.limits):
+            self._moved_count += 1
+        else:
+            self._moved_count = 1
+        self._moved_run = (pose, stamp_ns)
+        return self._moved_count >= REANCHOR_FRAMES
+
+
+def points_beyond_workspace(points: np.ndarray, limits: PoseLimits,
+                            centre: np.ndarray | None = None, scale: float = 1.0) -> int:
+    """How many of ``points`` (N, 3) lie outside the box of half-size ``scale`` times
+    ``workspace_m`` around ``centre`` (default the origin), or are not finite."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if centre is not None:
+        points = points - centre
     inside = np.isfinite(points).all(axis=1)
-    inside[inside] = np.linalg.norm(points[inside], axis=1) <= limits.workspace_m
+    inside[inside] = np.abs(points[inside]).max(axis=1) <= scale * limits.workspace_m
     return int(np.count_nonzero(~inside))
 
 

@@ -4,6 +4,7 @@ deprojected cloud put back on its pixels."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 
@@ -99,3 +100,38 @@ def organize(points: np.ndarray, colors: np.ndarray | None, width: int, height: 
     OK.organize_points(points, pixels, float(fx), float(fy), float(cx), float(cy), organized,
                        image)
     return organized, None if colors is None else image
+
+
+#: a cloud starts a tracked map only when its depth image holds smooth surfaces: at least this
+#: share of its neighbouring pixels (both with depth) within ``SMOOTH_DEPTH_SHARE`` of each
+#: other's depth (measured: real and rendered scenes 0.99, a depth image of noise 0.02-0.36),
+#: judged from ``MIN_JUDGED_PAIRS`` such pairs (fewer: a sparse cloud, not judged)
+MIN_SMOOTH_SHARE = 0.5
+SMOOTH_DEPTH_SHARE = 0.02
+MIN_JUDGED_PAIRS = 1000
+#: the reason a tracker's loss of such a frame is counted under
+NOT_A_SCENE = "no smooth surfaces"
+
+
+def implausible_start(positions: np.ndarray, camera: Any) -> str:
+    """Why a cloud (``positions`` (N, 3) camera frame, its depth image's valid pixels
+    deprojected with ``camera``, a `CameraIntrinsics`) cannot start a map: its depth image holds
+    no smooth surfaces (see ``MIN_SMOOTH_SHARE``), a sensor's noise and not a scene; "" when it
+    can, or when it cannot be judged (no intrinsics, too sparse a cloud)."""
+    if camera is None:
+        return ""
+    organized, _ = organize(positions, None, camera.width, camera.height, camera.fx,
+                            camera.fy, camera.cx, camera.cy)
+    depth = organized[..., 2]
+    pairs = smooth = 0
+    for first, second in ((depth[:, 1:], depth[:, :-1]), (depth[1:, :], depth[:-1, :])):
+        both = np.isfinite(first) & np.isfinite(second)
+        pairs += int(both.sum())
+        smooth += int(np.count_nonzero(
+            np.abs(first[both] - second[both]) <= SMOOTH_DEPTH_SHARE * first[both]))
+    if pairs < MIN_JUDGED_PAIRS or smooth >= MIN_SMOOTH_SHARE * pairs:
+        return ""
+    return (f"a map is not started from this frame: only {smooth / pairs:.0%} of its "
+            f"neighbouring depth pixels lie within {SMOOTH_DEPTH_SHARE:.0%} of each other "
+            f"(a scene's surfaces: ~99 %; at least {MIN_SMOOTH_SHARE:.0%} needed): the depth "
+            "image holds no smooth surfaces (noise, not a scene)")

@@ -8,11 +8,15 @@ sign of a wrong field order, not rounding); one within it is normalised.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 __all__ = [
+    "MAX_FIELD_OF_VIEW_DEG",
+    "MIN_FIELD_OF_VIEW_DEG",
+    "PRINCIPAL_POINT_MARGIN",
     "QUATERNION_TOLERANCE",
     "CameraIntrinsics",
     "TransformError",
@@ -30,6 +34,14 @@ __all__ = [
 
 #: largest | |q|^2 - 1 | accepted (tf2's own bound); anything closer to 1 is normalised
 QUATERNION_TOLERANCE = 0.01
+#: field of view (degrees, per image axis) a pinhole calibration may claim: a D435's colour
+#: camera sees 69 x 42, a wide-angle one ~120; a pinhole model cannot reach 180, and under a
+#: degree is a telescope, not a depth camera
+MIN_FIELD_OF_VIEW_DEG = 1.0
+MAX_FIELD_OF_VIEW_DEG = 170.0
+#: how far outside the image the principal point may be, as a fraction of its width/height
+#: (a real camera's is near the centre; a cropped image's can be near an edge)
+PRINCIPAL_POINT_MARGIN = 0.5
 
 
 @dataclass(frozen=True)
@@ -44,6 +56,37 @@ class CameraIntrinsics:
     cy: float
     #: plumb_bob coefficients k1, k2, p1, p2, k3 (informational; depth is not undistorted)
     distortion: tuple[float, ...] = ()
+
+    def problem(self, image_size: tuple[int, int] | None = None) -> str:
+        """Why this cannot be a pinhole camera's calibration, or "" when it can: sizes positive
+        (and equal to ``image_size``, (width, height), when given), every value finite,
+        focal lengths giving a field of view within [``MIN_FIELD_OF_VIEW_DEG``,
+        ``MAX_FIELD_OF_VIEW_DEG``] per axis, the principal point within
+        ``PRINCIPAL_POINT_MARGIN`` of the image. Values read from a file or a message are
+        judged here before anything is deprojected with them."""
+        if self.width <= 0 or self.height <= 0:
+            return f"image size {self.width}x{self.height} is empty"
+        if image_size is not None and tuple(image_size) != (self.width, self.height):
+            return (f"calibration is for {self.width}x{self.height}, the images are "
+                    f"{image_size[0]}x{image_size[1]}")
+        values = (self.fx, self.fy, self.cx, self.cy, *self.distortion)
+        if not all(math.isfinite(value) for value in values):
+            return (f"fx, fy, cx, cy and the distortion must be finite numbers (fx={self.fx}, "
+                    f"fy={self.fy}, cx={self.cx}, cy={self.cy})")
+        for axis, focal, size in (("x", self.fx, self.width), ("y", self.fy, self.height)):
+            if focal <= 0:
+                return f"f{axis}={focal:g} must be positive"
+            view_deg = math.degrees(2.0 * math.atan(size / (2.0 * focal)))
+            if not MIN_FIELD_OF_VIEW_DEG <= view_deg <= MAX_FIELD_OF_VIEW_DEG:
+                return (f"f{axis}={focal:g} px over {size} px is a field of view of "
+                        f"{view_deg:.3g} degrees; a camera's is {MIN_FIELD_OF_VIEW_DEG:g}-"
+                        f"{MAX_FIELD_OF_VIEW_DEG:g}")
+        for axis, centre, size in (("x", self.cx, self.width), ("y", self.cy, self.height)):
+            margin = PRINCIPAL_POINT_MARGIN * size
+            if not -margin <= centre <= size + margin:
+                return (f"principal point c{axis}={centre:g} px is far outside the image "
+                        f"(0-{size} px)")
+        return ""
 
     def matrix(self) -> np.ndarray:
         """(3, 3) float64 camera matrix K."""

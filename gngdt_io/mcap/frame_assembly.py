@@ -41,6 +41,11 @@ class DecodedImage:
 BadFrameHandler = Callable[[RecordingError], None]
 
 
+class CameraRefused(RecordingError):
+    """The camera the user gave (--camera-json) cannot be this recording's: it ends the
+    reading, as no frame can be read with it."""
+
+
 class FrameAssembler:
     """Pairs colour and depth, attaches calibration and labels, and checks sizes."""
 
@@ -73,6 +78,9 @@ class FrameAssembler:
         self.labels: deque[DecodedImage] = deque(maxlen=MAX_PENDING_IMAGES)
         self.awaiting_calibration: list[tuple[DecodedImage, DecodedImage, np.ndarray | None]] = []
         self.next_index = 0
+        #: calibration messages refused (not a camera's), and why the latest was
+        self.calibrations_refused = 0
+        self.refused_calibration = ""
 
     def error(self, reason: str) -> RecordingError:
         return RecordingError(self.path, self.next_index, reason)
@@ -83,10 +91,21 @@ class FrameAssembler:
             raise error
         self.on_bad_frame(error)
 
+    def refuse_calibration(self, reason: str) -> bool:
+        """Note a calibration message that cannot be a camera's (nothing is deprojected with
+        it): counted, and named if frames end up without a calibration. True when it is to be
+        said: the first refusal since the last good calibration (a driver or a bag repeats
+        its CameraInfo with every frame)."""
+        self.calibrations_refused += 1
+        first = not self.refused_calibration
+        self.refused_calibration = reason
+        return first
+
     def add_calibration(self, intrinsics: CameraIntrinsics) -> Iterator[Frame]:
         if self.camera is not None:
             return  # the user's intrinsics win over the recording's
         self.calibration = intrinsics
+        self.refused_calibration = ""
         held, self.awaiting_calibration = self.awaiting_calibration, []
         for color, depth, labels in held:
             yield from self._checked_frame(color, depth, labels)
@@ -140,7 +159,7 @@ class FrameAssembler:
                     f"no calibration channel (CameraCalibration/CameraInfo) in the first "
                     f"{len(self.awaiting_calibration) + 1} frames (at most "
                     f"{MAX_FRAMES_WITHOUT_CALIBRATION} frames or {self.max_held_bytes >> 20} "
-                    "MB are held waiting for one, --max-pending-mb)"
+                    f"MB are held waiting for one, --max-pending-mb){self._refusal_note()}"
                 )
             self.awaiting_calibration.append((color, depth, labels))
             return
@@ -149,8 +168,15 @@ class FrameAssembler:
     def finish(self) -> None:
         if self.awaiting_calibration:
             raise RecordingError(
-                self.path, 0, "no calibration (foxglove CameraCalibration or ROS CameraInfo) found"
+                self.path, 0, "no calibration (foxglove CameraCalibration or ROS CameraInfo) "
+                f"found{self._refusal_note()}"
             )
+
+    def _refusal_note(self) -> str:
+        if not self.calibrations_refused:
+            return ""
+        return (f"; {self.calibrations_refused} calibration messages were refused, the latest "
+                f"because {self.refused_calibration}")
 
     def _checked_frame(
         self, color: DecodedImage, depth: DecodedImage, labels: np.ndarray | None
@@ -158,17 +184,19 @@ class FrameAssembler:
         """The frame, or nothing when it is bad and bad frames are skipped (index still used)."""
         try:
             yield self._frame(color, depth, labels)
+        except CameraRefused:
+            raise  # the user's camera: every frame would be refused, not one bad frame
         except RecordingError as error:
             self.next_index += 1
             self.skip_or_raise(error)
 
     def _intrinsics(self, width: int, height: int) -> CameraIntrinsics:
         if self.camera is not None:
-            expected = (self.camera.width or width, self.camera.height or height)
-            if expected != (width, height):
-                raise self.error(f"--camera-json is for {expected[0]}x{expected[1]}, colour is "
-                                 f"{width}x{height}")
-            return self.camera.intrinsics(width, height)
+            try:
+                return self.camera.intrinsics(width, height)
+            except ValueError as error:
+                raise CameraRefused(self.path, self.next_index,
+                                    f"--camera-json refused: {error}") from None
         assert self.calibration is not None
         return self.calibration
 

@@ -5,9 +5,12 @@ pose looked up in the fixed frame (see :mod:`gngdt.io.mcap.reader`)."""
 from __future__ import annotations
 
 import logging
+from array import array
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
+
+import numpy as np
 
 from gngdt.core.sensor.geometry import TransformError
 from gngdt.io.frame import CameraPose
@@ -26,6 +29,10 @@ _TRANSFORM_SCHEMAS = frozenset(
 FIXED_FRAME_CANDIDATES = ("world", "map", "odom")
 #: frames without a pose are warned about one by one up to this many, then only counted
 MAX_POSE_WARNINGS = 5
+#: a dynamic transform whose stamp is this much further from its message's log time than the
+#: recording's transforms typically are (their median; a bag of simulated time has a large
+#: but steady one) is ignored and counted: a forged or broken stamp, not a pose
+FAR_STAMP_NS = 60_000_000_000
 
 
 def _transform_samples(
@@ -87,6 +94,7 @@ def read_transforms(stream: IO[bytes], path: Path,
         return tree
     decoder = MessageDecoder()
     bad = read = 0
+    offsets = StampOffsets()
     try:
         for schema, channel, message in open_messages(stream, limits.max_chunk_bytes):
             if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
@@ -103,6 +111,8 @@ def read_transforms(stream: IO[bytes], path: Path,
                             "pose", path, limits.max_transform_samples, message.log_time / 1e9)
                         return tree
                     tree.add(parent, child, stamp, translation, rotation, static)
+                    if not static:
+                        offsets.add(child, stamp, stamp - message.log_time)
             except (DecodeFailure, TransformError) as error:
                 bad += 1
                 read += 1
@@ -112,7 +122,42 @@ def read_transforms(stream: IO[bytes], path: Path,
         logger.debug("%s: transform pass stopped: %s", path, error)
     if bad > MAX_POSE_WARNINGS:
         logger.warning("%s: %d bad transform messages skipped in all", path, bad)
+    far = offsets.discard_far(tree)
+    if far:
+        logger.warning("%s: %d transform samples stamped over %g s away from the others (against "
+                       "their log times) ignored", path, far, FAR_STAMP_NS / 1e9)
     return tree
+
+
+class StampOffsets:
+    """Each dynamic transform sample's stamp minus its message's log time (12 bytes a sample),
+    to find the samples stamped far from the others once every one is read."""
+
+    def __init__(self) -> None:
+        self._children: dict[str, int] = {}
+        self._child = array("i")
+        self._stamps = array("q")
+        self._offsets = array("q")
+
+    def add(self, child: str, stamp_ns: int, offset_ns: int) -> None:
+        self._child.append(self._children.setdefault(child, len(self._children)))
+        self._stamps.append(stamp_ns)
+        self._offsets.append(max(-(2**63), min(offset_ns, 2**63 - 1)))
+
+    def discard_far(self, tree: TransformTree) -> int:
+        """Drop from ``tree`` the samples whose offset is over ``FAR_STAMP_NS`` from the median
+        offset; how many went."""
+        if not self._offsets:
+            return 0
+        offsets = np.frombuffer(self._offsets, dtype=np.int64).astype(np.float64)
+        far = np.abs(offsets - np.median(offsets)) > FAR_STAMP_NS
+        if not far.any():
+            return 0
+        children = np.frombuffer(self._child, dtype=np.int32)[far]
+        stamps = np.frombuffer(self._stamps, dtype=np.int64)[far]
+        names = list(self._children)  # by index
+        return sum(tree.discard(names[index], stamps[children == index])
+                   for index in np.unique(children).tolist())
 
 
 class PoseLookup:

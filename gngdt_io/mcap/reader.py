@@ -190,7 +190,8 @@ def _read_stream(
                 if role is None or chosen.setdefault(role, channel.topic) != channel.topic:
                     continue
                 if role == "calibration":
-                    yield from assembler.add_calibration(decoder.intrinsics(schema.name, payload))
+                    yield from _calibrated(assembler, decoder, schema.name, payload,
+                                           channel.topic)
                     continue
                 image = DecodedImage(
                     decoder.stamp_ns(schema.name, payload, message.log_time),
@@ -222,6 +223,20 @@ def _read_stream(
             f"no colour image was paired with a depth image (stamps differ by more than "
             f"max_skew_ns={max_skew_ns})",
         )
+
+
+def _calibrated(assembler: FrameAssembler, decoder: MessageDecoder, schema_name: str,
+                payload: Any, topic: str) -> Iterator[Frame]:
+    """The frames a calibration message releases; one that cannot be a camera's is refused
+    (`FrameAssembler.refuse_calibration`)."""
+    try:
+        intrinsics = decoder.intrinsics(schema_name, payload)
+    except DecodeFailure as failure:
+        reason = f"{topic}: {failure}"
+        if assembler.refuse_calibration(reason):
+            assembler.skip_or_raise(assembler.error(reason))
+        return
+    yield from assembler.add_calibration(intrinsics)
 
 
 def recording_info(path: str | Path) -> dict[str, Any]:

@@ -124,6 +124,11 @@ class Output(ABC):
         """A sample from the logger's loop; ValueError when it is malformed."""
         raise NotImplementedError
 
+    def wants(self, camera: str, stream: str, sequence: int) -> bool:
+        """Whether frame ``sequence`` of a thinned stream (images, clouds) would be written:
+        asked on zenoh's thread before the payload is copied (default: always)."""
+        return True
+
     def cameras_changed(self, cameras: list[str]) -> None:
         """The logger now knows these cameras (a new one came)."""
         return None

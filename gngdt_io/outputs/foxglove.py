@@ -6,9 +6,16 @@ topology, status and end of stream, and the camera poses on ``/tf``.
 Every sample is forwarded as it arrived (its protobuf bytes, never re-encoded) on an SDK channel
 declared with ``message_encoding="protobuf"`` and the message's ``FileDescriptorSet`` as schema,
 ``log_time`` the frame's capture time. Zenoh's callback only keeps the newest sample of each key;
-a thread hands them to the server, so a slow client never blocks a subscriber. Each client gets
-at most ``--foxglove-backlog`` (32) queued messages: beyond them the SDK drops the client's
-oldest (the SDK's default, 1024, would let one stalled client hold gigabytes of clouds).
+a thread hands them to the server, so a slow client never blocks a subscriber.
+
+What clients may cost is bounded in bytes (`gngdt.io.outputs.foxglove_clients`): each gets at
+most ``--foxglove-backlog`` (8) queued messages, beyond which the SDK drops its oldest, and no
+message larger than ``--foxglove-client-mb`` (48) over the backlog is sent (said once per
+topic), so a client holds at most that many megabytes; at most ``--foxglove-max-clients`` (16)
+are served (a newer one is dropped, said); one that has acknowledged nothing for
+``STALL_SECONDS`` while data waited for it is dropped as too slow, said; the memory of clients
+gone goes back to the system. Before: 40 clients that never read took a logger from 257 MB to
+2.7 GB, kept after they left.
 
 Foxglove has no latched topics: a client that connects late would never get the calibration
 (sent at start and on change) nor, once a recording has ended, anything at all. So each
@@ -40,7 +47,13 @@ log = logging.getLogger(__name__)
 
 DEFAULT_FOXGLOVE_PORT = 8765
 #: messages queued per client before the SDK drops the oldest
-DEFAULT_BACKLOG = 32
+DEFAULT_BACKLOG = 8
+#: megabytes a client's queue may hold: no message larger than this over the backlog is sent
+DEFAULT_CLIENT_MB = 48
+#: clients served at once
+DEFAULT_MAX_CLIENTS = 16
+#: how often the clients are watched (`ClientGuard.poll`), seconds
+GUARD_PERIOD_S = 0.1
 #: a channel quiet this long gets its last message again (late clients, ended streams)
 REPUBLISH_SECONDS = 1.0
 #: distinct keys served at most (16 cameras of ~10 streams): garbage keys make no channels
@@ -112,6 +125,7 @@ class FoxgloveServer:
             raise OSError(f"cannot serve Foxglove on {host}:{port}: {error}") from None
         self.host = host
         self.port = self._server.port
+        self.backlog = backlog
 
     @property
     def url(self) -> str:
@@ -140,6 +154,28 @@ class FoxgloveServer:
         self._server.stop()
 
 
+class _Registrations(logging.Handler):
+    """Calls ``on_registration`` when the SDK logs that a client connected (its INFO line
+    "Registered client ...", on the SDK's thread): the client guard then runs at once instead
+    of within ``GUARD_PERIOD_S``, before the client has subscribed to anything. Only a hint:
+    with the SDK's INFO lines off (--log-level WARNING) the guard's period still holds."""
+
+    LOGGER = "foxglove.websocket.server"
+
+    def __init__(self, on_registration: Any) -> None:
+        super().__init__(logging.INFO)
+        self._on_registration = on_registration
+        logging.getLogger(self.LOGGER).addHandler(self)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if str(record.msg).startswith("Registered client"):
+            self._on_registration()
+
+    def close(self) -> None:
+        logging.getLogger(self.LOGGER).removeHandler(self)
+        super().close()
+
+
 @dataclass
 class _Latest:
     """The newest sample of one key, and when it was last sent (monotonic s; 0: not yet)."""
@@ -157,8 +193,17 @@ class FoxgloveOutput(Output):
     raw = True
 
     def __init__(self, host: str, port: int, backlog: int = DEFAULT_BACKLOG,
-                 republish_s: float = REPUBLISH_SECONDS) -> None:
+                 republish_s: float = REPUBLISH_SECONDS, client_mb: float = DEFAULT_CLIENT_MB,
+                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
+        from gngdt.io.outputs.foxglove_clients import ClientGuard
+
         self.server = FoxgloveServer(host, port, backlog)
+        self.guard = ClientGuard(self.server.port, max_clients)
+        self._guard_due = False
+        self._registrations = _Registrations(self._on_registration)
+        #: largest message sent: a client's backlog of them fits in ``client_mb``
+        self.max_message_bytes = int(client_mb * 1e6 / backlog)
+        self._too_large: set[str] = set()
         self.republish_s = republish_s
         self._latest: dict[str, _Latest] = {}
         self._new: set[str] = set()
@@ -179,20 +224,33 @@ class FoxgloveOutput(Output):
         group.add_argument("--foxglove-backlog", type=int, default=DEFAULT_BACKLOG, metavar="N",
                            help="messages queued per Foxglove client; a client reading slower "
                            f"loses its oldest (default {DEFAULT_BACKLOG})")
+        group.add_argument("--foxglove-client-mb", type=float, default=DEFAULT_CLIENT_MB,
+                           metavar="MB", help="megabytes a Foxglove client's queue may hold: "
+                           "no message larger than this over --foxglove-backlog is sent "
+                           f"(default {DEFAULT_CLIENT_MB:g})")
+        group.add_argument("--foxglove-max-clients", type=int, default=DEFAULT_MAX_CLIENTS,
+                           metavar="N", help="Foxglove clients served at once; a newer one is "
+                           f"dropped (default {DEFAULT_MAX_CLIENTS})")
 
     @classmethod
     def check_args(cls, args: argparse.Namespace) -> None:
         if args.foxglove:
             check_bindable(*split_bind(args.bind, DEFAULT_FOXGLOVE_PORT))
-        if getattr(args, "foxglove_backlog", DEFAULT_BACKLOG) < 1:
-            raise ValueError(f"--foxglove-backlog must be >= 1, got {args.foxglove_backlog}")
+        for option, default, low in (("backlog", DEFAULT_BACKLOG, 1),
+                                     ("client_mb", DEFAULT_CLIENT_MB, 1),
+                                     ("max_clients", DEFAULT_MAX_CLIENTS, 1)):
+            value = getattr(args, f"foxglove_{option}", default)
+            if not low <= value <= 1e6:  # also NaN
+                raise ValueError(f"--foxglove-{option.replace('_', '-')} must be {low} to "
+                                 f"1,000,000, got {value}")
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> FoxgloveOutput | None:
         if not args.foxglove:
             return None
         host, port = split_bind(args.bind, DEFAULT_FOXGLOVE_PORT)
-        return cls(host, port, args.foxglove_backlog)
+        return cls(host, port, args.foxglove_backlog, client_mb=args.foxglove_client_mb,
+                   max_clients=args.foxglove_max_clients)
 
     def describe(self) -> str:
         return f"serving Foxglove at {self.server.url} ({FOXGLOVE_STEPS} > {self.server.url})"
@@ -222,9 +280,14 @@ class FoxgloveOutput(Output):
         self._wake.set()
 
     def _run(self) -> None:
+        watched = 0.0
         while not self._closing:
-            self._wake.wait(min(0.2, self.republish_s))
+            self._wake.wait(min(GUARD_PERIOD_S, self.republish_s))
             self._wake.clear()
+            if self._guard_due or time.monotonic() - watched >= GUARD_PERIOD_S:
+                self._guard_due = False
+                self.guard.poll()
+                watched = time.monotonic()
             with self._lock:
                 new = [self._latest[key] for key in self._new]
                 self._new.clear()
@@ -236,10 +299,21 @@ class FoxgloveOutput(Output):
                 if self._send(item, only_if_listened=True):
                     self.republished += 1
 
+    def _on_registration(self) -> None:
+        """A client connected: watch the clients now, before it is sent anything."""
+        self._guard_due = True
+        self._wake.set()
+
     def _send(self, item: _Latest, only_if_listened: bool = False) -> bool:
         channel = self.server.channel(item.topic, item.type_name)
-        if channel is None:
+        if channel is None or len(item.payload) > self.max_message_bytes:
             self.skipped += 1
+            if channel is not None and item.topic not in self._too_large:
+                self._too_large.add(item.topic)
+                log.warning("Foxglove: %s messages of %.1f MB are not served: a client may "
+                            "queue %d of them, at most %.0f MB (--foxglove-client-mb)",
+                            item.topic, len(item.payload) / 1e6, self.server.backlog,
+                            self.max_message_bytes * self.server.backlog / 1e6)
             return False
         item.sent_at = time.monotonic()
         if only_if_listened and not channel.has_sinks():
@@ -252,7 +326,9 @@ class FoxgloveOutput(Output):
         self._closing = True
         self._wake.set()
         self._thread.join()
+        self._registrations.close()
         self.server.stop()
         log.info("Foxglove: %d messages sent (%d again for late clients), %d replaced by newer "
-                 "ones before they were sent, %d skipped", self.sent, self.republished,
-                 self.replaced, self.skipped)
+                 "ones before they were sent, %d skipped; %d clients refused, %d dropped as too "
+                 "slow", self.sent, self.republished, self.replaced, self.skipped,
+                 self.guard.refused, self.guard.dropped_slow)

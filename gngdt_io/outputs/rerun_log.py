@@ -144,14 +144,17 @@ class RerunLog:
     def due(self, paths: EntityPaths, stream: str, sequence: int, every: int) -> bool:
         """Whether frame ``sequence`` of ``stream`` is logged: ``every`` frames after the last
         one logged (so frames the learner skipped do not starve a stream), or a new stream."""
-        if every == 1:
-            return True
-        key = (paths.camera, stream)
-        last = self._last_logged.get(key)
-        if last is not None and last <= sequence < last + every:
+        if not self.would_log(paths.camera, stream, sequence, every):
             return False
-        self._last_logged[key] = sequence
+        if every > 1:
+            self._last_logged[(paths.camera, stream)] = sequence
         return True
+
+    def would_log(self, camera: str, stream: str, sequence: int, every: int) -> bool:
+        """Whether `due` would log frame ``sequence`` of ``camera``'s ``stream``, without
+        counting it as logged (asked from zenoh's thread too: a read of one entry)."""
+        last = self._last_logged.get((camera, stream))
+        return every == 1 or last is None or not last <= sequence < last + every
 
     def set_time(self, stamp: FrameStamp) -> None:
         self.rec.set_time("frame", sequence=stamp.sequence)

@@ -185,7 +185,9 @@ def open_recording(args: argparse.Namespace, default_name: str = "log"
         rec.stdout(default_blueprint=initial)
         return rec, "stdout", None, None
     if args.serve:
-        server = ViewerServer(split_bind(args.bind, 0)[0], args.grpc_port, args.web_port)
+        binary = getattr(getattr(args, "environment", None), "rerun_cli_path", None)
+        server = ViewerServer(split_bind(args.bind, 0)[0], args.grpc_port, args.web_port,
+                              binary=binary)
         try:
             server.wait_ready()
         except OSError:
@@ -262,6 +264,20 @@ class RerunOutput(Output):
 
     def describe(self) -> str:
         return "" if self.to_stdout else f"logging to {self.destination}"
+
+    def wants(self, camera: str, stream: str, sequence: int) -> bool:
+        """Images and clouds of frames the .rrd thins away are not wanted (a cloud still is
+        while its camera's pose comes with the clouds, not on a tf stream)."""
+        rates = self.rerun_log.rates
+        if stream == "points":
+            if camera not in self._transforms:
+                return True
+            every = rates.cloud_every
+        elif stream in THINNED_IMAGES:
+            every = getattr(rates, THINNED_IMAGES[stream])
+        else:
+            return True
+        return self.rerun_log.would_log(camera, stream, sequence, every)
 
     def write(self, sample: StreamSample) -> None:
         from gngdt.schemas.images import calibration_to_intrinsics, raw_to_image

@@ -165,13 +165,13 @@ class ViewerServer:
     viewer; a child process that dies with this one."""
 
     def __init__(self, bind: str = DEFAULT_BIND, grpc_port: int = DEFAULT_GRPC_PORT,
-                 web_port: int = DEFAULT_WEB_PORT) -> None:
+                 web_port: int = DEFAULT_WEB_PORT, binary: str | None = None) -> None:
         self.bind = bind
         self.grpc_port = grpc_port
         self.web_port = web_port
         check_ports_free(bind, {"--grpc-port": grpc_port, "--web-port": web_port})
         self._output = tempfile.TemporaryFile()
-        command = [rerun_binary(), "--serve-web", "--bind", bind,
+        command = [binary or rerun_binary(), "--serve-web", "--bind", bind,
                    "--port", str(grpc_port), "--web-viewer-port", str(web_port),
                    "--server-memory-limit", SERVER_MEMORY_LIMIT]
         self.process = subprocess.Popen(orphan_proof(command), stdin=subprocess.DEVNULL,
@@ -219,12 +219,11 @@ class ViewerServer:
 
 def rerun_binary() -> str:
     """The rerun CLI binary rerun-sdk ships (run directly: ``python -m rerun`` would start it as
-    a grandchild, which a death signal of ours would not reach)."""
+    a grandchild, which a death signal of ours would not reach; ``RERUN_CLI_PATH``, read at the
+    command line's edge, names another: `ViewerServer`'s ``binary``)."""
     import importlib.util
     import os
 
-    if "RERUN_CLI_PATH" in os.environ:
-        return os.environ["RERUN_CLI_PATH"]
     spec = importlib.util.find_spec("rerun_cli")
     if spec is None or spec.origin is None:
         raise OSError("the rerun CLI is not installed (pip install rerun-sdk)")

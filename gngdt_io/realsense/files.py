@@ -66,6 +66,7 @@ def inspect_db3(path: Path) -> RecordingInfo:
         if check != [("ok",)]:
             detail = "; ".join(str(row[0]) for row in check[:3])
             raise RecordingError(path, None, f"damaged recording (sqlite quick_check: {detail})")
+        _check_blobs(path, connection)
         info = RecordingInfo(_count(connection, DEPTH_IMAGES), _count(connection, COLOR_IMAGES),
                              _first_number(connection, DEPTH_METADATA),
                              _first_number(connection, COLOR_METADATA))
@@ -81,6 +82,21 @@ def inspect_db3(path: Path) -> RecordingInfo:
             "topics (/device_0/sensor_N/...); a ROS 2 bag in .db3 reads once converted to MCAP "
             "(ros2 bag convert)")
     return info
+
+
+def _check_blobs(path: Path, connection: sqlite3.Connection) -> None:
+    """RecordingError unless every message is a BLOB, as rosbag2 and the SDK write them (a
+    message stored as TEXT, a number or NULL is damage or a forgery; the SDK's reader and this
+    module would choke on it)."""
+    row = connection.execute(
+        "SELECT t.name, typeof(m.data), COUNT(*) FROM messages m JOIN topics t "
+        "ON t.id = m.topic_id WHERE typeof(m.data) != 'blob' GROUP BY t.name, typeof(m.data) "
+        "ORDER BY COUNT(*) DESC LIMIT 1").fetchone()
+    if row is not None:
+        topic, kind, count = row
+        raise RecordingError(path, None, f"damaged, or not written by the RealSense SDK: "
+                             f"{count} messages of {topic} are stored as {kind.upper()}, not "
+                             "as BLOB")
 
 
 def _count(connection: sqlite3.Connection, topic_like: str) -> int:

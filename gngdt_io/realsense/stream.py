@@ -31,6 +31,7 @@ import numpy as np
 
 from gngdt.core.sensor.geometry import CameraIntrinsics
 from gngdt.io.errors import RecordingError
+from gngdt.io.mcap.limits import ReadLimits
 from gngdt.io.realsense.files import RecordingInfo
 
 log = logging.getLogger(__name__)
@@ -127,6 +128,14 @@ def color_to_rgb(rs: ModuleType, data: np.ndarray, fmt: Any) -> np.ndarray:
     raise ValueError(f"unsupported colour format {fmt}")
 
 
+def sdk_intrinsics(intrinsics: Any) -> CameraIntrinsics:
+    """The SDK's ``rs.intrinsics`` as `CameraIntrinsics` (not yet judged: ``.problem()``)."""
+    return CameraIntrinsics(
+        width=int(intrinsics.width), height=int(intrinsics.height),
+        fx=float(intrinsics.fx), fy=float(intrinsics.fy), cx=float(intrinsics.ppx),
+        cy=float(intrinsics.ppy), distortion=tuple(float(c) for c in intrinsics.coeffs))
+
+
 def list_devices(rs: ModuleType, context: Any) -> list[dict[str, str]]:
     """Connected devices: ``[{"serial": ..., "name": ...}]`` (1-2 ms, never waits)."""
     found = []
@@ -167,12 +176,14 @@ class AlignedStream:
     ``recording``: a ``.db3`` (its `RecordingInfo` in ``info``) or a legacy ``.bag`` to play;
     None: the device ``serial`` streaming ``mode``. ``strict``: an early end of playback (an
     undecodable frame) raises, else it is warned about. ``context``: the ``rs.context`` to use.
+    ``max_frame_pixels``: largest image a stream's calibration may claim.
     """
 
     def __init__(self, rs: ModuleType, context: Any, *, name: str,
                  recording: Path | None = None, info: RecordingInfo | None = None,
                  serial: str | None = None, mode: StreamMode | None = None,
-                 frame_timeout_s: float = 5.0, strict: bool = True) -> None:
+                 frame_timeout_s: float = 5.0, strict: bool = True,
+                 max_frame_pixels: int = ReadLimits.max_frame_pixels) -> None:
         self.rs = rs
         self.context = context
         #: how errors name the source: the file, or ``realsense:SERIAL``
@@ -183,6 +194,7 @@ class AlignedStream:
         self.mode = mode or StreamMode()
         self.frame_timeout_s = frame_timeout_s
         self.strict = strict
+        self.max_frame_pixels = max_frame_pixels
         self._pipe: Any = None
         self._profile: Any = None
         self._playback: Any = None
@@ -282,6 +294,28 @@ class AlignedStream:
         except RuntimeError as error:
             raise RealSenseError(self.name, None, f"cannot start: {error}") from error
         self._pipe = pipe
+        self._check_streams()
+
+    def _check_streams(self) -> None:
+        """RealSenseError unless every stream's calibration can be a camera's and its images
+        fit ``max_frame_pixels`` (a recording's CameraInfo may claim anything: 65535x65535
+        made the SDK's alignment fail on every frame)."""
+        try:
+            streams = [(str(stream.stream_type()).rsplit(".", 1)[-1],
+                        stream.as_video_stream_profile().get_intrinsics())
+                       for stream in self._profile.get_streams()]
+        except RuntimeError as error:
+            raise RealSenseError(self.name, None, f"the SDK cannot describe its streams: "
+                                 f"{error}") from error
+        for kind, sdk in streams:
+            intrinsics = sdk_intrinsics(sdk)
+            problem = intrinsics.problem()
+            if not problem and intrinsics.width * intrinsics.height > self.max_frame_pixels:
+                problem = (f"images of {intrinsics.width}x{intrinsics.height} exceed the limit "
+                           f"of {self.max_frame_pixels:,} pixels")
+            if problem:
+                raise RealSenseError(self.name, None, f"{kind} stream calibration refused: "
+                                     f"{problem}")
 
     def _on_devices_changed(self, event: Any) -> None:
         """The SDK's callback (its own thread): note when our device goes away."""
@@ -309,18 +343,24 @@ class AlignedStream:
                     return
                 continue
             last_frame_at = time.monotonic()
-            self._note_seen(frameset)
-            aligned = align.process(frameset)
-            depth, color = aligned.get_depth_frame(), aligned.get_color_frame()
-            if not depth or not color:
-                continue
-            ids = ((depth.get_frame_number(), depth.get_timestamp()),
-                   (color.get_frame_number(), color.get_timestamp()))
-            if last is not None and (ids[0] == last[0] or ids[1] == last[1]):
-                self.stale_skipped += 1
-                continue
-            last = ids
-            yield self._to_frame(depth, color)
+            try:
+                self._note_seen(frameset)
+                aligned = align.process(frameset)
+                depth, color = aligned.get_depth_frame(), aligned.get_color_frame()
+                if not depth or not color:
+                    continue
+                ids = ((depth.get_frame_number(), depth.get_timestamp()),
+                       (color.get_frame_number(), color.get_timestamp()))
+                if last is not None and (ids[0] == last[0] or ids[1] == last[1]):
+                    self.stale_skipped += 1
+                    continue
+                last = ids
+                frame = self._to_frame(depth, color)
+            except (RuntimeError, ValueError) as error:  # the SDK's (its processing blocks'),
+                # and a colour format it delivered that gngdt does not read
+                raise RealSenseError(self.name, self.frames_read,
+                                     f"the SDK cannot read this frame: {error}") from error
+            yield frame
 
     def _next_frameset(self, pipe: Any, last_frame_at: float) -> Any:
         """The next frameset, or None after one poll without (raising when the wait is over)."""
@@ -360,13 +400,16 @@ class AlignedStream:
         profile = color.get_profile()
         rgb = color_to_rgb(self.rs, np.asanyarray(color.get_data()), profile.format())
         intrinsics = profile.as_video_stream_profile().get_intrinsics()
+        camera = sdk_intrinsics(intrinsics)
+        problem = camera.problem((rgb.shape[1], rgb.shape[0]))
+        if not problem and depth_mm.shape != rgb.shape[:2]:
+            problem = (f"aligned depth {depth_mm.shape[1]}x{depth_mm.shape[0]} is not the "
+                       f"colour's {rgb.shape[1]}x{rgb.shape[0]}")
+        if problem:
+            raise RealSenseError(self.name, self.frames_read, f"frame refused: {problem}")
         self.frames_read += 1
         return AlignedFrame(
-            color=rgb, depth_mm=depth_mm,
-            intrinsics=CameraIntrinsics(
-                width=int(intrinsics.width), height=int(intrinsics.height),
-                fx=float(intrinsics.fx), fy=float(intrinsics.fy), cx=float(intrinsics.ppx),
-                cy=float(intrinsics.ppy), distortion=tuple(float(c) for c in intrinsics.coeffs)),
+            color=rgb, depth_mm=depth_mm, intrinsics=camera,
             timestamp_ns=round(color.get_timestamp() * 1e6),
             timestamp_domain=str(color.get_frame_timestamp_domain()).rsplit(".", 1)[-1],
             frame_number=int(color.get_frame_number()), depth_units_m=units,

@@ -46,7 +46,8 @@ class ImageFolderSource(FrameSource):
         else:
             camera = DEFAULT_CAMERAS[layout]
             note = (f"ASSUMED: {path / 'camera.json'} is missing, so the {layout} defaults are "
-                    f"used: fx={camera.fx} fy={camera.fy} cx={camera.cx} cy={camera.cy} px, "
+                    f"used: fx={camera.fx} fy={camera.fy} cx={camera.cx} cy={camera.cy} px "
+                    "(for 640x480, scaled to the images' size), "
                     f"depth_scale={camera.depth_scale:g} units/m. Wrong intrinsics bend every "
                     "surface; add camera.json or pass --camera-json")
         super().__init__(path, note)

@@ -129,11 +129,16 @@ class RealSenseSource(FrameSource):
         return super().check()
 
     def frames(self) -> Iterator[tuple[str, Frame]]:
+        """The aligned frames; anything the SDK raises is the source's RecordingError (the
+        stream names most; this is the net under the SDK calls it does not wrap)."""
         stream = self._open_stream()
         try:
             stream.open()
             for index, aligned in enumerate(stream.frames()):
                 yield f"{index:06d}", self._frame(index, aligned)
+        except RuntimeError as error:
+            raise RecordingError(self.path, None, f"the RealSense SDK failed: {error}"
+                                 ) from error
         finally:
             stream.close()
             self._stream = None

@@ -11,7 +11,9 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
-from gngdt.core.clustering import POS
+import numpy as np
+
+from gngdt.core.clustering import COL, POS
 from gngdt.core.gas.model import GNGDT
 from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
 from gngdt.core.learner.results import Counters
@@ -89,17 +91,59 @@ def resume(path: Path, camera: str, config: LearnerConfig) -> FrameLearner:
     return learner
 
 
+#: the learner's colours are 8-bit RGB (and averages of them): a node's or a remembered
+#: sample's colour outside this range is a forged or broken file
+COLOR_RANGE = (0.0, 255.0)
+
+
 def check_workspace(path: Path, state: dict, config: LearnerConfig) -> None:
-    """The nodes and the rehearsal memory of a checkpoint must lie in the workspace the
-    learner's poses may span (`PoseLimits.workspace_m`): anything beyond is a forged or broken
-    file, and would be learned from."""
+    """Every array of a checkpoint a learner would use must hold what the learner could have
+    made (`GNGDT.from_state` and the tracker check finiteness and consistency): positions (the
+    nodes, the rehearsal memory, the camera's pose, the tracker's pose and plane memory) within
+    the workspace its poses may span (`PoseLimits`), colours (the nodes', the memory's) within
+    8-bit RGB. Anything beyond is a forged or broken file, and would be learned from (colours
+    at 1e300 were, with overflow warnings)."""
     limits = config.options.pose_limits()
-    for key, what in ((POS, "nodes"), ("memory_positions", "remembered samples")):
-        beyond = points_beyond_workspace(state[key], limits) if key in state else 0
+    centre, scale = None, 1.0
+    if limits.workspace_around == "first-camera" and "camera_pose" in state:
+        # the first camera is unknown here; every camera lies within a box of twice the
+        # workspace of the last one, and the surfaces it saw a little beyond
+        centre, scale = np.asarray(state["camera_pose"], dtype=np.float64)[:3, 3], 3.0
+    positions = {POS: "nodes", "memory_positions": "remembered samples",
+                 "camera_pose": "camera poses", f"{TRACKER_PREFIX}pose": "tracked poses",
+                 f"{TRACKER_PREFIX}plane_points": "tracked plane points"}
+    for key, what in positions.items():
+        if key not in state:
+            continue
+        try:
+            beyond = points_beyond_workspace(_positions_of(key, state[key]), limits, centre,
+                                             scale)
+        except (ValueError, TypeError) as error:
+            raise CheckpointError(f"checkpoint {path}: {key}: {error}") from error
         if beyond:
             raise CheckpointError(
                 f"checkpoint {path}: {beyond} {what} lie beyond the workspace of "
                 f"{limits.workspace_m:g} m (pose_workspace_m); not a map this learner made")
+    for key, what in ((COL, "node colours"), ("memory_colors", "remembered colours")):
+        colors = np.asarray(state.get(key, np.zeros((0, 3))), dtype=np.float64)
+        outside = ~((colors >= COLOR_RANGE[0]) & (colors <= COLOR_RANGE[1]))
+        if outside.any():
+            raise CheckpointError(
+                f"checkpoint {path}: {int(outside.any(axis=-1).sum())} {what} lie outside "
+                f"8-bit RGB (0-255; e.g. {colors[outside][0]:g}); not a map this learner made")
+
+
+def _positions_of(key: str, array: np.ndarray) -> np.ndarray:
+    """The (N, 3) positions an array of a checkpoint holds (a pose: its translation; a tracker
+    without a pose yet holds NaN)."""
+    array = np.asarray(array, dtype=np.float64)
+    if key.endswith("pose"):
+        if array.shape != (4, 4):
+            raise ValueError(f"shape {array.shape}, not a (4, 4) pose")
+        return np.zeros((0, 3)) if np.isnan(array).all() else array[:3, 3]
+    if array.size % 3:
+        raise ValueError(f"shape {array.shape}, not positions")
+    return array
 
 
 def counters_from_metadata(path: Path, saved: Any) -> Counters:

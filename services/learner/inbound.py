@@ -69,11 +69,14 @@ def attachment_bytes(sample: zenoh.Sample) -> bytes | None:
 
 
 class LatestCalibration:
-    """The camera's latest intrinsics (set from zenoh's thread), for tracking."""
+    """The camera's latest intrinsics (set from zenoh's thread), for tracking. A calibration
+    that is malformed or cannot be a camera's is counted as malformed and never used (the one
+    in use stays); it is said once until a good one comes."""
 
     def __init__(self, learner: FrameLearner) -> None:
         self.learner = learner
         self.intrinsics = None
+        self._refusal_said = False
 
     def on_sample(self, sample: zenoh.Sample) -> None:
         from gngdt.schemas.images import calibration_to_intrinsics
@@ -82,9 +85,13 @@ class LatestCalibration:
         try:
             self.intrinsics = calibration_to_intrinsics(
                 payload_bytes(sample, MAX_CALIBRATION_BYTES))
+            self._refusal_said = False
         except (MessageError, ValueError) as error:
             self.learner.counters.malformed_messages += 1
-            log.warning("malformed calibration skipped: %s", error)
+            if not self._refusal_said:
+                log.warning("calibration refused, not used: %s (each one refused is counted "
+                            "as malformed)", error)
+                self._refusal_said = True
 
 
 @dataclass(frozen=True)

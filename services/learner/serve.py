@@ -181,7 +181,8 @@ class LearnerService:
 
     def __init__(self, session: zenoh.Session, camera: str, config: LearnerConfig,
                  learner: FrameLearner, checkpoint: Path | None = None,
-                 instances: LearnerInstances | None = None) -> None:
+                 instances: LearnerInstances | None = None,
+                 pool_bytes: int | None = None) -> None:
         import zenoh
 
         self.camera = camera
@@ -204,16 +205,19 @@ class LearnerService:
         self.tracker: TrackerThread | None = None
         self._eos = session.declare_subscriber(topic(camera, "eos"), self._on_eos)
         self._topology = declare_publisher(session, topic(camera, "topology"),
-                                           ENCODING_TOPOLOGY, latest_wins=True)
+                                           ENCODING_TOPOLOGY, latest_wins=True,
+                                           pool_bytes=pool_bytes)
         self._status = declare_publisher(session, topic(camera, "learner/status"),
                                          ENCODING_STATUS, latest_wins=False)
         self._ack = declare_publisher(session, topic(camera, "learner/ack"), ENCODING_FRAME_ACK,
                                       latest_wins=False)
         # latest-wins views: a consumer that never reads must not hold the learner back
         self._objects = declare_publisher(session, topic(camera, "objects"),
-                                          ENCODING_SCENE_UPDATE, latest_wins=True)
+                                          ENCODING_SCENE_UPDATE, latest_wins=True,
+                                          pool_bytes=pool_bytes)
         self._scene = declare_publisher(session, topic(camera, "scene"),
-                                        ENCODING_SCENE_UPDATE, latest_wins=True)
+                                        ENCODING_SCENE_UPDATE, latest_wins=True,
+                                        pool_bytes=pool_bytes)
         self._queryable = session.declare_queryable(topic(camera, "topology"), self.latest.reply)
         self._token = session.liveliness().declare_token(alive_key(camera, LEARNER))
         options = self.options
@@ -268,7 +272,10 @@ class LearnerService:
         self._objects.put(objects_message(published, stamp).SerializeToString(),
                           attachment=attachment)
         every = self.options.scene_every_frames
-        if every and (settled or published.figures.counters.frames_used % every == 1 % every):
+        # the scene (~27 ms at 3,000 nodes) only for someone who takes it: `gngdt log` without
+        # --mcap or --foxglove does not subscribe to it
+        due = published.figures.counters.frames_used % every == 1 % every if every else False
+        if every and (settled or (due and self._scene.matching_status.matching)):
             scene = scene_message(published, stamp)
             self._scene.put(scene.SerializeToString(), attachment=attachment)
         # the status last: a consumer that ends on the settled status has everything before it
@@ -489,7 +496,8 @@ def serve(args: argparse.Namespace, config: LearnerConfig, learner: FrameLearner
           session: zenoh.Session, instances: LearnerInstances | None = None) -> int:
     """Learn on ``session`` (as the learner ``instances`` announced, if it was) until stopped;
     checkpoint on the way out."""
-    service = LearnerService(session, args.cam, config, learner, args.checkpoint, instances)
+    service = LearnerService(session, args.cam, config, learner, args.checkpoint, instances,
+                             args.environment.shm_pool_bytes)
     log.info("learning from %s (%d steps per frame)", topic(args.cam, "points"),
              config.options.samples_per_frame)
     try:

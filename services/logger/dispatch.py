@@ -14,6 +14,8 @@ log = logging.getLogger(__name__)
 #: the streams of a camera the logger takes (others on ``gngdt/**`` are not its business)
 LOGGED_STREAMS = ("calibration", "color", "depth", "points", "tf", "topology", "objects",
                   "learner/status", "eos")
+#: streams an output may thin: asked whether it wants a frame before the payload is copied
+THINNED_STREAMS = ("color", "depth", "points")
 
 
 class Dispatcher:
@@ -54,6 +56,18 @@ class Dispatcher:
             return
         if new_camera:
             self.cameras_changed()
+
+    def wants(self, key: str, attachment: bytes | None) -> bool:
+        """Whether an image or cloud is wanted by an output, before its payload is copied (on
+        zenoh's thread; anything undecidable is wanted, and checked in `handle`)."""
+        parts = split_key(key)
+        if parts is None or parts[1] not in THINNED_STREAMS:
+            return True
+        try:
+            sequence = FrameStamp.from_attachment(attachment).sequence
+        except (ValueError, OverflowError):
+            return True
+        return any(output.wants(parts[0], parts[1], sequence) for output in self.outputs)
 
     def capture_seen(self, camera: str, alive: bool) -> None:
         """A capture of ``camera`` started (``alive``) or left."""

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from gngdt.services.plumbing.session import MAX_MESSAGE_BYTES
@@ -54,7 +55,8 @@ class Inbox:
     room; each is counted. Ends of stream are kept apart and never evicted (64 at most).
     """
 
-    def __init__(self, max_bytes: int = DEFAULT_QUEUE_MB * 1024 * 1024) -> None:
+    def __init__(self, max_bytes: int = DEFAULT_QUEUE_MB * 1024 * 1024,
+                 wanted: Callable[[str, bytes | None], bool] | None = None) -> None:
         self._lock = threading.Lock()
         self._latest: dict[str, tuple[bytes, bytes | None]] = {}
         self._queued: deque[tuple[str, bytes, bytes | None]] = deque()
@@ -64,6 +66,9 @@ class Inbox:
         self.dropped = 0
         self.oversized = 0
         self.arrived = threading.Event()
+        #: asked before a payload is copied: frames the outputs would skip are not (``skipped``)
+        self.wanted = wanted
+        self.skipped = 0
 
     def put(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
@@ -75,10 +80,13 @@ class Inbox:
             with self._lock:
                 self.oversized += 1
             return
-        payload = sample.payload.to_bytes()
         attachment = sample.attachment
         attachment = attachment.to_bytes() if attachment is not None and len(attachment) <= 64 \
             else None
+        if self.wanted is not None and not self.wanted(key, attachment):
+            self.skipped += 1
+            return
+        payload = sample.payload.to_bytes()
         with self._lock:
             if stream == "eos":
                 if len(self._ends) < 64:

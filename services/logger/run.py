@@ -6,9 +6,9 @@ import argparse
 import logging
 
 from gngdt.io.outputs import Output
-from gngdt.schemas.wire import ALL_KEYS, logger_alive_key
+from gngdt.schemas.wire import ALL_KEYS, ANY_CAMERA, logger_alive_key, topic
 from gngdt.services.logger.cameras import Cameras, CaptureWatch
-from gngdt.services.logger.dispatch import Dispatcher
+from gngdt.services.logger.dispatch import LOGGED_STREAMS, Dispatcher
 from gngdt.services.logger.inbox import Inbox
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.report import write_report
@@ -19,15 +19,18 @@ log = logging.getLogger(__name__)
 def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
     """Subscribe to ``gngdt/**`` and drive ``outputs`` until stopped or every stream is over;
     the outputs are closed on the way out. The exit code."""
-    inbox = Inbox(args.max_queue_mb * 1024 * 1024)
     dispatcher = Dispatcher(outputs, Cameras(args.max_cameras))
+    inbox = Inbox(args.max_queue_mb * 1024 * 1024, dispatcher.wants)
     try:
         session = open_session(args)
     except ZenohSetupError:  # said by the command line, exit 1; the outputs close first
         for output in outputs:
             output.close()
         raise
-    declared = [session.declare_subscriber(ALL_KEYS, inbox.put)]
+    # only the streams the outputs log: a learner builds its scene only for a subscriber; raw
+    # outputs (--mcap, --foxglove) subscribe to everything themselves
+    declared = [session.declare_subscriber(topic(ANY_CAMERA, stream), inbox.put)
+                for stream in LOGGED_STREAMS]
     declared += [session.declare_subscriber(ALL_KEYS, output.receive)
                  for output in outputs if output.raw]
     captures = CaptureWatch()

@@ -18,10 +18,11 @@ import sys
 import threading
 from collections.abc import Iterator
 
+# PARENT_ENV names the parent a child of `gngdt run` must not outlive (its pid)
+from gngdt.services.plumbing.environment import PARENT_ENV
+
 #: set by the first stop signal; every service loop polls it
 STOP = threading.Event()
-#: names the parent a child of `gngdt run` must not outlive (its pid)
-PARENT_ENV = "GNGDT_PARENT_PID"
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _PR_SET_PDEATHSIG = 1
 
@@ -44,8 +45,9 @@ def _relay_stop(wake_read: int) -> None:
     STOP.set()
 
 
-def install() -> None:
-    """Install the stop handlers and honour :data:`PARENT_ENV`; the CLI calls this first."""
+def install(parent_pid: int | None = None) -> None:
+    """Install the stop handlers and die with ``parent_pid`` (``GNGDT_PARENT_PID``, read by
+    the CLI) when given; the CLI calls this first."""
     global _wake_write
     if _wake_write < 0:
         wake_read, _wake_write = os.pipe()
@@ -55,9 +57,9 @@ def install() -> None:
         if signum == signal.SIGHUP and signal.getsignal(signum) == signal.SIG_IGN:
             continue  # started under nohup: the user asked to survive the terminal
         signal.signal(signum, _on_signal)
-    parent = os.environ.pop(PARENT_ENV, None)
-    if parent is not None:
-        die_with_parent(int(parent))
+    os.environ.pop(PARENT_ENV, None)  # our own children get ours (`child_environment`)
+    if parent_pid is not None:
+        die_with_parent(parent_pid)
 
 
 def die_with_parent(parent_pid: int) -> None:

@@ -21,8 +21,10 @@ keeps equal to it).
 from __future__ import annotations
 
 import json
+import logging
 import os
 import secrets
+import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -44,8 +46,16 @@ from gngdt.services.plumbing.session import client_settings, router_config, sett
 if TYPE_CHECKING:
     import zenoh
 
-__all__ = ["ROLES", "ROLE_STREAMS", "ROLE_TOKENS", "SERVICE_ROLES", "RunAccess",
-           "access_control"]
+__all__ = ["ROLES", "ROLE_STREAMS", "ROLE_TOKENS", "RUN_FOLDER_PREFIX", "SERVICE_ROLES",
+           "RunAccess", "access_control", "remove_stale_credentials"]
+
+log = logging.getLogger(__name__)
+
+#: a ``gngdt run``'s private folder (``tempfile.mkdtemp(prefix=...)``)
+RUN_FOLDER_PREFIX = "gngdt-run-"
+#: the file in it naming the run's process: ``<pid> <start time>`` (the start time tells a
+#: reused pid from the run's own)
+OWNER_FILE = "run.pid"
 
 #: the streams each role may put on, per camera (``gngdt/<cam>/<stream>``)
 ROLE_STREAMS: dict[str, tuple[str, ...]] = {
@@ -134,6 +144,8 @@ class RunAccess:
     def __init__(self, endpoint: str, folder: Path) -> None:
         self.endpoint = endpoint
         passwords = {role: secrets.token_urlsafe(24) for role in SERVICE_ROLES.values()}
+        self.owner_file = folder / OWNER_FILE
+        write_private(self.owner_file, f"{os.getpid()} {process_start(os.getpid())}\n")
         self.users_file = folder / "router-users.txt"
         self.client_files = {role: folder / f"{role}.json5" for role in passwords}
         write_private(self.users_file,
@@ -161,8 +173,66 @@ class RunAccess:
 
     def forget(self) -> None:
         """Remove the credentials (the logs stay, for a failed run)."""
-        for path in (self.users_file, *self.client_files.values()):
+        for path in credential_files(self.users_file.parent):
             path.unlink(missing_ok=True)
+
+
+def credential_files(folder: Path) -> list[Path]:
+    """The files a `RunAccess` writes into ``folder``."""
+    return [folder / OWNER_FILE, folder / "router-users.txt",
+            *(folder / f"{role}.json5" for role in SERVICE_ROLES.values())]
+
+
+def process_start(pid: int) -> str:
+    """When process ``pid`` started (clock ticks since boot, /proc), "" when unknown."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
+    except (OSError, IndexError):
+        return ""
+
+
+def _run_gone(owner_file: Path) -> bool:
+    """Whether the run an owner file names has ended (its pid gone, or reused by another
+    process: another start time)."""
+    try:
+        pid_text, _, started = owner_file.read_text().strip().partition(" ")
+        pid = int(pid_text)
+    except (OSError, ValueError):
+        return False  # unreadable: not judged
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:  # a process of another user: not ours, so not our run
+        return True
+    return bool(started) and process_start(pid) not in ("", started)
+
+
+def remove_stale_credentials(temp_dir: Path | None = None) -> list[Path]:
+    """Remove the credentials that runs killed before they could (``kill -9``, a crash) left
+    in their private folders under ``temp_dir`` (default the system's): a folder of this
+    user's whose owner file names a process that has ended. The logs stay; an emptied folder
+    goes. The folders cleaned."""
+    temp_dir = Path(temp_dir or tempfile.gettempdir())
+    cleaned = []
+    for folder in temp_dir.glob(f"{RUN_FOLDER_PREFIX}*"):
+        try:
+            if not folder.is_dir() or folder.stat().st_uid != os.getuid():
+                continue
+        except OSError:
+            continue
+        if not _run_gone(folder / OWNER_FILE):
+            continue
+        for path in credential_files(folder):
+            path.unlink(missing_ok=True)
+        try:
+            folder.rmdir()  # only when nothing else (a failed run's logs) is left
+        except OSError:
+            pass
+        cleaned.append(folder)
+        log.info("removed the credentials of a run that ended without removing them: %s",
+                 folder)
+    return cleaned
 
 
 def write_private(path: Path, text: str) -> None:

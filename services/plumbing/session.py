@@ -17,13 +17,14 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import os
 import re
 import socket
 import threading
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from gngdt.services.plumbing.environment import SHARED_MEMORY_POOL_ENV
 
 if TYPE_CHECKING:
     import zenoh
@@ -349,7 +350,8 @@ def open_session(args: argparse.Namespace) -> zenoh.Session:
 
 
 def declare_publisher(session: zenoh.Session, key: str, encoding: str,
-                      latest_wins: bool, large: bool | None = None) -> SharedMemoryPublisher:
+                      latest_wins: bool, large: bool | None = None,
+                      pool_bytes: int | None = None) -> SharedMemoryPublisher:
     """The one place congestion and transport are decided. ``latest_wins`` (images, clouds,
     topologies: a newer one supersedes it): ``DROP``, so that a consumer that does not keep up
     loses stale samples instead of stalling the publisher and everyone else; large payloads go
@@ -358,13 +360,15 @@ def declare_publisher(session: zenoh.Session, key: str, encoding: str,
     stops reading altogether then being cut off by zenoh after ``transport/link/tx/queue/
     congestion_control/block/wait_before_close``. ``large`` (default: ``latest_wins``): its
     payloads are large, and go through shared memory too (a capture's clouds paced by the
-    learner: every one must arrive)."""
+    learner: every one must arrive). ``pool_bytes``: the shared-memory pool's size
+    (``GNGDT_SHM_POOL_MB``, `gngdt.services.plumbing.environment`; None: from the payloads)."""
     import zenoh
 
     control = zenoh.CongestionControl.DROP if latest_wins else zenoh.CongestionControl.BLOCK
     publisher = session.declare_publisher(key, encoding=encoding, congestion_control=control)
     return SharedMemoryPublisher(session, publisher,
-                                 shared_memory=latest_wins if large is None else large)
+                                 shared_memory=latest_wins if large is None else large,
+                                 pool_bytes=pool_bytes)
 
 
 #: payloads at least this large go through gngdt's shared-memory pool when the link allows
@@ -376,29 +380,13 @@ SHARED_MEMORY_MIN_BYTES = 64 * 1024
 SHARED_MEMORY_POOL_PAYLOADS = 8
 #: the smallest pool a publisher makes, bytes
 SHARED_MEMORY_MIN_POOL_BYTES = 4 * 1024 * 1024
-#: environment variable: each publisher's pool in MiB instead (0: no gngdt pool, zenoh's own
-#: transport optimisation only)
-SHARED_MEMORY_POOL_ENV = "GNGDT_SHM_POOL_MB"
+#: and the largest (unless GNGDT_SHM_POOL_MB says): eight 4K colour images would take 200 MB
+#: and a 4K stream's three pools 570 MB of a ROS 2 bridge's 1.5 GB peak under a flood; beyond
+#: the pool, payloads go over the network
+SHARED_MEMORY_MAX_POOL_BYTES = 64 * 1024 * 1024
 #: what a process lacking shared memory needs (mlock of its pool, room in /dev/shm)
 _SHARED_MEMORY_HINT = ("raise its locked-memory limit (ulimit -l; Docker: --ulimit memlock=-1 or "
                        "cap_add IPC_LOCK) and give /dev/shm room (Docker: --shm-size or ipc: host)")
-
-
-def pool_setting() -> int | None:
-    """Each publisher's pool in bytes from ``GNGDT_SHM_POOL_MB`` (0: none), None when unset
-    (sized from the first payload) or not a number of MiB >= 0 (warned)."""
-    value = os.environ.get(SHARED_MEMORY_POOL_ENV, "").strip()
-    if not value:
-        return None
-    try:
-        megabytes = float(value)
-    except ValueError:
-        megabytes = -1.0
-    if not megabytes >= 0:  # also NaN
-        log.warning("%s=%r is not a number of MiB >= 0; pools are sized from their payloads",
-                    SHARED_MEMORY_POOL_ENV, value)
-        return None
-    return int(megabytes * 1024 * 1024)
 
 
 class SharedMemoryPublisher:
@@ -409,18 +397,20 @@ class SharedMemoryPublisher:
     (``transport/shared_memory/enabled``, zenoh's default; ``false`` in the session's and the
     router's configuration turns it off). A payload of ``SHARED_MEMORY_MIN_BYTES`` or more is
     then copied once into this publisher's pool (``ShmProvider``, made at the first such payload
-    with room for ``SHARED_MEMORY_POOL_PAYLOADS`` of it) and only a reference crosses the router
+    with room for ``SHARED_MEMORY_POOL_PAYLOADS`` of it, at most ``SHARED_MEMORY_MAX_POOL_BYTES``)
+    and only a reference crosses the router
     to subscribers on the same host; zenoh turns it back into bytes on any link that has no
     shared memory (another host). When the pool cannot be made (locked-memory limit, a small
     /dev/shm) or is full (subscribers still hold its payloads), the payload goes over the
-    network as it would without shared memory: said once in the log, counted.
+    network as it would without shared memory: said once in the log, counted. ``pool_bytes``:
+    the pool's size instead (0: no pool).
     """
 
     def __init__(self, session: zenoh.Session, publisher: zenoh.Publisher,
-                 shared_memory: bool = True) -> None:
+                 shared_memory: bool = True, pool_bytes: int | None = None) -> None:
         self._session = session
         self._publisher = publisher
-        self._pool_bytes = pool_setting()
+        self._pool_bytes = pool_bytes
         self._shared_memory = shared_memory and self._pool_bytes != 0
         self._provider: Any = None
         self._unavailable = False  # the pool could not be made: the network from now on
@@ -473,8 +463,9 @@ class SharedMemoryPublisher:
             import zenoh.shm as shm
 
             if self._provider is None:
-                pool = self._pool_bytes or max(SHARED_MEMORY_MIN_POOL_BYTES,
-                                               SHARED_MEMORY_POOL_PAYLOADS * size)
+                pool = self._pool_bytes or min(max(SHARED_MEMORY_MIN_POOL_BYTES,
+                                                   SHARED_MEMORY_POOL_PAYLOADS * size),
+                                               max(SHARED_MEMORY_MAX_POOL_BYTES, size))
                 self._provider = shm.ShmProvider.default_backend(pool)
                 log.debug("%s: shared-memory pool of %.1f MB", self.key_expr, pool / 1e6)
             # collect what subscribers released, compact, else give up: never block a publisher

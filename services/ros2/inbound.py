@@ -39,6 +39,7 @@ from gngdt.services.ros2.worker import Worker
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt.core.sensor.geometry import CameraIntrinsics
     from gngdt.io.deproject import FrameToCloud
     from gngdt.io.errors import RecordingError
     from gngdt.io.frame import Frame
@@ -51,7 +52,9 @@ COLOR_ENCODINGS = frozenset({"rgb8", "bgr8", "rgba8", "bgra8", "mono8"})
 DEPTH_ENCODINGS = frozenset({"16UC1", "mono16", "32FC1"})
 #: a frame may be this much newer than the newest transform of its chain (a live /tf at 10 Hz)
 LIVE_TF_EXTRAPOLATION_NS = 100_000_000
-#: transforms older than this (behind the newest) are forgotten: /tf is held over a window
+#: /tf is held over a window this wide either side of the latest image's stamp (before the
+#: first image: behind each link's own newest sample); a transform stamped beyond it is
+#: ignored and counted (a far-future stamp once emptied every other link)
 TF_WINDOW_NS = 10_000_000_000
 #: tf2_ros' static listener QoS: reliable, transient local, keep last 100
 QOS_TF_STATIC = Qos(durability=Durability.TRANSIENT_LOCAL, depth=100)
@@ -75,8 +78,10 @@ class InboundCounts:
     frames_published: int = 0
     frames_without_pose: int = 0
     images_before_calibration: int = 0
+    calibrations_refused: int = 0
     bad_frames: int = 0
     transforms_refused: int = 0
+    transforms_far_off: int = 0
 
 
 class RosToGngdt:
@@ -85,19 +90,22 @@ class RosToGngdt:
 
     def __init__(self, session: zenoh.Session, node: Ros2Node, camera: str, topics: CameraTopics,
                  to_cloud: FrameToCloud, *, max_skew_ns: int, max_pixels: int,
-                 max_held_bytes: int, fixed_frame: str | None = None) -> None:
-        self.publisher = CapturePublisher(session, camera)
+                 max_held_bytes: int, fixed_frame: str | None = None,
+                 pool_bytes: int | None = None) -> None:
+        self.publisher = CapturePublisher(session, camera, pool_bytes)
         self.to_cloud = to_cloud
         self.max_pixels = max_pixels
         self.fixed_frame = fixed_frame
         self.counts = InboundCounts()
-        self.transforms = TransformTree(max_extrapolation_ns=LIVE_TF_EXTRAPOLATION_NS)
+        self.topics = topics
+        self.transforms = TransformTree(max_extrapolation_ns=LIVE_TF_EXTRAPOLATION_NS,
+                                        evict=True)
         self.assembler = FrameAssembler(
             Path(topics.color), None, max_skew_ns, on_bad_frame=self._bad_frame,
             poses=self._pose if fixed_frame else None, max_held_bytes=max_held_bytes)
         self.worker = Worker("camera", self._on_sample, capacity=8)
         self._sequence = 0
-        self._newest_transform_ns = 0
+        self._image_stamp_ns: int | None = None  # the latest image's: poses are looked up near
         self._pruned_at = 0.0
         self._simulated_time = False
         subscriptions = [(topics.color, "color", IMAGE, QOS_SENSOR_DATA),
@@ -117,8 +125,8 @@ class RosToGngdt:
 
     def _on_sample(self, stream: str, payload: bytes, attachment: bytes | None) -> None:
         if stream == "camera_info":
-            intrinsics = decode_camera_info(payload).intrinsics
-            if intrinsics != self.assembler.calibration:
+            intrinsics = self._calibration(payload)
+            if intrinsics is not None and intrinsics != self.assembler.calibration:
                 log.info("camera calibration: %dx%d, fx %.1f fy %.1f cx %.1f cy %.1f",
                          intrinsics.width, intrinsics.height, intrinsics.fx, intrinsics.fy,
                          intrinsics.cx, intrinsics.cy)
@@ -129,6 +137,22 @@ class RosToGngdt:
         else:
             self._on_transforms(payload, static=stream == "tf_static")
 
+    def _calibration(self, payload: bytes) -> CameraIntrinsics | None:
+        """The CameraInfo's intrinsics, or None when they cannot be a camera's: refused,
+        counted, said once until a good one comes (a driver repeats it with every frame); the
+        calibration in use stays."""
+        from gngdt.io.ros2.messages import Ros2MessageError
+
+        try:
+            return decode_camera_info(payload).intrinsics
+        except Ros2MessageError as error:
+            self.counts.calibrations_refused += 1
+            if self.assembler.refuse_calibration(str(error)):
+                log.warning("%s: CameraInfo refused (%s); every CameraInfo refused is counted "
+                            "in the status (camera/calibrations_refused)", self.topics.camera_info,
+                            error)
+            return None
+
     def _on_image(self, role: str, payload: bytes) -> None:
         from gngdt.io.ros2.messages import Ros2MessageError
 
@@ -137,6 +161,7 @@ class RosToGngdt:
         if image.encoding not in accepted:
             raise Ros2MessageError(f"{role} image encoding {image.encoding!r} is not one of "
                                    f"{', '.join(sorted(accepted))}")
+        self._image_stamp_ns = image.stamp_ns
         if self.assembler.calibration is None:  # a driver sends CameraInfo with every frame
             self.counts.images_before_calibration += 1
             if self.counts.images_before_calibration == 1:
@@ -147,7 +172,14 @@ class RosToGngdt:
             self._publish(frame)
 
     def _on_transforms(self, payload: bytes, static: bool) -> None:
+        reference = self._image_stamp_ns
         for transform in decode_tf(payload):
+            if (not static and reference is not None
+                    and abs(transform.stamp_ns - reference) > TF_WINDOW_NS):
+                self._far_off(1, f"transform {transform.parent!r} -> {transform.child!r} "
+                              f"stamped {(transform.stamp_ns - reference) / 1e9:+.3g} s from "
+                              "the latest image")
+                continue
             try:
                 self.transforms.add(transform.parent, transform.child, transform.stamp_ns,
                                     transform.translation, transform.rotation, static)
@@ -155,11 +187,27 @@ class RosToGngdt:
                 self.counts.transforms_refused += 1
                 if self.counts.transforms_refused <= WARN_FIRST:
                     log.warning("%s: %s; skipped", "/tf_static" if static else "/tf", error)
-                continue
-            self._newest_transform_ns = max(self._newest_transform_ns, transform.stamp_ns)
         if time.monotonic() - self._pruned_at > 1.0:
-            self.transforms.forget_before(self._newest_transform_ns - TF_WINDOW_NS)
+            self._prune(reference)
             self._pruned_at = time.monotonic()
+
+    def _prune(self, reference: int | None) -> None:
+        """Hold /tf over the window around the latest image (samples beyond it, taken before
+        the first image, are counted as far off); before any image, each link over its own."""
+        if reference is None:
+            self.transforms.forget_stale(TF_WINDOW_NS)
+            return
+        far = self.transforms.forget_outside(-(2**63), reference + TF_WINDOW_NS)
+        if far:
+            self._far_off(far, f"{far} transform samples stamped over {TF_WINDOW_NS / 1e9:g} s "
+                          "after the latest image")
+        self.transforms.forget_outside(reference - TF_WINDOW_NS, 2**63 - 1)
+
+    def _far_off(self, count: int, what: str) -> None:
+        self.counts.transforms_far_off += count
+        if self.counts.transforms_far_off <= WARN_FIRST:
+            log.warning("/tf: %s ignored (another clock, or forged); counted in the status "
+                        "(camera/transforms_far_off)", what)
 
     def _pose(self, camera_frame: str, stamp_ns: int,
               index: int) -> tuple[CameraPose | None, str | None]:

@@ -17,6 +17,9 @@ log = logging.getLogger(__name__)
 Handler = Callable[[str, bytes, bytes | None], None]
 #: malformed samples are warned about one by one up to this many, then every this many
 WARN_FIRST = 5
+#: payload bytes that may wait (beside the sample in hand): three 4K colour images; at 8
+#: samples a worker held 200 MB of them under a flood
+MAX_WAITING_BYTES = 64 * 1024 * 1024
 
 
 @dataclass
@@ -34,17 +37,20 @@ class WorkerCounts:
 class Worker:
     """``put`` (from any thread) queues a sample; the worker's thread hands each to ``handle``.
 
-    At most ``capacity`` samples wait; a new one beyond that evicts the oldest (counted as
-    dropped). Samples of a stream in ``latest_only`` replace the one of their stream still
-    waiting (counted as dropped too): only the newest image or cloud matters.
+    At most ``capacity`` samples and ``max_bytes`` of payload wait; a new one beyond that
+    evicts the oldest (counted as dropped). Samples of a stream in ``latest_only`` replace the
+    one of their stream still waiting (counted as dropped too): only the newest image or cloud
+    matters.
     """
 
     def __init__(self, name: str, handle: Handler, capacity: int = 16,
-                 latest_only: tuple[str, ...] = ()) -> None:
+                 latest_only: tuple[str, ...] = (), max_bytes: int = MAX_WAITING_BYTES) -> None:
         self.name = name
         self.counts = WorkerCounts()
         self._handle = handle
         self._capacity = capacity
+        self._max_bytes = max_bytes
+        self._waiting_bytes = 0
         self._latest_only = latest_only
         self._queue: deque[tuple[str, bytes, bytes | None]] = deque()
         self._condition = threading.Condition()
@@ -60,15 +66,18 @@ class Worker:
         with self._condition:
             self.counts.received += 1
             if stream in self._latest_only:
-                for index, (waiting, _, _) in enumerate(self._queue):
+                for index, (waiting, old, _) in enumerate(self._queue):
                     if waiting == stream:
                         del self._queue[index]
+                        self._waiting_bytes -= len(old)
                         self.counts.dropped += 1
                         break
-            if len(self._queue) >= self._capacity:
-                self._queue.popleft()
+            while self._queue and (len(self._queue) >= self._capacity
+                                   or self._waiting_bytes + len(payload) > self._max_bytes):
+                self._waiting_bytes -= len(self._queue.popleft()[1])
                 self.counts.dropped += 1
             self._queue.append((stream, payload, attachment))
+            self._waiting_bytes += len(payload)
             self._condition.notify()
 
     def idle(self) -> bool:
@@ -81,6 +90,7 @@ class Worker:
         with self._condition:
             self._stopping = True
             self._queue.clear()
+            self._waiting_bytes = 0
             self._condition.notify()
         self._thread.join(timeout_s)
 
@@ -92,6 +102,7 @@ class Worker:
                 if self._stopping:
                     return
                 stream, payload, attachment = self._queue.popleft()
+                self._waiting_bytes -= len(payload)
                 self._busy = True
             try:
                 self._handle(stream, payload, attachment)

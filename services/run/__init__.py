@@ -43,7 +43,7 @@ from gngdt.services.learner import SETTINGS as LEARNER_SETTINGS
 from gngdt.services.logger import SETTINGS as LOGGER_SETTINGS
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.report import read_report
-from gngdt.services.plumbing.roles import RunAccess
+from gngdt.services.plumbing.roles import RUN_FOLDER_PREFIX, RunAccess, remove_stale_credentials
 from gngdt.services.plumbing.session import ZenohSetupError, free_tcp_port, open_config
 from gngdt.services.plumbing.settings import OptionGroup
 from gngdt.services.run import live
@@ -271,7 +271,8 @@ def main(args: argparse.Namespace) -> int:
     except (RecordingError, ValueError, OSError) as error:
         log.error("%s", error)
         return INPUT_UNUSABLE
-    log_dir = Path(tempfile.mkdtemp(prefix="gngdt-run-"))  # 0700: holds the run's password
+    remove_stale_credentials()  # of runs killed before they could
+    log_dir = Path(tempfile.mkdtemp(prefix=RUN_FOLDER_PREFIX))  # 0700: the run's passwords
     try:
         outcome = run_pipeline(args, plan, log_dir)
     except (ZenohSetupError, StartupTimeout) as error:

@@ -9,9 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_broken_recordings import RawRecording
-
-WIDTH, HEIGHT = 40, 30
+from helpers.raw_recordings import HEIGHT, WIDTH, RawRecording
 
 
 @pytest.mark.timeout(120)

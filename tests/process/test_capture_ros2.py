@@ -6,7 +6,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from test_recording_io import make_frames, write_ros_bag
+from helpers.recordings import make_frames
+from helpers.ros2_bags import write_ros_bag
 
 from gngdt.services.capture import CloudOptions
 

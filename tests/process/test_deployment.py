@@ -15,7 +15,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from test_pipeline import DESIGN_ENTITIES, log_text, rrd_entities_and_scalars, wait_exit
+from helpers.processes import log_text, wait_exit
+from helpers.rrd import DESIGN_ENTITIES, rrd_entities_and_scalars
 
 from gngdt.schemas.topology import TopologySnapshot, decode_topology
 from gngdt.services.plumbing.session import client_config, open_config

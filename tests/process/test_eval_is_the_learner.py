@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import wait_for
+from helpers.processes import wait_for
 
 from gngdt.io.deproject import CloudOptions, FrameToCloud
 from gngdt.io.mcap.reader import read_frames

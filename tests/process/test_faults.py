@@ -13,47 +13,25 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import log_text, wait_for
+from helpers.checkpoints import trained_checkpoint
+from helpers.processes import log_text, wait_for
+from helpers.rrd import rrd_rows
 
 from gngdt.io.outputs.rerun_output import RRD_FLUSH_SECONDS
 from gngdt.schemas.topology import decode_topology
 from gngdt.services.plumbing.session import ZenohSetupError, client_config, open_config
 
 
-def _rrd_entities(path: Path) -> dict[str, int]:
-    """Rows per entity path of an .rrd (with or without its footer)."""
-    import warnings
-
-    from rerun.chunk import RrdReader
-
-    rows: dict[str, int] = {}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # "no footer" after a kill -9: expected here
-        store = RrdReader(path).stream().collect()
-    for chunk in store.stream():
-        rows[chunk.entity_path] = rows.get(chunk.entity_path, 0) + chunk.num_rows
-    return rows
-
-
 def _rgb_on_disk(path: Path) -> bool:
     """Whether the .rrd being written already holds a colour image (False while rerun is
     half-way through writing a message: a partial file does not read)."""
     try:
-        return path.exists() and _rrd_entities(path).get("/world/camera/image/rgb", 0) >= 1
+        return path.exists() and rrd_rows(path).get("/world/camera/image/rgb", 0) >= 1
     except RuntimeError:
         return False
 
 
 # ------------------------------------------------------------------------------ checkpoints
-def _trained_checkpoint(path: Path) -> None:
-    from gngdt.core import GNGDT
-    from gngdt.io.checkpoints import save_checkpoint
-
-    rng = np.random.default_rng(0)
-    model = GNGDT(random_state=0).partial_fit(
-        rng.random((2000, 3), dtype=np.float32), rng.integers(0, 256, (2000, 3), np.uint8),
-        n_steps=2000)
-    save_checkpoint(path, model.get_state(), {"camera": "camera", "counters": {}})
 
 
 def _npz(path: Path, members: dict[str, bytes]) -> None:
@@ -83,7 +61,7 @@ def test_learner_refuses_a_damaged_checkpoint_with_a_clear_message(
     import json
 
     path = tmp_path / "learner.npz"
-    _trained_checkpoint(path)
+    trained_checkpoint(path, samples=2000)
     data = bytearray(path.read_bytes())
     if damage == "torn":  # a crash half-way through a copy (our own writes are atomic)
         path.write_bytes(bytes(data[: len(data) // 2]))
@@ -131,7 +109,7 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
     logger.send_signal(signal.SIGKILL)
     logger.wait(10)
     size_at_kill = rrd_path.stat().st_size
-    rows = _rrd_entities(rrd_path)
+    rows = rrd_rows(rrd_path)
     assert rows.get("/world/camera/image/rgb", 0) >= 1, rows
 
     restarted = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
@@ -142,8 +120,8 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
     assert restarted.wait(30) == 0, log_text(restarted)
     assert f"writing {second} instead" in log_text(restarted)
     assert rrd_path.stat().st_size == size_at_kill  # the first file is untouched
-    assert _rrd_entities(rrd_path) == rows
-    assert _rrd_entities(second).get("/world/camera/image/rgb", 0) >= 1
+    assert rrd_rows(rrd_path) == rows
+    assert rrd_rows(second).get("/world/camera/image/rgb", 0) >= 1
 
 
 # ---------------------------------------------------------------------------------- router

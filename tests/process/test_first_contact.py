@@ -12,7 +12,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from processes import (
+from helpers.processes import (
     alive,
     bound_sockets,
     children,
@@ -227,7 +227,8 @@ def test_children_of_a_killed_run_stop_too(tabletop_recording: Path, tmp_path: P
 
 
 def test_run_refuses_a_bag_without_calibration_before_starting_anything(tmp_path: Path) -> None:
-    from test_recording_io import make_frames, write_ros_bag
+    from helpers.recordings import make_frames
+    from helpers.ros2_bags import write_ros_bag
 
     bag = tmp_path / "no_info.mcap"
     write_ros_bag(bag, make_frames(2), color_encoding="rgb8", depth_encoding="16UC1",

@@ -15,8 +15,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from foxglove_client import FoxgloveClient, decode
-from processes import log_text
+from helpers.foxglove_client import FoxgloveClient, decode
+from helpers.processes import log_text
 
 from gngdt.schemas.clouds import msg_to_cloud, transform_to_pose
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import log_text, wait_for
+from helpers.processes import log_text, wait_for
 
 from gngdt.schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
 

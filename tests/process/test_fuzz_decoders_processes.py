@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import wait_for
+from helpers.processes import wait_for
 
 from gngdt.schemas.clouds import cloud_to_msg
 from gngdt.schemas.status import encode_stream_end

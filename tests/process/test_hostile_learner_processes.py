@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import log_text, wait_for
-from test_hostile_learner import _checkpoint
+from helpers.checkpoints import trained_checkpoint
+from helpers.processes import log_text, wait_for
 
 from gngdt.schemas.clouds import cloud_to_msg
 from gngdt.schemas.status import decode_status
@@ -108,7 +108,7 @@ def test_a_second_learner_on_a_camera_or_a_checkpoint_is_refused(
     router_endpoint: str, spawn: Callable, tmp_path: Path
 ) -> None:
     checkpoint = tmp_path / "camera.npz"
-    _checkpoint(checkpoint)
+    trained_checkpoint(checkpoint)
     for index in range(3):  # what kill -9 during checkpoint writes leaves behind
         (tmp_path / f".camera.npz.x{index}.tmp").write_bytes(b"half a checkpoint")
     connect = ("--zenoh-connect", router_endpoint)

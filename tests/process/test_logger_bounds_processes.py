@@ -6,10 +6,10 @@ from __future__ import annotations
 import time
 
 import pytest
-from processes import wait_for
+from helpers.pipeline import ImageFlood
+from helpers.processes import FILE_SIZE_LIMITED, log_text, wait_for
 
-from gngdt.schemas.status import encode_stream_end
-from gngdt.schemas.wire import ENCODING_RAW_IMAGE, FrameStamp
+from gngdt.schemas.wire import FrameStamp
 
 
 # ---------------------------------------------------------------------------- the inbox
@@ -44,56 +44,12 @@ def test_the_inbox_of_a_busy_logger_is_bounded_in_bytes(router_endpoint: str) ->
 
 
 # ---------------------------------------------------------------------------- the .rrd
-class ImageFlood:
-    """A camera publishing 320x240 colour images at ~20 Hz, then an end of stream."""
-
-    def __init__(self, endpoint: str) -> None:
-        from gngdt.services.plumbing.session import client_config, open_config
-
-        self.session = open_config(client_config([endpoint]))
-        self.sent = 0
-
-    def run(self, seconds: float) -> None:
-        import numpy as np
-        import zenoh
-
-        from gngdt.schemas.images import image_to_raw
-
-        rng = np.random.default_rng(0)
-        deadline = time.monotonic() + seconds
-        while time.monotonic() < deadline:
-            image = rng.integers(0, 256, (240, 320, 3), dtype=np.uint8)  # incompressible
-            now = time.time_ns()
-            self.session.put("gngdt/camera/color", image_to_raw(image, timestamp_ns=now)
-                             .SerializeToString(), attachment=FrameStamp(self.sent, now)
-                             .to_attachment(), encoding=ENCODING_RAW_IMAGE,
-                             congestion_control=zenoh.CongestionControl.BLOCK)
-            self.sent += 1
-            time.sleep(0.05)
-
-    def end(self) -> None:
-        import zenoh
-
-        _eos_put(self.session, self.sent)
-        self.session.close()
-        del zenoh
-
-
-def _eos_put(session, frames: int) -> None:
-    import zenoh
-
-    message = encode_stream_end(timestamp_ns=time.time_ns(), frames_sent=frames,
-                                last_frame_sequence=max(frames - 1, 0))
-    session.put("gngdt/camera/eos", message.SerializeToString(),
-                attachment=FrameStamp(max(frames - 1, 0), time.time_ns()).to_attachment(),
-                congestion_control=zenoh.CongestionControl.BLOCK)
 
 
 @pytest.mark.timeout(120)
 def test_the_rrd_stops_at_its_cap_complete_and_the_logger_goes_on(
     router_endpoint: str, spawn, tmp_path
 ) -> None:
-    from processes import log_text
     from rerun.chunk import RrdReader
 
     rrd_path = tmp_path / "capped.rrd"
@@ -113,15 +69,6 @@ def test_the_rrd_stops_at_its_cap_complete_and_the_logger_goes_on(
     assert rrd_path.stat().st_size < 1_000_000 + 7_000_000
     chunks = list(RrdReader(rrd_path).stream().collect().stream())  # complete, with a footer
     assert any(chunk.entity_path == "/world/camera/image/rgb" for chunk in chunks)
-
-
-#: runs gngdt with writes limited to a few megabytes a file, as a full disk would stop them
-FILE_SIZE_LIMITED = (
-    "import os, resource, signal, sys\n"
-    "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG instead of a kill\n"
-    "resource.setrlimit(resource.RLIMIT_FSIZE, (3_000_000, 3_000_000))\n"
-    "os.execv(sys.executable, [sys.executable, '-m', 'gngdt.services.cli', *sys.argv[1:]])\n"
-)
 
 
 @pytest.mark.timeout(120)

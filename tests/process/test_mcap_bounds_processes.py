@@ -8,8 +8,8 @@ import sys
 from pathlib import Path
 
 import pytest
-from processes import wait_for
-from test_logger_bounds_processes import FILE_SIZE_LIMITED, ImageFlood
+from helpers.pipeline import ImageFlood
+from helpers.processes import FILE_SIZE_LIMITED, wait_for
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 

@@ -6,117 +6,28 @@ import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.pipeline import Watcher, points_publisher
+from helpers.processes import log_text, wait_exit
+from helpers.rrd import DESIGN_ENTITIES, rrd_entities_and_scalars
 
 from gngdt.schemas.clouds import cloud_to_msg
-from gngdt.schemas.status import decode_status
 from gngdt.schemas.topology import decode_topology
-from gngdt.schemas.wire import ENCODING_POINT_CLOUD, FrameStamp
+from gngdt.schemas.wire import FrameStamp
 from gngdt.services.plumbing.session import client_config, open_config
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
-#: what `gngdt run` must write (docs/contracts.md "Rerun"), for the default camera
-DESIGN_ENTITIES = {
-    "/world/camera",
-    "/world/camera/image/rgb",
-    "/world/camera/image/depth",
-    "/world/points",
-    "/world/gng/nodes",
-    "/world/gng/edges/pos",
-    "/world/gng/edges/col",
-    "/world/gng/edges/nor",
-    "/world/gng/edges/col\\+nor",  # rerun escapes "+" in entity paths
-    "/metrics/nodes",
-    "/metrics/steps_per_second",
-    "/metrics/latency_ms",
-    "/metrics/quantization_error/pos",
-    "/metrics/quantization_error/col",
-    "/metrics/clusters/col",
-    "/metrics/clusters/nor",
-}
 
 #: stated tolerance of the learned cluster counts against the scene's ground truth: colour
 #: regions are well separated (+-1); normal clusters of a young network split the curved
 #: cylinder or merge across the prism's edges (+-2)
 CLUSTER_TOLERANCE = {"col": 1, "nor": 2}
-
-
-class Watcher:
-    """A test-side zenoh client recording the learner's status messages."""
-
-    def __init__(self, endpoint: str, camera: str = "camera") -> None:
-        self.session = open_config(client_config([endpoint]))
-        self.statuses: list = []
-        self._lock = threading.Lock()
-        self._subscriber = self.session.declare_subscriber(
-            f"gngdt/{camera}/learner/status", self._on_status)
-
-    def _on_status(self, sample) -> None:
-        with self._lock:
-            self.statuses.append(decode_status(sample.payload.to_bytes()))
-
-    def wait_for(self, condition: Callable[[list], bool], timeout_s: float) -> list:
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            with self._lock:
-                statuses = list(self.statuses)
-            if condition(statuses):
-                return statuses
-            time.sleep(0.05)
-        raise AssertionError(f"condition not met within {timeout_s} s; statuses: {statuses[-3:]}")
-
-    def close(self) -> None:
-        self._subscriber.undeclare()
-        self.session.close()
-
-
-def rrd_entities_and_scalars(path: Path) -> tuple[set[str], dict[str, list[tuple[int, float]]]]:
-    """Entity paths in an .rrd, and every ``metrics/...`` scalar as (frame, value) pairs."""
-    from rerun.chunk import RrdReader
-
-    store = RrdReader(path).stream().collect()
-    entities: set[str] = set()
-    scalars: dict[str, list[tuple[int, float]]] = {}
-    for chunk in store.stream():
-        entities.add(chunk.entity_path)
-        if chunk.entity_path.startswith("/metrics/"):
-            batch = chunk.to_record_batch()
-            frames = batch.column("frame").to_pylist()
-            values = batch.column("Scalars:scalars").to_pylist()
-            scalars.setdefault(chunk.entity_path, []).extend(
-                (frame, value[0]) for frame, value in zip(frames, values, strict=True))
-    return entities, scalars
-
-
-def points_publisher(session, camera: str = "camera"):
-    """A BLOCK publisher on the camera's points, once a subscriber (the learner) matches it."""
-    import zenoh
-
-    publisher = session.declare_publisher(
-        f"gngdt/{camera}/points", encoding=ENCODING_POINT_CLOUD,
-        congestion_control=zenoh.CongestionControl.BLOCK)
-    deadline = time.monotonic() + 60
-    while not publisher.matching_status.matching and time.monotonic() < deadline:
-        time.sleep(0.05)
-    return publisher
-
-
-def log_text(process: subprocess.Popen) -> str:
-    return Path(process.log_path).read_text(errors="replace")
-
-
-def wait_exit(process: subprocess.Popen, timeout_s: float) -> int:
-    try:
-        return process.wait(timeout_s)
-    except subprocess.TimeoutExpired:
-        raise AssertionError(f"process did not exit:\n{log_text(process)}") from None
 
 
 @pytest.mark.timeout(240)

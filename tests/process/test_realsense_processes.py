@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from realsense_recordings import DATA, require_pyrealsense
+from helpers.realsense import DATA, require_pyrealsense
 
 require_pyrealsense()
 
@@ -194,9 +194,10 @@ def test_record_keeps_what_a_lost_camera_gave(camera, tmp_path: Path) -> None:
 def test_capture_ends_the_stream_when_its_camera_is_lost(camera, router_endpoint: str) -> None:
     from gngdt.io.deproject import CloudOptions, FrameToCloud
     from gngdt.schemas.status import decode_stream_end
-    from gngdt.services.capture import ReplayClock, capture
+    from gngdt.services.capture import capture
     from gngdt.services.cli import build_parser
     from gngdt.services.plumbing.session import client_config, open_config, open_session
+    from gngdt.services.replay_clock import ReplayClock
 
     context, path = camera
     ends: list = []

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from processes import children, wait_for
+from helpers.processes import children, wait_for
 
 from gngdt.schemas.status import encode_stream_end
 from gngdt.schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp

@@ -1,8 +1,8 @@
 """`gngdt ros2` end to end through a router: a robot side written by others (zenoh-ros2-sdk, see
-tests/ros2_sdk.py) publishes real Kinect frames as a ROS 2 camera driver would (sensor_msgs/Image
-colour and depth + CameraInfo, with its liveliness tokens) and receives, through the bridge and
-a real learner, gngdt's clouds, nodes and objects as ROS 2 messages; it also lists gngdt's
-node and topics as ROS 2's graph does."""
+tests/helpers/ros2_sdk.py) publishes real Kinect frames as a ROS 2 camera driver would
+(sensor_msgs/Image colour and depth + CameraInfo, with its liveliness tokens) and receives, through
+the bridge and a real learner, gngdt's clouds, nodes and objects as ROS 2 messages; it also lists
+gngdt's node and topics as ROS 2's graph does."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from ros2_sdk import message_class, sdk_session
+from helpers.ros2_sdk import message_class, sdk_session
 
 from gngdt.services.plumbing.session import client_config, open_config
 
@@ -267,9 +267,10 @@ def publish_bad_input(sdk, driver: CameraDriver, color: np.ndarray, depth: np.nd
                       counted: Callable[[int], None]) -> None:
     """Seven messages the bridge must refuse: three of garbage on the colour key, a yuv422
     image, a frame over 640x480 (colour and depth), an uncalibrated CameraInfo. Each (or each
-    frame's) waited for until ``counted`` sees the status count it: the bridge holds at most 8
-    samples, and a burst beyond that, on a machine too busy to keep up, would be dropped
-    (counted as such) before being refused."""
+    frame's) waited for until ``counted`` sees the status count it (the first six as
+    malformed, the CameraInfo as a refused calibration): the bridge holds at most 8 samples,
+    and a burst beyond that, on a machine too busy to keep up, would be dropped (counted as
+    such) before being refused."""
     noise = sdk.ZenohSession.get_instance().session
     for count, garbage in enumerate((b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3), 1):
         noise.put(driver.publishers[COLOR].keyexpr, garbage)
@@ -331,7 +332,8 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
                 return {kv.key: kv.value for kv in ours[0].values} if ours else {}
 
             def counted(bad: int) -> None:
-                wait_for(lambda: int(status_values().get("camera/images/malformed", 0)) >= bad,
+                wait_for(lambda: int(status_values().get("camera/images/malformed", 0))
+                         + int(status_values().get("camera/calibrations_refused", 0)) >= bad,
                          30, f"{bad} bad messages counted in the status")
 
             try:
@@ -346,7 +348,8 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
                     time.sleep(0.2)
                 # 3 garbage, yuv422, the big colour and depth, the uncalibrated CameraInfo:
                 # each counted once, and no good frame since
-                assert int(status_values()["camera/images/malformed"]) == 7
+                assert int(status_values()["camera/images/malformed"]) == 6
+                assert int(status_values()["camera/calibrations_refused"]) == 1
             finally:
                 driver.close()
                 tf.close()
@@ -388,7 +391,7 @@ def test_run_with_ros2_publishes_the_results_into_ros(
     """`gngdt run --ros2 ENDPOINT` on a recording whose camera moves: the bridge joins the ROS 2
     router, the robot side gets nodes, clouds in the camera frame and the camera's pose on
     /tf (one of the recording's poses), and run ends as usual."""
-    from synthetic_recordings import render_small_recording
+    from helpers.synthetic import render_small_recording
 
     from gngdt.io.mcap.reader import read_frames
 
@@ -473,7 +476,7 @@ def test_ros2_side_on_its_own_router_and_nothing_listening(
         router_endpoint: str, spawn: Callable) -> None:
     """``--ros2-connect``: gngdt's side on gngdt's router, the ROS 2 node on the other one; the
     bridge is a client of both and listens nowhere (no port, no scouting socket)."""
-    from processes import bound_sockets
+    from helpers.processes import bound_sockets
 
     from gngdt.services.plumbing.session import free_tcp_port, router_config
 

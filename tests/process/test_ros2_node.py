@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import zenoh
-from ros2_sdk import message_class, sdk_session
+from helpers.ros2_sdk import message_class, sdk_session
 
 from gngdt.io.ros2 import messages as m
 from gngdt.io.ros2 import wire as w

@@ -24,7 +24,7 @@ from gngdt.io.ros2 import messages as m
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ORACLE_PYTHON = REPO_ROOT / ".venv-ros2-oracle" / "bin" / "python"
-ORACLE_SCRIPT = REPO_ROOT / "tests" / "ros2_oracle.py"
+ORACLE_SCRIPT = REPO_ROOT / "tests" / "helpers" / "ros2_oracle.py"
 HOW_TO_CREATE = ("python3 -m venv .venv-ros2-oracle && .venv-ros2-oracle/bin/pip install -r "
                  "tests/ros2-oracle-requirements.txt (in the repository; .ci/run does it)")
 

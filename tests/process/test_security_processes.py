@@ -14,7 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from processes import bound_sockets, children, wait_for
+from helpers.processes import bound_sockets, children, wait_for
 
 from gngdt.services.plumbing.session import (
     ZenohSetupError,

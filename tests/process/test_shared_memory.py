@@ -17,7 +17,6 @@ import pytest
 
 from gngdt.services.plumbing.session import (
     SHARED_MEMORY_MIN_BYTES,
-    SHARED_MEMORY_POOL_ENV,
     client_config,
     declare_publisher,
     open_config,
@@ -69,13 +68,14 @@ def payloads(count: int, size: int) -> list[bytes]:
 
 
 def publish(router_endpoint: str, sent: list[bytes], shared_memory: bool = True,
-            latest_wins: bool = True):
+            latest_wins: bool = True, pool_bytes: int | None = None):
     """Publish ``sent`` from a new client session; the publisher (its counters)."""
     config = client_config([router_endpoint])
     config.insert_json5("transport/shared_memory/enabled", json.dumps(shared_memory))
     session = open_config(config)
     try:
-        publisher = declare_publisher(session, KEY, "application/octet-stream", latest_wins)
+        publisher = declare_publisher(session, KEY, "application/octet-stream", latest_wins,
+                                      pool_bytes)
         assert wait_for_subscribers(publisher, 10.0)
         for payload in sent:
             publisher.put(payload, attachment=b"a")
@@ -127,15 +127,13 @@ def test_without_shared_memory_on_the_link_payloads_go_over_the_network(
 
 
 @pytest.mark.timeout(60)
-def test_a_full_pool_sends_over_the_network_instead(router_endpoint: str,
-                                                    monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, "2.5")  # room for two payloads of 1 MB
+def test_a_full_pool_sends_over_the_network_instead(router_endpoint: str) -> None:
     session = open_config(client_config([router_endpoint]))
     received = Received(hold=True)  # holds every sample: their buffers stay in use
     subscription = session.declare_subscriber(KEY, received)
     try:
         sent = payloads(4, 1_000_000)
-        publisher = publish(router_endpoint, sent)
+        publisher = publish(router_endpoint, sent, pool_bytes=int(2.5 * 2**20))  # room for 2
         received.wait(4)
     finally:
         subscription.undeclare()
@@ -146,12 +144,10 @@ def test_a_full_pool_sends_over_the_network_instead(router_endpoint: str,
 
 
 @pytest.mark.timeout(60)
-def test_pool_size_zero_leaves_payloads_to_zenoh(router_endpoint: str, subscriber,
-                                                 monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, "0")
+def test_pool_size_zero_leaves_payloads_to_zenoh(router_endpoint: str, subscriber) -> None:
     _, received = subscriber
     sent = payloads(2, 1_000_000)
-    publisher = publish(router_endpoint, sent)
+    publisher = publish(router_endpoint, sent, pool_bytes=0)
     received.wait(2)
     assert received.payloads == sent
     assert (publisher.sent_shared, publisher.sent_network) == (0, 0)

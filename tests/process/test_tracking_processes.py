@@ -12,8 +12,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from synthetic_recordings import render_walk
-from test_pipeline import Watcher, log_text, wait_exit
+from helpers.pipeline import Watcher
+from helpers.processes import log_text, wait_exit
+from helpers.synthetic import render_walk
 
 from gngdt.core.kernels.odometry import motion_size
 from gngdt.core.sensor.geometry import rigid_inverse
@@ -124,7 +125,7 @@ def test_without_calibration_a_tracking_learner_reports_and_learns_nothing(
 ) -> None:
     """Clouds reach a tracking learner that never got the camera's calibration (it started
     after the capture sent it): the first starts the map, the others are reported lost."""
-    from test_pipeline import points_publisher
+    from helpers.pipeline import points_publisher
 
     from gngdt.io.deproject import Deprojector
     from gngdt.schemas.clouds import cloud_to_msg

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import log_text
-from test_faults import _rrd_entities
+from helpers.processes import log_text
+from helpers.rrd import rrd_rows
 from two_hosts import Deployment, TwoHosts, unavailable
 
 pytestmark = pytest.mark.timeout(600)
@@ -114,7 +114,7 @@ def test_shared_memory_stays_on_each_host_and_services_stop_cleanly(deployment) 
     assert total > 0 and shared > 0, capture_log
     received_shared, received = _counts(learner_log, "", "clouds arrived")
     assert received > 0 and received_shared == 0, learner_log
-    entities = _rrd_entities(deployment.rrd_path)
+    entities = rrd_rows(deployment.rrd_path)
     assert entities.get("/world/points", 0) > 0 and entities.get("/world/gng/nodes", 0) > 0
     for router in deployment.routers.values():
         router.send_signal(signal.SIGINT)

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from synthetic_recordings import render_walk
-from test_pipeline import Watcher, log_text, points_publisher, wait_exit
-from test_world_frame import attachment, pose_at, posed_cloud
+from helpers.pipeline import Watcher, attachment, points_publisher, pose_at, posed_cloud
+from helpers.processes import log_text, wait_exit
+from helpers.synthetic import render_walk
 
 from gngdt.schemas.topology import decode_topology
 from gngdt.services.plumbing.session import client_config, open_config

@@ -68,7 +68,7 @@ def test_gngdt_router_process_serves_clients(free_port: int) -> None:
 
 @pytest.mark.timeout(60)
 def test_gngdt_router_listens_where_its_config_file_says(tmp_path: Path, spawn) -> None:
-    from processes import bound_sockets, log_text, wait_for
+    from helpers.processes import bound_sockets, log_text, wait_for
 
     port = free_tcp_port()
     path = tmp_path / "zenohd.json5"

@@ -1,12 +1,13 @@
 """The house rules (ARCHITECTURE.md), checked on the source: layers whose imports point down, no
-import cycle, modules and functions of a readable size."""
+import cycle, modules and functions of a readable size, tests that share code only through
+tests/helpers."""
 
 from __future__ import annotations
 
 import ast
 import sys
 from collections import defaultdict
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import pytest
 
@@ -151,6 +152,74 @@ def test_the_cycle_finder_finds_a_cycle() -> None:
     """The check above can fail: a two-module loop and a three-module ring are found."""
     graph = {"a": {"b"}, "b": {"a", "c"}, "c": {"d"}, "d": {"e"}, "e": {"c"}, "f": set()}
     assert sorted(strongly_connected(graph)) == [["a", "b"], ["c", "d", "e"]]
+
+
+def _test_modules_imported(tree: ast.Module) -> list[str]:
+    """What ``tree`` imports that is a test module: a ``test_*`` part of a module's dotted name
+    (``import test_x``, ``from tests.unit.test_x import y``, ``from .test_x import y``) or a
+    ``test_*`` name taken from a package (``from tests.unit import test_x``)."""
+    def is_test(name: str) -> bool:
+        return any(part.startswith("test_") for part in name.split("."))
+
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.extend(alias.name for alias in node.names if is_test(alias.name))
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            found.extend([base] if is_test(base) else
+                         [f"{base}.{alias.name}".strip(".") for alias in node.names
+                          if is_test(alias.name)])
+    return found
+
+
+def layout_offences(sources: dict[str, str]) -> list[str]:
+    """Where test code (``sources``: path under the repository -> text, of tests/**.py) breaks
+    the tests' layout: a module that is neither a test (``test_*.py``), a conftest.py nor in
+    tests/helpers/ (shared code lives there), and any import of a test module (what two test
+    modules need is a helper, never one's code imported by the other)."""
+    offences = []
+    for name, source in sorted(sources.items()):
+        path = PurePosixPath(name)
+        if not (path.name.startswith("test_") or path.name == "conftest.py"
+                or path.parts[1] == "helpers"):
+            offences.append(f"{name}: neither a test, a conftest.py nor in tests/helpers/")
+        offences.extend(f"{name}: imports the test module {imported}"
+                        for imported in _test_modules_imported(ast.parse(source, name)))
+    return offences
+
+
+def test_tests_share_code_only_through_helpers() -> None:
+    sources = {path.relative_to(ROOT).as_posix(): path.read_text()
+               for path in (ROOT / "tests").rglob("*.py")}
+    offences = layout_offences(sources)
+    assert not offences, "move what test modules share to tests/helpers:\n" + "\n".join(offences)
+
+
+def test_the_layout_check_finds_test_modules_imported_and_loose_helpers() -> None:
+    """The check above can fail: every way of importing a test module, and a helper module
+    outside tests/helpers, are found; helpers, conftest.py and benchmarks' helpers pass."""
+    sources = {
+        "tests/unit/test_a.py": "from test_b import helper\n",
+        "tests/unit/test_b.py": "def helper() -> None: ...\n",
+        "tests/process/test_c.py": "import test_b\nfrom tests.unit.test_b import helper\n",
+        "tests/process/test_d.py": "def f() -> None:\n    from tests.unit import test_b\n",
+        "tests/process/test_e.py": "from .test_b import helper\n",
+        "tests/loose.py": "def helper() -> None: ...\n",
+        "tests/helpers/__init__.py": "",
+        "tests/helpers/shared.py": "from gngdt.core import GNGDT\n",
+        "tests/unit/test_f.py": ("from helpers.shared import GNGDT\nimport conftest\n"
+                                 "from hostile_recordings import zstd_bomb\n"),
+        "tests/unit/conftest.py": "from helpers.shared import GNGDT\n",
+    }
+    assert layout_offences(sources) == [
+        "tests/loose.py: neither a test, a conftest.py nor in tests/helpers/",
+        "tests/process/test_c.py: imports the test module test_b",
+        "tests/process/test_c.py: imports the test module tests.unit.test_b",
+        "tests/process/test_d.py: imports the test module tests.unit.test_b",
+        "tests/process/test_e.py: imports the test module test_b",
+        "tests/unit/test_a.py: imports the test module test_b",
+    ]
 
 
 def _python_files() -> list[Path]:

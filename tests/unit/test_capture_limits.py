@@ -9,7 +9,7 @@ import time
 def test_the_replay_clock_keeps_the_recorded_spacing_below_the_cap() -> None:
     import threading
 
-    from gngdt.services.capture import ReplayClock
+    from gngdt.services.replay_clock import ReplayClock
 
     clock = ReplayClock(rate=2.0, max_gap_s=0.3)
     stop = threading.Event()

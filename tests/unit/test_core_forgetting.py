@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers.forgetting_scenes import FORGETTING, HEIGHT, PARAMS, STEPS, WIDTH, frames_of, to_world
 from scipy.spatial import cKDTree
 
 from gngdt.core import GNGDT
@@ -13,28 +14,6 @@ from gngdt.core.sensor.view import seen_nodes
 from gngdt.eval.synthetic import make_data2
 from gngdt.io.deproject import Deprojector
 from gngdt.io.synth.render import render_scene
-
-#: small but realistic: 160x120 frames, a 300-node budget reached after 15 frames
-WIDTH, HEIGHT = 160, 120
-STEPS = 10_000
-PARAMS = {"max_nodes": 300, "lambda_": 500, "random_state": 0}
-#: the learner's forgetting profile (gngdt.services.learner.LEARNER_MODEL_DEFAULTS)
-FORGETTING = {"utility_k": 1000.0}
-
-
-def frames_of(scene: str, count: int, fps: float):
-    """(camera-frame points, colours, pose, labels per point, segment names) per frame."""
-    from gngdt.eval.recording_eval import deproject_labels
-
-    deproject = Deprojector()
-    for frame in render_scene(scene, count, width=WIDTH, height=HEIGHT, fps=fps):
-        points, colors = deproject(frame.depth, frame.color, frame.intrinsics)
-        labels = deproject_labels(deproject, frame.depth, frame.labels, frame.intrinsics)
-        yield points, colors, frame.pose.matrix, labels, frame.extras["segments"]
-
-
-def to_world(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
-    return points.astype(np.float64) @ pose[:3, :3].T + pose[:3, 3]
 
 
 def ids_of(segments: dict[int, str], primitive: str) -> list[int]:
@@ -82,11 +61,12 @@ def test_camera_pose_is_validated():
         model.partial_fit(points, camera_pose=np.eye(3))
     with pytest.raises(ValueError, match="3-D"):
         model.partial_fit(points[:, :2], camera_pose=np.eye(4))
-    assert GNGDT(utility_k=0).utility_k is None  # 0 = off, as None (TOML has no None)
+    # 0 = off, as None (TOML has no None)
+    assert GNGDT(utility_k=0).check_params()["utility_k"] is None
     for bad in ({"utility_k": -1.0}, {"utility_decay": 1.0},
                 {"view_depth_margin": -0.1}):
         with pytest.raises(ValueError, match=next(iter(bad))):
-            GNGDT(**bad)
+            GNGDT(**bad).check_params()
 
 
 def old_place_nodes(model: GNGDT, old_place: np.ndarray, frame: cKDTree) -> int:

@@ -57,9 +57,9 @@ def test_without_refresh_stored_normals_lag_behind() -> None:
 @pytest.mark.parametrize("bad", [0.0, 91.0, float("nan")])
 def test_normal_angle_is_validated(bad: float) -> None:
     with pytest.raises(ValueError, match="normal_angle_deg"):
-        GNGDT(normal_angle_deg=bad)
+        GNGDT(normal_angle_deg=bad).check_params()
 
 
 def test_normal_refresh_steps_is_validated() -> None:
     with pytest.raises(ValueError, match="normal_refresh_steps"):
-        GNGDT(normal_refresh_steps=0)
+        GNGDT(normal_refresh_steps=0).check_params()

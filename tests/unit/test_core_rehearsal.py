@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from helpers.forgetting_scenes import FORGETTING, PARAMS, STEPS, frames_of, to_world
 from scipy.spatial import cKDTree
-from test_core_forgetting import FORGETTING, PARAMS, STEPS, frames_of, to_world
 
 from gngdt.core import GNGDT
 from gngdt.core.gas.rehearsal import SampleMemory
@@ -123,4 +123,4 @@ def test_rehearsal_continues_exactly_from_a_checkpoint_and_is_off_by_default():
 def test_rehearsal_parameters_are_validated():
     for bad in ({"replay_share": 1.0}, {"replay_share": -0.1}, {"replay_points": 0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
-            GNGDT(**bad)
+            GNGDT(**bad).check_params()

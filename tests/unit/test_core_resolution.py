@@ -96,7 +96,7 @@ def test_without_resolution_the_budget_is_max_nodes() -> None:
     off = GNGDT(max_nodes=80, resolution_m=0, random_state=0).fit(points, n_steps=50_000,
                                                                   camera_pose=shifted(0.5))
     assert plain.growth_limit_ == plain.n_nodes_ == 80
-    assert off.resolution_m is None  # 0 turns it off, as TOML has no None
+    assert off.check_params()["resolution_m"] is None  # 0 turns it off, as TOML has no None
     np.testing.assert_array_equal(plain.positions_, off.positions_)
 
 

@@ -269,6 +269,21 @@ def test_predict_through_the_grid_is_the_exact_nearest_node() -> None:
     assert np.allclose(distances, best, rtol=0, atol=1e-12)
 
 
+def test_a_frozen_predict_keeps_the_network_it_was_made_from() -> None:
+    rng = np.random.default_rng(8)
+    points, _ = table_scene(rng, [((-0.08, 0.08), 0.12, (0.8, 0.9))])
+    model = GNGDT(max_nodes=500, lambda_=50, random_state=9).fit(points, n_steps=30_000)
+    queries = np.vstack([points[:3000], rng.normal(0.0, 2.0, (100, 3))])
+    before = model.predict(queries, return_distance=True)
+    frozen = model.frozen_predict()
+    # the network learns on (nodes move, are inserted and deleted, the grid is rebuilt)
+    model.partial_fit(points + np.array([0.05, 0.0, 0.1]), n_steps=30_000)
+    after = model.predict(queries, return_distance=True)
+    assert not np.array_equal(after[1], before[1])
+    winners, distances = frozen(queries)
+    assert np.array_equal(winners, before[0]) and np.array_equal(distances, before[1])
+
+
 def test_fresh_normals_follow_eq_16_on_the_current_positions() -> None:
     points, _ = table_scene(np.random.default_rng(6), [((-0.08, 0.08), 0.12, (0.8, 0.9))])
     model = GNGDT(max_nodes=300, random_state=7).fit(points, n_steps=40_000)

@@ -1,4 +1,5 @@
-"""Bad parameters and bad arrays raise ValueError naming the culprit."""
+"""Bad parameters and bad arrays raise ValueError naming the culprit (parameters when learning
+starts, as scikit-learn's estimators check them)."""
 
 from __future__ import annotations
 
@@ -34,8 +35,14 @@ from gngdt.core import GNG, GNGDT, GNGW
     ],
 )
 def test_bad_parameters(cls, params, name):
+    model = cls(**params)  # stored as given; checked by fit and partial_fit
+    points = np.random.default_rng(1).random((50, 3))
+    for learn in (model.fit, model.partial_fit):
+        with pytest.raises(ValueError, match=name):
+            learn(points, points, n_steps=10)
     with pytest.raises(ValueError, match=name):
-        cls(**params)
+        model.check_params()
+    assert model.n_nodes_ == 0
 
 
 RNG = np.random.default_rng(0)

@@ -155,15 +155,19 @@ def test_cli_rejects_a_folder_without_frames(tmp_path, capsys) -> None:
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.timeout(300)
-def test_eval_paper_small_run(tmp_path, capsys) -> None:
-    out = tmp_path / "paper"
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory) -> tuple[Path, dict, str]:
+    """`gngdt eval paper` with one trial and a 40-node budget: its folder, JSON and report."""
+    out = tmp_path_factory.mktemp("eval") / "paper"
     argv = ["eval", "paper", "--trials", "1", "--max-nodes", "40", "--data2-points", "20000",
             "--workers", "2", "--out", str(out), "--no-progress"]
     assert gngdt_main(argv) == 0
-    data = json.loads((out / "paper.json").read_text())
-    markdown = (out / "paper.md").read_text()
+    return out, json.loads((out / "paper.json").read_text()), (out / "paper.md").read_text()
 
+
+@pytest.mark.timeout(300)  # the first one run makes the fixture
+def test_eval_paper_small_run_reports_what_its_tables_say(small_run) -> None:
+    _, data, markdown = small_run
     for heading in (
         "## Colour model",
         "## Table 2",
@@ -187,6 +191,10 @@ def test_eval_paper_small_run(tmp_path, capsys) -> None:
     assert "the one that puts GNG-DT's Data1 position error at scl = 1 at the paper's" \
         not in markdown
 
+
+@pytest.mark.timeout(300)  # the first one run makes the fixture
+def test_eval_paper_small_run_reproduces_the_papers_findings(small_run) -> None:
+    _, data, _ = small_run
     # the default: the chosen colour noise, and flat colours beside it
     main, flat = str(PaperSettings().color_noise[0]), "0.0"
     assert set(data["levels"]) == {main, flat} and main != flat
@@ -234,6 +242,10 @@ def test_eval_paper_small_run(tmp_path, capsys) -> None:
     spread = tables(main)["normal_edges"]["1.0"]
     assert set(spread) == {"floor", "prism red face", "prism brown face", "half cylinder"}
 
+
+@pytest.mark.timeout(300)  # the first one run makes the fixture
+def test_eval_paper_writes_the_figures_its_help_names(small_run, capsys) -> None:
+    out, _, markdown = small_run
     # the files are the figures the help names (issue 35.7), each shown in the report
     with pytest.raises(SystemExit):
         gngdt_main(["eval", "paper", "--help"])

@@ -5,19 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
-
-
-def _checkpoint(path: Path, camera: str = "camera") -> None:
-    from gngdt.core import GNGDT
-    from gngdt.io.checkpoints import save_checkpoint
-
-    rng = np.random.default_rng(0)
-    model = GNGDT(random_state=0).partial_fit(
-        rng.random((500, 3), dtype=np.float32), rng.integers(0, 256, (500, 3), np.uint8),
-        n_steps=500)
-    save_checkpoint(path, model.get_state(), {"camera": camera, "counters": {}})
+from helpers.checkpoints import trained_checkpoint
 
 
 def test_stale_temporaries_of_one_checkpoint_only_are_removed(tmp_path: Path) -> None:
@@ -37,7 +26,7 @@ def test_a_camera_mismatch_is_a_checkpoint_error(tmp_path: Path) -> None:
     from gngdt.services.learner import checkpoints
 
     path = tmp_path / "left.npz"
-    _checkpoint(path, camera="left")
+    trained_checkpoint(path, camera="left")
     assert checkpoints.resume(path, "left", LearnerConfig()).camera == "left"
     with pytest.raises(CheckpointError, match="--cam left"):
         checkpoints.resume(path, "camera", LearnerConfig())

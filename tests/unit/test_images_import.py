@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import logging
 import shutil
@@ -11,14 +10,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from helpers.image_folders import RGBD, TUM, build_tum_folder, run_cli
 
 from gngdt.io.errors import RecordingError
 from gngdt.io.images import iter_image_frames
 from gngdt.io.mcap.reader import read_frames
-from gngdt.services import record as cli
-
-RGBD = Path(__file__).resolve().parents[3] / "shared" / "data" / "rgbd"
-TUM = RGBD / "tum_fr1_xyz_dvo_examples"
 
 #: folder -> (format, frames) as listed in ../shared/data/rgbd/README.md
 DATASETS = {
@@ -34,12 +30,6 @@ def rgbd() -> Path:
     if not RGBD.is_dir():
         pytest.skip(f"real RGB-D samples not found at {RGBD} (the repository's sibling ../shared)")
     return RGBD
-
-
-def run_cli(*argv: str) -> int:
-    parser = argparse.ArgumentParser()
-    cli.add_arguments(parser)
-    return cli.main(parser.parse_args(list(argv)))
 
 
 @pytest.mark.parametrize("folder", sorted(DATASETS))
@@ -70,38 +60,8 @@ def test_pcl_tiff_timestamps_come_from_file_names(rgbd: Path) -> None:
     assert frames[1].timestamp_ns - frames[0].timestamp_ns == 254_471_000
 
 
-def _build_tum_folder(root: Path) -> list[tuple[str, str]]:
-    """A TUM-layout folder from the fr1 samples; returns (rgb stamp, depth stamp) pairs."""
-    (root / "rgb").mkdir(parents=True)
-    (root / "depth").mkdir()
-    stamps = [
-        ("1305031102.175304", "1305031102.160407"),
-        ("1305031102.211214", "1305031102.226738"),
-        ("1305031102.275326", "1305031102.262886"),
-    ]
-    rgb_lines = [
-        "# color images",
-        "# file: 'rgbd_dataset_freiburg1_xyz.bag'",
-        "# timestamp filename",
-    ]
-    depth_lines = [
-        "# depth maps",
-        "# file: 'rgbd_dataset_freiburg1_xyz.bag'",
-        "# timestamp filename",
-    ]
-    for index, (rgb_stamp, depth_stamp) in enumerate(stamps):
-        shutil.copy(TUM / "color" / f"{index:06d}.png", root / "rgb" / f"{rgb_stamp}.png")
-        shutil.copy(TUM / "depth" / f"{index:06d}.png", root / "depth" / f"{depth_stamp}.png")
-        rgb_lines.append(f"{rgb_stamp} rgb/{rgb_stamp}.png")
-        depth_lines.append(f"{depth_stamp} depth/{depth_stamp}.png")
-    depth_lines.append("1305031109.000000 depth/unpaired.png")  # no colour near it: skipped
-    (root / "rgb.txt").write_text("\n".join(rgb_lines) + "\n")
-    (root / "depth.txt").write_text("\n".join(depth_lines) + "\n")
-    return stamps
-
-
 def test_tum_layout(rgbd: Path, tmp_path: Path) -> None:
-    stamps = _build_tum_folder(tmp_path / "fr1")
+    stamps = build_tum_folder(tmp_path / "fr1")
     frames = list(iter_image_frames(tmp_path / "fr1", "tum"))
     assert [frame.timestamp_ns for frame in frames] == [
         int(rgb.replace(".", "")) * 1000 for rgb, _ in stamps
@@ -143,7 +103,7 @@ def test_record_images_cli_writes_a_readable_recording(rgbd: Path, tmp_path: Pat
 
 
 def test_record_images_cli_tum_depth_scale_override(rgbd: Path, tmp_path: Path) -> None:
-    _build_tum_folder(tmp_path / "fr1")
+    build_tum_folder(tmp_path / "fr1")
     out = tmp_path / "fr1.mcap"
     assert (
         run_cli(

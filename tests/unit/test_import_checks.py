@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from test_images_import import run_cli
+from helpers.image_folders import run_cli
 
 from gngdt.core.sensor.geometry import matrix_to_pose
 from gngdt.io import pose_files

@@ -71,7 +71,8 @@ def test_a_map_in_a_fixed_frame_grows_with_the_world_a_camera_frame_map_does_not
                             ({"resolution_m": 0}, (None, 20_000))):
         learner = FrameLearner("camera", LearnerConfig(model=model))
         learner.learn(points, colors, "world", frame.pose.matrix)
-        assert (learner.model.resolution_m, learner.model.max_nodes) == expected
+        checked = learner.model.check_params()  # as the model learns with them: 0 turns it off
+        assert (checked["resolution_m"], checked["max_nodes"]) == expected
 
 
 def test_a_static_camera_is_learned_as_before(walk) -> None:

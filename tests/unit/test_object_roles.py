@@ -4,7 +4,7 @@ support or clutter (issue 26, item 4), in the learner's `ObjectSet` and on the w
 from __future__ import annotations
 
 import numpy as np
-from test_segmentation_rules import (
+from helpers.segmentation_scenes import (
     TABLE_Y,
     box,
     majority,

@@ -40,7 +40,7 @@ def test_the_learner_forgets_unless_told_not_to(tmp_path: Path) -> None:
     path = tmp_path / "paper.toml"
     path.write_text("[gngdt]\nutility_k = 0   # the paper's GNG-DT: no forgetting\n")
     model = GNGDT(**load_profile(path).config.model)
-    assert model.utility_k is None and model.n_forgotten_ == 0
+    assert model.check_params()["utility_k"] is None and model.n_forgotten_ == 0
 
 
 def test_unknown_params_key_is_named(tmp_path: Path) -> None:

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.image_folders import TUM, build_tum_folder, run_cli
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
-from test_images_import import TUM, _build_tum_folder, run_cli
 
 from gngdt.io.deproject import Deprojector
 from gngdt.io.errors import RecordingError
@@ -61,7 +61,7 @@ def test_the_three_tum_frames_land_in_one_world_frame(rgbd: Path, tmp_path: Path
 
 
 def test_a_tum_trajectory_is_interpolated_at_each_frame(rgbd: Path, tmp_path: Path):
-    stamps = _build_tum_folder(tmp_path / "fr1")
+    stamps = build_tum_folder(tmp_path / "fr1")
     trajectory = tmp_path / "groundtruth.txt"
     # 10 Hz ground truth around the frames (1305031102.175-.275 s): pose(t) linear in t
     times = [1305031102.1 + 0.1 * k for k in range(4)]
@@ -77,7 +77,7 @@ def test_a_tum_trajectory_is_interpolated_at_each_frame(rgbd: Path, tmp_path: Pa
 
 
 def test_a_trajectory_that_misses_a_frame_is_an_error_naming_it(rgbd: Path, tmp_path: Path):
-    _build_tum_folder(tmp_path / "fr1")
+    build_tum_folder(tmp_path / "fr1")
     trajectory = tmp_path / "short.txt"
     trajectory.write_text(tum_line(pose(0, 0), "1305031102.17") + "\n"
                           + tum_line(pose(0, 1), "1305031102.22") + "\n")

@@ -8,19 +8,16 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.recordings import HEIGHT, INTRINSICS, WIDTH, make_frames
+from helpers.ros2_bags import (
+    CAMERA_INFO_MSGDEF,
+    HEADER_MSGDEF,
+    IMAGE_MSGDEF,
+    ros_header,
+    ros_image,
+)
 from mcap_ros2.writer import Writer as Ros2Writer
 from scipy.spatial.transform import Rotation
-from test_recording_io import (
-    _HEADER,
-    CAMERA_INFO_MSGDEF,
-    HEIGHT,
-    IMAGE_MSGDEF,
-    INTRINSICS,
-    WIDTH,
-    _ros_header,
-    _ros_image,
-    make_frames,
-)
 
 from gngdt.io.mcap.reader import read_frames
 from gngdt.io.mcap.writer import RecordingWriter
@@ -207,12 +204,12 @@ float64 x
 float64 y
 float64 z
 float64 w"""
-    + _HEADER
+    + HEADER_MSGDEF
 )
 
 
 def _stamped(parent: str, child: str, stamp_ns: int, matrix: np.ndarray) -> dict:
-    header = _ros_header(stamp_ns)
+    header = ros_header(stamp_ns)
     header["frame_id"] = parent
     x, y, z = matrix[:3, 3]
     qx, qy, qz, qw = quaternion(matrix)
@@ -247,18 +244,18 @@ def write_posed_ros_bag(path: Path, frames, odom_from_base, base_from_optical,
                     _stamped("odom", "base_link", stamp, odom_from_base(stamp))]}, log_time=stamp)
                 stamp += tf_period_ns
             writer.write_message("/camera/color/image_raw", image_schema,
-                                 _ros_image(frame.timestamp_ns, frame.color, "rgb8"),
+                                 ros_image(frame.timestamp_ns, frame.color, "rgb8"),
                                  log_time=frame.timestamp_ns + 10)
             k = INTRINSICS.matrix().ravel().tolist()
             writer.write_message("/camera/color/camera_info", info_schema, {
-                "header": _ros_header(frame.timestamp_ns), "height": HEIGHT, "width": WIDTH,
+                "header": ros_header(frame.timestamp_ns), "height": HEIGHT, "width": WIDTH,
                 "distortion_model": "plumb_bob", "d": [0.0] * 5, "k": k,
                 "r": np.eye(3).ravel().tolist(), "p": [*k[:3], 0, *k[3:6], 0, *k[6:], 0],
                 "binning_x": 0, "binning_y": 0,
                 "roi": {"x_offset": 0, "y_offset": 0, "height": 0, "width": 0,
                         "do_rectify": False}}, log_time=frame.timestamp_ns + 20)
             writer.write_message("/camera/aligned_depth_to_color/image_raw", image_schema,
-                                 _ros_image(frame.timestamp_ns, frame.depth, "16UC1"),
+                                 ros_image(frame.timestamp_ns, frame.depth, "16UC1"),
                                  log_time=frame.timestamp_ns + 30)
         writer.finish()
 

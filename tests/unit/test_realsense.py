@@ -14,7 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from realsense_recordings import require_pyrealsense
+from helpers.realsense import require_pyrealsense
 
 require_pyrealsense()
 

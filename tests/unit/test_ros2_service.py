@@ -12,23 +12,27 @@ import pytest
 
 from gngdt.io.tf_tree import TransformTree
 from gngdt.services.cli import build_parser
+from gngdt.services.plumbing.environment import read_environment
 from gngdt.services.ros2 import check_names, domain_id
 from gngdt.services.ros2.worker import Worker
 
 
-def parse(*arguments: str) -> argparse.Namespace:
-    return build_parser().parse_args(["ros2", *arguments])
+def parse(*arguments: str, environ: dict[str, str] | None = None) -> argparse.Namespace:
+    """`gngdt ros2`'s arguments, with the environment `gngdt`'s main would read from
+    ``environ``."""
+    args = build_parser().parse_args(["ros2", *arguments])
+    args.environment = read_environment(environ or {})
+    return args
 
 
-def test_domain_from_option_environment_or_zero(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.delenv("ROS_DOMAIN_ID", raising=False)
+def test_domain_from_option_environment_or_zero() -> None:
     assert domain_id(parse()) == 0
-    monkeypatch.setenv("ROS_DOMAIN_ID", "7")
-    assert domain_id(parse()) == 7
-    assert domain_id(parse("--domain", "3")) == 3  # the option wins
-    monkeypatch.setenv("ROS_DOMAIN_ID", "seven")
+    assert domain_id(parse(environ={"ROS_DOMAIN_ID": "7"})) == 7
+    assert domain_id(parse("--domain", "3", environ={"ROS_DOMAIN_ID": "7"})) == 3  # option wins
     with pytest.raises(ValueError, match="ROS_DOMAIN_ID='seven'"):
-        domain_id(parse())
+        domain_id(parse(environ={"ROS_DOMAIN_ID": "seven"}))
+    with pytest.raises(ValueError, match="ROS_DOMAIN_ID='1e999'"):
+        domain_id(parse(environ={"ROS_DOMAIN_ID": "1e999"}))
     with pytest.raises(ValueError, match="--domain"):
         domain_id(parse("--domain", "233"))
 

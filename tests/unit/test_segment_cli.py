@@ -162,7 +162,8 @@ def test_a_folder_without_camera_json_warns_which_intrinsics_are_assumed(
     assert "WARNING: depth_scale=1000 units per metre assumed" in printed
     summary = check_outputs(out, ["000000", "000001"], [f.depth for f in recorded_frames[:2]])
     assert summary["intrinsics"]["from"].startswith("ASSUMED")
-    assert summary["intrinsics"]["fx"] == 525.0
+    width = recorded_frames[0].color.shape[1]  # the defaults are for 640x480: scaled
+    assert width != 640 and summary["intrinsics"]["fx"] == 525.0 * width / 640
 
 
 @pytest.mark.parametrize("damage, message", [

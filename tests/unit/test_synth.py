@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.synthetic import segment_mask, world_points
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
@@ -26,22 +27,6 @@ from gngdt.io.synth.render import (
 from gngdt.io.synth.scenes import Scene, build_scene
 
 WIDTH, HEIGHT = 160, 120
-
-
-def world_points(frame: Frame, mask: np.ndarray) -> np.ndarray:
-    """(M, 3) world points (metres) of the pixels in ``mask`` with valid depth, via the pose."""
-    k = frame.intrinsics
-    rows, columns = np.nonzero(mask & (frame.depth > 0))
-    z = frame.depth[rows, columns] / 1000.0
-    camera = np.column_stack([(columns - k.cx) / k.fx * z, (rows - k.cy) / k.fy * z, z])
-    pose = frame.pose.matrix
-    return camera @ pose[:3, :3].T + pose[:3, 3]
-
-
-def segment_mask(frame: Frame, name: str) -> np.ndarray:
-    ids = [i for i, segment in frame.extras["segments"].items() if segment == name]
-    assert ids, f"no segment {name!r} in {sorted(frame.extras['segments'].values())}"
-    return np.isin(frame.labels, ids)
 
 
 def test_frames_have_the_documented_shapes_types_and_intrinsics():

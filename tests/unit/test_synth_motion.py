@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_synth import segment_mask, world_points
+from helpers.synthetic import segment_mask, world_points
 
 from gngdt.io.mcap.reader import read_frames, recording_metadata
 from gngdt.io.mcap.writer import RecordingWriter

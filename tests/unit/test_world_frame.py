@@ -10,34 +10,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.pipeline import attachment, pose_at, posed_cloud
 
 from gngdt.core.learner.frame_learner import FrameLearner, LearnerConfig
 from gngdt.core.learner.results import Ghosts, Outcome
-from gngdt.schemas.clouds import cloud_to_msg
 from gngdt.schemas.messages import MessageError
 from gngdt.schemas.wire import FrameStamp
 from gngdt.services.learner import checkpoints
 from gngdt.services.learner.messages import decode_points, status_message, topology_message
-
-
-def posed_cloud(pose: np.ndarray | None, frame_id: str, seed: int = 0) -> bytes:
-    """A 2,000-point coloured cloud of a wall 2 m in front of the camera (one wall for every
-    pose that only slides the camera along it, as `pose_at`'s do)."""
-    rng = np.random.default_rng(seed)
-    positions = rng.uniform([-0.5, -0.4, 2.0], [0.5, 0.4, 2.0], (2000, 3)).astype(np.float32)
-    colors = rng.integers(0, 256, (2000, 3), dtype=np.uint8)
-    return cloud_to_msg(positions, colors, timestamp_ns=1, frame_id=frame_id,
-                        pose=pose).SerializeToString()
-
-
-def pose_at(x: float) -> np.ndarray:
-    pose = np.eye(4)
-    pose[:3, 3] = [x, 0.0, 1.0]
-    return pose
-
-
-def attachment(sequence: int) -> bytes:
-    return FrameStamp(sequence, time.time_ns()).to_attachment()
 
 
 def test_the_learner_learns_in_the_first_clouds_frame_and_skips_others(tmp_path: Path):

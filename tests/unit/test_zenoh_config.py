@@ -7,12 +7,15 @@ from pathlib import Path
 
 import pytest
 
+from gngdt.services.plumbing.environment import (
+    PARENT_ENV,
+    SHARED_MEMORY_POOL_ENV,
+    read_environment,
+)
 from gngdt.services.plumbing.session import (
     DEFAULT_ENDPOINT,
-    SHARED_MEMORY_POOL_ENV,
     ZenohSetupError,
     client_config,
-    pool_setting,
     router_config,
     router_endpoints,
 )
@@ -118,16 +121,22 @@ def test_every_shipped_config_keeps_gngdt_bounds(path: Path) -> None:
 
 @pytest.mark.parametrize(("value", "expected"), [
     ("", None), ("0", 0), ("2.5", int(2.5 * 1024 * 1024)), ("64", 64 * 1024 * 1024)])
-def test_shared_memory_pool_setting(monkeypatch: pytest.MonkeyPatch, value: str,
-                                    expected: int | None) -> None:
-    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, value)
-    assert pool_setting() == expected
+def test_shared_memory_pool_setting(value: str, expected: int | None) -> None:
+    environment = read_environment({SHARED_MEMORY_POOL_ENV: value})
+    assert environment.shm_pool_bytes == expected and not environment.problems
 
 
-@pytest.mark.parametrize("value", ["lots", "-1", "nan"])
-def test_a_wrong_shared_memory_pool_setting_is_warned_and_ignored(
-        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, value: str) -> None:
-    monkeypatch.setenv(SHARED_MEMORY_POOL_ENV, value)
-    with caplog.at_level("WARNING"):
-        assert pool_setting() is None
-    assert SHARED_MEMORY_POOL_ENV in caplog.text and repr(value) in caplog.text
+@pytest.mark.parametrize("value", ["lots", "-1", "nan", "inf", "1e308", "1025"])
+def test_a_wrong_shared_memory_pool_setting_is_named_and_ignored(value: str) -> None:
+    """inf and 1e308 once killed every service with OverflowError (int(inf * 2**20))."""
+    environment = read_environment({SHARED_MEMORY_POOL_ENV: value})
+    assert environment.shm_pool_bytes is None
+    assert len(environment.problems) == 1
+    assert SHARED_MEMORY_POOL_ENV in environment.problems[0]
+    assert repr(value) in environment.problems[0]
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-5", "1e9", "99999999999"])
+def test_a_wrong_parent_pid_is_named_and_ignored(value: str) -> None:
+    environment = read_environment({PARENT_ENV: value})
+    assert environment.parent_pid is None and PARENT_ENV in environment.problems[0]

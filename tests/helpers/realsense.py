@@ -13,7 +13,8 @@ import pytest
 
 from gngdt.io.realsense.sdk import availability
 
-DATA = Path(__file__).resolve().parent / "data" / "realsense"
+#: the bundled RealSense bags (tests/data/realsense)
+DATA = Path(__file__).resolve().parents[1] / "data" / "realsense"
 #: pyrealsense2 2.59 publishes wheels for these only
 WHEEL_PLATFORM = (sys.platform == "linux" and platform.machine() == "x86_64") or (
     sys.platform == "win32" and platform.machine() == "AMD64")

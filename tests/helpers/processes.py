@@ -1,9 +1,10 @@
 """Helpers for tests of real processes: their logs, waiting on them, and what they hold, read
-from /proc (their sockets and children; Linux)."""
+from /proc (their sockets and children; Linux); commands wrapped to measure or limit them."""
 
 from __future__ import annotations
 
 import os
+import subprocess
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -74,6 +75,14 @@ def log_text(process) -> str:
     return Path(process.log_path).read_text(errors="replace")
 
 
+def wait_exit(process: subprocess.Popen, timeout_s: float) -> int:
+    """``process``'s exit status; AssertionError with its log if it runs past ``timeout_s``."""
+    try:
+        return process.wait(timeout_s)
+    except subprocess.TimeoutExpired:
+        raise AssertionError(f"process did not exit:\n{log_text(process)}") from None
+
+
 def wait_for(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
     """Poll ``condition`` until true; AssertionError naming ``what`` after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
@@ -120,3 +129,12 @@ def with_default_sighup(command: list[str]) -> list[str]:
     import sys
 
     return [sys.executable, "-c", _DEFAULT_SIGHUP, *command]
+
+
+#: runs gngdt with writes limited to a few megabytes a file, as a full disk would stop them
+FILE_SIZE_LIMITED = (
+    "import os, resource, signal, sys\n"
+    "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # EFBIG instead of a kill\n"
+    "resource.setrlimit(resource.RLIMIT_FSIZE, (3_000_000, 3_000_000))\n"
+    "os.execv(sys.executable, [sys.executable, '-m', 'gngdt.services.cli', *sys.argv[1:]])\n"
+)
