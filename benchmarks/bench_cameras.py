@@ -56,7 +56,8 @@ def run_cameras(count: int, recordings: list[Path], args: argparse.Namespace,
             bench.start("log", ["--save", str(workdir / "cameras.rrd")], "logger")
             expected.append(LOGGER_ALIVE)
         bench.wait(lambda: bench.observer.has_alive(*expected), 300, "learners and logger")
-        captures = [bench.start("capture", [str(recordings[index % len(recordings)]), "--cam",
+        captures = [bench.start("capture", [str(recordings[index % len(recordings)]),
+                                            "--realtime", "--cam",
                                             camera, "--max-points", str(args.max_points)],
                                 f"capture-{camera}")
                     for index, camera in enumerate(cameras)]

@@ -179,7 +179,8 @@ def pipeline_run(recording: Path, workdir: Path, params: Path | None, busy: int)
                    and observed.has_alive(LOGGER_ALIVE), 300, stop, pipeline)
         spinners = [spin() for _ in range(busy)]
         # as `gngdt run` starts it: a random 50,000 points of each cloud
-        pipeline.start("capture", [str(recording), "--max-points", str(RUN_MAX_POINTS)])
+        pipeline.start("capture", [str(recording), "--realtime", "--max-points",
+                                    str(RUN_MAX_POINTS)])
         started = time.monotonic()
         while learner.process.poll() is None and time.monotonic() - started < 600:
             time.sleep(0.2)

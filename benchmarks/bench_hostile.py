@@ -330,7 +330,8 @@ def replay_recordings(folder: Path, endpoint: str, peaks: Peaks) -> list[Capture
         wait_until(lambda: "listening on" in (folder / "router-capture.log").read_text(), 30,
                    "a router")
         began = time.monotonic()
-        capture = gngdt("capture", str(path), "--fast", "--wait-subscribers", "0", *connect,
+        capture = gngdt("capture", str(path), "--fast", "--realtime", "--wait-subscribers", "0",
+                        *connect,
                         log=log)
         peaks.watch(f"capture: {label}", capture.pid)
         code = capture.wait(300)

@@ -143,7 +143,8 @@ def main() -> None:
     observer = Observer(endpoint)
     observer.start()
     wait_until(lambda: "learning from" in (folder / "learn.log").read_text(), 120, "the learner")
-    processes["capture"] = gngdt("capture", str(recording), "--loop", "--max-points",
+    processes["capture"] = gngdt("capture", str(recording), "--loop", "--realtime",
+                                 "--max-points",
                                  str(DEFAULT_MAX_POINTS), *connect, log=folder / "capture.log")
     hostile = None
     try:

@@ -187,7 +187,7 @@ def soak(args: argparse.Namespace, work: Path, recording: Path) -> tuple[StatusL
         session.declare_subscriber("gngdt/camera/learner/status", statuses.add)
         time.sleep(5.0)  # learner warm-up (numba)
         statuses.started = time.monotonic()
-        processes["capture"] = start(["capture", str(recording), "--loop",
+        processes["capture"] = start(["capture", str(recording), "--loop", "--realtime",
                                       "--max-points", str(args.max_points), *connect],
                                      work / "capture.log")
         samples = sample_processes(processes, statuses.started, args.minutes * 60.0,

@@ -266,8 +266,8 @@ def foxglove_under_clients(folder: Path, recording: Path, stalled: int, reading:
     logger = gngdt("log", "--save", str(folder / "foxglove.rrd"), "--foxglove", "--bind",
                    f"127.0.0.1:{port}", "--keep-running", "--zenoh-connect", endpoint,
                    *logger_options, log=log)
-    capture = gngdt("capture", str(recording), "--loop", "--zenoh-connect", endpoint,
-                    log=folder / "capture.log")
+    capture = gngdt("capture", str(recording), "--loop", "--realtime", "--zenoh-connect",
+                    endpoint, log=folder / "capture.log")
     phases = FoxglovePhases()
     try:
         wait_until(lambda: "serving Foxglove" in log.read_text(), 180, "the logger")

@@ -276,7 +276,7 @@ class CapturePublisher:
                  pool_bytes: int | None = None) -> None:
         def declare(name: str, encoding: str, latest_wins: bool) -> SharedMemoryPublisher:
             return declare_publisher(session, topic(camera, name), encoding, latest_wins,
-                                     pool_bytes)
+                                     pool_bytes=pool_bytes)
 
         self.camera = camera
         self.color = declare("color", ENCODING_RAW_IMAGE, latest_wins=True)
@@ -394,6 +394,7 @@ class Replay:
                     yield frame
             except RecordingError as error:
                 self.error = error
+                self.tally.reading_stopped(error)
                 if yielded:
                     log.error("%s (continuing after %d good frames of this pass)", error, yielded)
             if not self.loop or yielded == 0:

@@ -68,6 +68,13 @@ class CaptureTally:
         where = str(error)[:-len(reason)].rstrip(": ") if str(error).endswith(reason) else ""
         self.refuse(where or "a frame", reason)
 
+    def reading_stopped(self, error: Exception) -> None:
+        """The source could not be read on (damage to the file, a calibration refused): a
+        warning of the stream, so that its end of stream says why it ended early."""
+        warning = f"the reading stopped: {str(error)[:MAX_REASON_CHARS]}"
+        if warning not in self.warnings:  # a file looped over says it once
+            self.warnings.append(warning)
+
     def check_depth(self, frame: Frame) -> None:
         """Add the frame's depth to the check until it is judged, then warn once when the
         depth is implausible (`depth_warning`)."""

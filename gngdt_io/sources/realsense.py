@@ -19,7 +19,7 @@ import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from gngdt.io.errors import RecordingError
 from gngdt.io.frame import Frame
@@ -33,6 +33,9 @@ from gngdt.io.realsense.stream import (
     find_device,
 )
 from gngdt.io.sources.base import FrameSource, SourceOptions
+
+if TYPE_CHECKING:
+    from gngdt.core.sensor.depth import DepthRange
 
 log = logging.getLogger(__name__)
 
@@ -122,11 +125,11 @@ class RealSenseSource(FrameSource):
                     f"{self._info.depth_frames} depth images)")
         return f"{self.path} (legacy RealSense .bag)"
 
-    def check(self) -> int:
+    def check(self, depth: DepthRange | None = None) -> int:
         if self.live:
             raise RecordingError(self.path, None, "a live camera has no end to check: record "
                                  "it first (gngdt record realsense --out x.mcap --seconds 10)")
-        return super().check()
+        return super().check(depth)
 
     def frames(self) -> Iterator[tuple[str, Frame]]:
         """The aligned frames; anything the SDK raises is the source's RecordingError (the

@@ -350,7 +350,7 @@ def open_session(args: argparse.Namespace) -> zenoh.Session:
 
 
 def declare_publisher(session: zenoh.Session, key: str, encoding: str,
-                      latest_wins: bool, large: bool | None = None,
+                      latest_wins: bool, *, large: bool | None = None,
                       pool_bytes: int | None = None) -> SharedMemoryPublisher:
     """The one place congestion and transport are decided. ``latest_wins`` (images, clouds,
     topologies: a newer one supersedes it): ``DROP``, so that a consumer that does not keep up

@@ -27,7 +27,10 @@ def test_capture_skips_bad_frames_and_sends_the_good_ones(
 
     output = run_capture(path)
 
+    # the first frame refused for a reason is named; the others are counted, in the log and in
+    # the end of stream
     assert "holes.mcap: frame 1: depth 40x15 does not match colour 40x30" in output.log
-    assert "holes.mcap: frame 4:" in output.log
+    assert "2 frames refused: depth 40x15 does not match colour 40x30 (2)" in output.log
     assert len(output.ends) == 1 and output.ends[0].frames_sent == 5
+    assert output.ends[0].frames_refused == {"depth 40x15 does not match colour 40x30": 2}
     assert len(output.clouds) == 5

@@ -75,7 +75,7 @@ def publish(router_endpoint: str, sent: list[bytes], shared_memory: bool = True,
     session = open_config(config)
     try:
         publisher = declare_publisher(session, KEY, "application/octet-stream", latest_wins,
-                                      pool_bytes)
+                                      pool_bytes=pool_bytes)
         assert wait_for_subscribers(publisher, 10.0)
         for payload in sent:
             publisher.put(payload, attachment=b"a")
