@@ -23,9 +23,9 @@ import time
 from pathlib import Path
 
 import numpy as np
-from pipeline_runs import TRANSPORTS, BenchPipeline, CpuWindow, load_average, percentiles
+from pipeline_runs import TRANSPORTS, BenchPipeline, load_average, percentiles
 
-from gngdt.schemas.wire import CAPTURE, LEARNER, LOGGER_ALIVE, alive_key
+from gngdt.schemas.wire import LEARNER, LOGGER_ALIVE, alive_key
 
 SCENES = ("tabletop", "tabletop_walk", "tabletop_move", "data2")
 
@@ -61,17 +61,7 @@ def run_cameras(count: int, recordings: list[Path], args: argparse.Namespace,
                                             camera, "--max-points", str(args.max_points)],
                                 f"capture-{camera}")
                     for index, camera in enumerate(cameras)]
-        window = CpuWindow(bench.pids())
-        bench.wait(lambda: bench.observer.has_alive(
-            *(alive_key(camera, CAPTURE) for camera in cameras)), 120, "captures")
-        window.start()
-        while any(capture.process.poll() is None for capture in captures):
-            window.sample()
-            time.sleep(0.1)
-        window.stop()
-        for child in bench.children:
-            if child.process.wait(180) != 0:
-                raise RuntimeError(f"{child.name} failed:\n{child.stderr_tail()}")
+        window = bench.stream(captures, cameras, wait_s=120.0, exit_s=180.0)
         with bench.observer.lock:
             seen = {camera: bench.observer.cameras.get(camera) for camera in cameras}
     finally:

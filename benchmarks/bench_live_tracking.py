@@ -21,7 +21,6 @@ import subprocess
 import sys
 import tempfile
 import threading
-import time
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -29,7 +28,7 @@ import numpy as np
 from bench_tracking import ate
 from pipeline_runs import TRANSPORTS, BenchPipeline, CpuWindow, load_average
 
-from gngdt.schemas.wire import CAPTURE, DEFAULT_CAMERA, LEARNER, LOGGER_ALIVE, alive_key, topic
+from gngdt.schemas.wire import DEFAULT_CAMERA, LEARNER, LOGGER_ALIVE, alive_key, topic
 
 
 def render_walk(path: Path, frames: int) -> Path:
@@ -87,17 +86,7 @@ def run_once(recording: Path, workdir: Path, truth: list[np.ndarray], busy_count
         with busy(busy_count):
             capture = bench.start("capture", [str(recording), "--realtime", "--fixed-frame",
                                               "none", "--max-points", "0"])
-            window = CpuWindow(bench.pids())
-            bench.wait(lambda: bench.observer.has_alive(alive_key(DEFAULT_CAMERA, CAPTURE)), 60,
-                       "capture")
-            window.start()
-            while capture.process.poll() is None:
-                window.sample()
-                time.sleep(0.1)
-            window.stop()
-        for child in bench.children:
-            if child.process.wait(180) != 0:
-                raise RuntimeError(f"{child.name} failed:\n{child.stderr_tail()}")
+            window = bench.stream([capture], [DEFAULT_CAMERA], exit_s=180.0)
         seen = bench.observer.camera("gngdt/camera")
         with bench.observer.lock, watch.lock:
             status, end, poses = seen.status, seen.end, dict(watch.poses)

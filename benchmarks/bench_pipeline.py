@@ -31,14 +31,13 @@ import numpy as np
 from pipeline_runs import (
     TRANSPORTS,
     BenchPipeline,
-    CpuWindow,
     Transport,
     load_average,
     percentiles,
     shared_memory_use,
 )
 
-from gngdt.schemas.wire import CAPTURE, DEFAULT_CAMERA, LEARNER, LOGGER_ALIVE, alive_key
+from gngdt.schemas.wire import DEFAULT_CAMERA, LEARNER, LOGGER_ALIVE, alive_key
 
 
 def render_recording(path: Path, frames: int) -> None:
@@ -149,19 +148,7 @@ def run_pipeline(recording: Path, samples_per_frame: int, workdir: Path,
         bench.wait(lambda: bench.observer.has_alive(alive_key(DEFAULT_CAMERA, LEARNER),
                                                     LOGGER_ALIVE), 120, "learner and logger")
         capture = bench.start("capture", [str(recording), *capture_options])
-        window = CpuWindow(bench.pids())
-        # from capture's liveliness token on (declared after its start-up, just before its
-        # first frame) to its exit
-        bench.wait(lambda: bench.observer.has_alive(alive_key(DEFAULT_CAMERA, CAPTURE)), 60,
-                   "capture")
-        window.start()
-        while capture.process.poll() is None:
-            window.sample()
-            time.sleep(0.1)
-        window.stop()
-        for child in bench.children:
-            if child.process.wait(120) != 0:
-                raise RuntimeError(f"{child.name} failed:\n{child.stderr_tail()}")
+        window = bench.stream([capture], [DEFAULT_CAMERA])
         seen = bench.observer.camera("gngdt/camera")
         with bench.observer.lock:
             status, end, received = seen.status, seen.end, list(seen.received_latency_ms)

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 from procstat import REPO_ROOT, cpu_seconds, status_mb
 
-from gngdt.schemas.wire import ALL_KEYS, FrameStamp
+from gngdt.schemas.wire import ALL_KEYS, CAPTURE, FrameStamp, alive_key
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.environment import SHARED_MEMORY_POOL_ENV
 from gngdt.services.plumbing.session import (
@@ -188,6 +188,24 @@ class BenchPipeline:
             if time.monotonic() > deadline:
                 raise RuntimeError(f"timed out waiting for {what}")
             time.sleep(0.05)
+
+    def stream(self, captures: list[Child], cameras: list[str], wait_s: float = 60.0,
+               exit_s: float = 120.0) -> CpuWindow:
+        """Every process's CPU from the captures' liveliness tokens (declared after their
+        start-up, just before their first frame) until they exit; then every service must end
+        well (RuntimeError naming one that did not)."""
+        window = CpuWindow(self.pids())
+        self.wait(lambda: self.observer.has_alive(
+            *(alive_key(camera, CAPTURE) for camera in cameras)), wait_s, "capture")
+        window.start()
+        while any(capture.process.poll() is None for capture in captures):
+            window.sample()
+            time.sleep(0.1)
+        window.stop()
+        for child in self.children:
+            if child.process.wait(exit_s) != 0:
+                raise RuntimeError(f"{child.name} failed:\n{child.stderr_tail()}")
+        return window
 
     def pids(self) -> dict[str, int]:
         """Every process of the run by name (services by their log name, and the router)."""

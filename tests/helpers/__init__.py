@@ -5,6 +5,7 @@ the path); test modules never import each other, and fixtures stay in conftest.p
   (/proc), commands wrapped to measure their peak memory or limit their file sizes.
 - ``pipeline``: a test's side of running services on zenoh: the learner's statuses watched;
   clouds, images and ends of stream published; posed clouds and frame stamps.
+- ``summaries``: `gngdt run`'s summary read back as numbers.
 - ``rrd``: what a rerun recording holds (entities, metric scalars, rows), and what `gngdt run`
   must write.
 - ``checkpoints``: a small trained learner checkpoint.

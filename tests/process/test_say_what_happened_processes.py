@@ -18,6 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from helpers.summaries import every_frame_sent
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 GNGDT = [sys.executable, "-m", "gngdt.services.cli"]
@@ -27,17 +28,6 @@ def gngdt_run(*arguments: str, timeout_s: float = 240) -> subprocess.CompletedPr
     """`gngdt run ARGUMENTS` to its end (its children die with it)."""
     return subprocess.run([*GNGDT, "run", *arguments], cwd=REPO_ROOT, capture_output=True,
                           text=True, timeout=timeout_s)
-
-
-def every_frame_sent(summary: str) -> tuple[int, dict[str, int]]:
-    """The frames sent and each named term of the summary's 'every frame sent' line."""
-    line = next(line for line in summary.splitlines() if line.startswith("every frame sent:"))
-    sent, terms = line.split(":", 1)[1].split("=")
-    named = {}
-    for term in terms.split(" + "):
-        count, name = term.strip().split(" ", 1)
-        named[name.split(" (")[0]] = int(count)
-    return int(sent), named
 
 
 @pytest.fixture

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.summaries import every_frame_sent
 
 from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
 from gngdt.services.cli import main
@@ -51,17 +52,6 @@ def test_run_help_and_the_contract_give_the_same_exit_statuses(capsys) -> None:
 
 
 # ------------------------------------------------------------- 5: counts that add up
-def _terms(text: str) -> tuple[int, dict[str, int]]:
-    """The frames sent and each named term of the summary's 'every frame sent' line."""
-    line = next(line for line in text.splitlines() if line.startswith("every frame sent:"))
-    sent, terms = line.split(":", 1)[1].split("=")
-    named = {}
-    for term in terms.split(" + "):
-        count, name = term.strip().split(" ", 1)
-        named[name.split(" (")[0]] = int(count)
-    return int(sent), named
-
-
 def _acks(**outcomes: int) -> LearnerAcks:
     acks = LearnerAcks()
     for outcome, count in outcomes.items():
@@ -77,7 +67,7 @@ def test_every_frame_sent_is_accounted_for_each_kind_named(paced: bool) -> None:
     acks = _acks(learned=11, posed=34, pose_rejected=3, malformed=1)
     status = LearnerStatusInfo(frames_used=11, frames_dropped=12, nodes=500, steps=10**6)
     text = format_summary(RunFacts(status, end, acks, "runs/x.rrd", paced=paced))
-    sent, terms = _terms(text)
+    sent, terms = every_frame_sent(text)
     assert sent == 60 == sum(terms.values())
     left = "left behind" if paced else "dropped"
     assert terms == {"learned": 11, "dropped": 0 if paced else 9, "malformed": 1, "refused": 3,
