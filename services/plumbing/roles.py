@@ -183,12 +183,18 @@ def credential_files(folder: Path) -> list[Path]:
             *(folder / f"{role}.json5" for role in SERVICE_ROLES.values())]
 
 
+def _stat_fields(pid: int) -> list[str]:
+    """The fields of /proc/<pid>/stat after the command's name ([] when unknown)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return []
+
+
 def process_start(pid: int) -> str:
     """When process ``pid`` started (clock ticks since boot, /proc), "" when unknown."""
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[19]
-    except (OSError, IndexError):
-        return ""
+    fields = _stat_fields(pid)
+    return fields[19] if len(fields) > 19 else ""
 
 
 def _run_gone(owner_file: Path) -> bool:
@@ -204,6 +210,9 @@ def _run_gone(owner_file: Path) -> bool:
     except ProcessLookupError:
         return True
     except PermissionError:  # a process of another user: not ours, so not our run
+        return True
+    fields = _stat_fields(pid)
+    if fields[:1] in (["Z"], ["X"]):  # dead, not yet reaped (an orphan waits for init)
         return True
     return bool(started) and process_start(pid) not in ("", started)
 

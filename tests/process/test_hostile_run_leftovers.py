@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -54,14 +55,30 @@ def test_only_the_credentials_of_ended_runs_are_removed(tmp_path: Path) -> None:
         (folder / "capture.json5").write_text("{}")
         return folder
 
+    # a run killed whose parent has not reaped it yet (an orphan waits for init): a zombie
+    zombie = subprocess.Popen([sys.executable, "-c", "pass"])
+    deadline = time.monotonic() + 30
+    while process_state(zombie.pid) != "Z" and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert process_state(zombie.pid) == "Z"
+
     alive = run_folder("alive", f"{os.getpid()} {process_start(os.getpid())}\n")
     gone = run_folder("gone", f"{ended.pid} 1\n")
     reused = run_folder("reused", f"{os.getpid()} 1\n")
+    dead = run_folder("zombie", f"{zombie.pid} {process_start(zombie.pid)}\n")
     (reused / "learn.log").write_text("what failed")
-    assert sorted(remove_stale_credentials(tmp_path)) == [gone, reused]
+    try:
+        assert sorted(remove_stale_credentials(tmp_path)) == [gone, reused, dead]
+    finally:
+        zombie.wait()
     assert (alive / "router-users.txt").exists()
     assert not gone.exists()  # emptied, removed
     assert [path.name for path in reused.iterdir()] == ["learn.log"]
+
+
+def process_state(pid: int) -> str:
+    """A process's state letter (R, S, Z, ...), from /proc."""
+    return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
 
 
 @pytest.mark.timeout(180)
