@@ -21,12 +21,12 @@ import subprocess
 import sys
 import tempfile
 import threading
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 from bench_tracking import ate
 from pipeline_runs import TRANSPORTS, BenchPipeline, CpuWindow, load_average
+from procstat import busy_processes
 
 from gngdt.schemas.wire import DEFAULT_CAMERA, LEARNER, LOGGER_ALIVE, alive_key, topic
 
@@ -62,18 +62,6 @@ class PoseWatch:
             self.poses[stamp.sequence] = matrix
 
 
-@contextmanager
-def busy(count: int):
-    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
-                for _ in range(count)]
-    try:
-        yield
-    finally:
-        for spinner in spinners:
-            spinner.kill()
-            spinner.wait()
-
-
 def run_once(recording: Path, workdir: Path, truth: list[np.ndarray], busy_count: int) -> None:
     load = load_average()
     bench = BenchPipeline(workdir, TRANSPORTS["shm"])
@@ -83,7 +71,7 @@ def run_once(recording: Path, workdir: Path, truth: list[np.ndarray], busy_count
         bench.start("log", ["--save", str(workdir / "live.rrd")], "logger")
         bench.wait(lambda: bench.observer.has_alive(alive_key(DEFAULT_CAMERA, LEARNER),
                                                     LOGGER_ALIVE), 300, "learner and logger")
-        with busy(busy_count):
+        with busy_processes(busy_count):
             capture = bench.start("capture", [str(recording), "--realtime", "--fixed-frame",
                                               "none", "--max-points", "0"])
             window = bench.stream([capture], [DEFAULT_CAMERA], exit_s=180.0)

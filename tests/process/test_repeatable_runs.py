@@ -10,30 +10,16 @@ import re
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pytest
+from procstat import busy_processes
 
 from gngdt.io.checkpoints import load_checkpoint
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 GNGDT = [sys.executable, "-m", "gngdt.services.cli"]
-
-
-@contextmanager
-def busy_processes(count: int = 2) -> Iterator[None]:
-    """``count`` processes spinning on the CPU (a machine busy with other work)."""
-    spinners = [subprocess.Popen([sys.executable, "-c", "while True: pass"])
-                for _ in range(count)]
-    try:
-        yield
-    finally:
-        for spinner in spinners:
-            spinner.kill()
-            spinner.wait()
 
 
 def run_file(recording: Path, workdir: Path, *options: str) -> tuple[str, dict[str, np.ndarray]]:
