@@ -321,13 +321,14 @@ def point_to_plane(points, normals, sigma, rotation, translation, node, gated, a
 
 
 @njit(cache=True, nogil=True)
-def organize_points(points, colors, fx, fy, cx, cy, organized, image):
-    """Put deprojected ``points`` (N, 3) camera frame back on their pixels: ``organized``
-    (H, W, 3) float32 (NaN-filled by the caller) gets each point at the pixel nearest its
-    projection, ``image`` (H, W, 3) uint8 its colour (``colors`` (N, 3) uint8; an empty array
-    when there are none). Points not in front of the camera, non-finite or off the image are
-    dropped. Returns how many were placed."""
-    height, width = organized.shape[0], organized.shape[1]
+def organize_points(points, colors, fx, fy, cx, cy, width, height, stride, organized, image):
+    """Put deprojected ``points`` (N, 3) camera frame back on their pixels of a ``width`` x
+    ``height`` image, keeping every ``stride``-th row and column: ``organized``
+    (ceil(height / stride), ceil(width / stride), 3) float32 (NaN-filled by the caller) gets each
+    point at the pixel nearest its projection, ``image`` (same rows and columns, 3) uint8 its
+    colour (``colors`` (N, 3) uint8; an empty array when there are none). Points not in front of
+    the camera, non-finite, off the image or between the kept pixels are dropped. Returns how
+    many were placed."""
     with_color = colors.shape[0] == points.shape[0]
     placed = 0
     for k in range(points.shape[0]):
@@ -338,7 +339,10 @@ def organize_points(points, colors, fx, fy, cx, cy, organized, image):
         v = np.rint(fy * y / z + cy)
         if not (0.0 <= u < width and 0.0 <= v < height):
             continue
-        i, j = int(v), int(u)
+        row, column = int(v), int(u)
+        if row % stride or column % stride:
+            continue
+        i, j = row // stride, column // stride
         organized[i, j, 0] = x
         organized[i, j, 1] = y
         organized[i, j, 2] = z

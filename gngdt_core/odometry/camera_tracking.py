@@ -99,10 +99,12 @@ class CameraTracking:
             return self._lost("no calibration")
         if surface is None:
             return self._lost("no map")
+        stride = self.odometry.pixel_stride  # the pixels between are never looked at
         organized, image = organize(positions, colors, camera.width, camera.height, camera.fx,
-                                    camera.fy, camera.cx, camera.cy)
+                                    camera.fy, camera.cx, camera.cy, stride)
         with self._lock:
-            result = self.odometry.track(organized, image, surface, stamp_ns=stamp_ns)
+            result = self.odometry.track(organized, image, surface, stamp_ns=stamp_ns,
+                                         stride=stride)
             self.last, self.problem = result, result.reason
         return Located(None if result.lost else result.pose, False, result, result.reason)
 

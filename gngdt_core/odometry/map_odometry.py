@@ -320,16 +320,23 @@ class MapOdometry:
 
     # ------------------------------------------------------------------ tracking
 
+    @property
+    def pixel_stride(self) -> int:
+        """The finest pixel spacing the levels look at (the strides' greatest common divisor):
+        `track` may be given only those pixels (``stride``)."""
+        return math.gcd(*self.params.strides)
+
     def track(self, points: np.ndarray, colors: np.ndarray | None, surface: MapSurface,
               initial_pose: np.ndarray | None = None,
-              stamp_ns: int | None = None) -> TrackingResult:
+              stamp_ns: int | None = None, stride: int = 1) -> TrackingResult:
         """Align one frame to ``surface`` and, when tracked, make it the current pose.
 
         points: (H, W, 3) organized cloud, camera frame (x right, y down, z forward), metres,
         NaN where there is no depth; colors: (H, W, 3) RGB 0..255 registered to it, or None;
         initial_pose: (4, 4) start of the search instead of the prediction; stamp_ns: the
         frame's capture time, nanoseconds (the prediction covers the time since the last
-        tracked frame).
+        tracked frame); stride: ``points`` and ``colors`` hold only every stride-th row and
+        column of the image (a divisor of `pixel_stride`).
         """
         started = time.perf_counter()
         prediction = (self.predict(stamp_ns) if initial_pose is None
@@ -340,7 +347,10 @@ class MapOdometry:
             raise ValueError(f"colors {colors.shape} do not match points {points.shape}")
         if len(surface) < 3:
             return self._finish(prediction, prediction, "no map", started, {}, stamp_ns)
-        levels = [self._level_points(points, colors, stride) for stride in self.params.strides]
+        if self.pixel_stride % stride:
+            raise ValueError(f"stride {stride} does not divide the levels' {self.pixel_stride}")
+        levels = [self._level_points(points, colors, level, stride)
+                  for level in self.params.strides]
         searched = initial_pose is None and self.n_tracked_ == 0 and self.params.search_steps
         start = searched_start(self, levels[0], surface, prediction) if searched else prediction
         pose, reason, stats = self.align(levels, surface, start)
@@ -420,13 +430,15 @@ class MapOdometry:
                 break
         return pose, pairing, drift, done
 
-    def _level_points(self, points: np.ndarray, colors: np.ndarray | None, stride: int
+    def _level_points(self, points: np.ndarray, colors: np.ndarray | None, stride: int,
+                      given_stride: int = 1
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray]:
         """A level's usable points (M, 3), their normals (M, 3), intensities (M,) or None and
-        depth noise (M,) metres: every ``stride``-th pixel, within the depth range, with a
-        normal."""
+        depth noise (M,) metres: every ``stride``-th pixel (of ``points``, which hold every
+        ``given_stride``-th), within the depth range, with a normal."""
         p = self.params
-        grid = points[::stride, ::stride]
+        step = stride // given_stride
+        grid = points[::step, ::step]
         normals = OK.organized_normals(grid, max_jump=0.05 * stride)
         z = grid[..., 2]
         with np.errstate(invalid="ignore"):
@@ -436,7 +448,7 @@ class MapOdometry:
         flat = grid.reshape(-1, 3).astype(np.float64)[rows]
         intensity = None
         if colors is not None and p.color_weight > 0:
-            intensity = OK.intensities(colors[::stride, ::stride].reshape(-1, 3)[rows])
+            intensity = OK.intensities(colors[::step, ::step].reshape(-1, 3)[rows])
         sigma = np.sqrt((p.depth_noise_m * flat[:, 2] ** 2) ** 2 + p.map_noise_m ** 2)
         return flat, normals.reshape(-1, 3)[rows], intensity, sigma
 
@@ -473,23 +485,23 @@ class MapOdometry:
                                                          centre)
             system += color_system / total
             rhs += color_rhs / total
-        chi = residual[inliers] / sigma[inliers]
-        stats: dict[str, Any] = {
-            "centre": centre, "scale": max(scale, 1e-6), "points": m,
-            "overlap": float(gated.mean()) if m else 0.0,
-            "inlier_share": float(inliers.sum() / max(gated.sum(), 1)),
-            "rms_m": (float(np.sqrt(np.mean(residual[inliers] ** 2))) if inliers.any()
-                      else math.inf),
-            "chi": float(np.sqrt(np.mean(chi ** 2))) if inliers.any() else math.inf,
-            "inlier_nodes": node[inliers], "inlier_residuals": residual[inliers],
-            "inlier_sigmas": sigma[inliers], "pairing": pairing,
-        }
+        stats: dict[str, Any] = {"centre": centre, "scale": max(scale, 1e-6), "points": m,
+                                 "pairing": pairing}
         step = np.eye(4)
-        if solve:
+        if solve:  # a step on the way: the judgement's statistics are the last pass's alone
             xi, stats["constraint"] = OK.constrained_step(system, rhs, stats["scale"],
                                                           p.min_constraint)
             step = OK.update_about(xi, centre)
         else:
+            chi = residual[inliers] / sigma[inliers]
+            stats.update({
+                "overlap": float(gated.mean()) if m else 0.0,
+                "inlier_share": float(inliers.sum() / max(gated.sum(), 1)),
+                "rms_m": (float(np.sqrt(np.mean(residual[inliers] ** 2))) if inliers.any()
+                          else math.inf),
+                "chi": float(np.sqrt(np.mean(chi ** 2))) if inliers.any() else math.inf,
+                "inlier_nodes": node[inliers], "inlier_residuals": residual[inliers],
+                "inlier_sigmas": sigma[inliers]})
             s = np.array([stats["scale"]] * 3 + [1.0] * 3)
             stats["constraint"] = float(np.linalg.eigvalsh(system / np.outer(s, s))[0])
             stats["geometry_constraint"] = float(

@@ -479,3 +479,39 @@ def test_organize_puts_deprojected_points_back_on_their_pixels() -> None:
     np.testing.assert_allclose(organized[valid], points[valid].astype(np.float32))
     np.testing.assert_array_equal(image[valid], colors[valid])
     assert organize(np.zeros((0, 3)), None, 4, 3, 1.0, 1.0, 1.5, 1.0)[1] is None
+
+
+@pytest.mark.parametrize("stride", [2, 3, 4])
+def test_organize_keeps_every_stride_th_pixel_as_the_whole_image_does(stride: int) -> None:
+    """Organized at a stride: the whole image's ``[::stride, ::stride]``, points and colours
+    (the image's odd size included)."""
+    points, colors = render(room(), START)
+    valid = np.isfinite(points[..., 2])
+    centre = ((WIDTH - 1) / 2, (HEIGHT - 1) / 2)
+    whole, whole_image = organize(points[valid], colors[valid], WIDTH - 1, HEIGHT - 1, FOCAL,
+                                  FOCAL, *centre)
+    kept, kept_image = organize(points[valid], colors[valid], WIDTH - 1, HEIGHT - 1, FOCAL,
+                                FOCAL, *centre, stride=stride)
+    np.testing.assert_array_equal(kept, whole[::stride, ::stride])
+    np.testing.assert_array_equal(kept_image, whole_image[::stride, ::stride])
+    with pytest.raises(ValueError, match="stride"):
+        organize(points[valid], None, WIDTH, HEIGHT, FOCAL, FOCAL, *centre, stride=0)
+
+
+def test_tracking_the_levels_pixels_alone_finds_the_same_pose() -> None:
+    """A frame given as only the pixels the levels look at (`pixel_stride`) is tracked to the
+    very pose the whole frame is; a stride the levels do not fall on is refused."""
+    surface = surface_of(room())
+    points, colors = render(room(), moved(START, (0.04, -0.02, 0.03), (2, -3, 1)))
+    stride = MapOdometry().pixel_stride
+    assert stride == math.gcd(*TrackerParams().strides) > 1
+    whole, sparse = MapOdometry(min_points=100), MapOdometry(min_points=100)
+    for odometry in (whole, sparse):
+        odometry.reset(START)
+    expected = whole.track(points, colors, surface)
+    found = sparse.track(points[::stride, ::stride], colors[::stride, ::stride], surface,
+                         stride=stride)
+    assert not expected.lost, expected.reason
+    np.testing.assert_array_equal(found.pose, expected.pose)
+    with pytest.raises(ValueError, match="does not divide"):
+        MapOdometry().track(points, colors, surface, stride=stride * 2 + 1)
