@@ -6,10 +6,12 @@ some frames, publishing what it learned (segmentation, topology, objects, scene,
 ``publish`` that does not shrink with the steps). Latest-frame-wins delivery drops the frames
 that arrive while it is busy; so, rather than learn a few frames fully and drop the rest:
 
-- **publishing** takes at most ``PUBLISH_SHARE`` of the time: the learner publishes when at least
-  ``publish / PUBLISH_SHARE`` seconds (and one frame interval) went by since it last did, or when
-  it is ahead (it waited for the frame), so a busy machine publishes less often, and every
-  learned frame is still learned;
+- **publishing** happens at most every ``publish_every_s`` of the stream's own clock (the
+  frames' sensor times: the same frames of a file on every run, whatever the load), and takes at
+  most ``PUBLISH_SHARE`` of the time: the learner publishes when at least ``publish /
+  PUBLISH_SHARE`` seconds (and one frame interval) went by since it last did, or when it is ahead
+  (it waited for the frame), so a busy machine publishes less often, and every learned frame is
+  still learned;
 - **learning**: each frame gets the steps that fit in what is left, ``share * interval -
   overhead - publish * interval / period``, at the steps per second measured on the last frames,
   within ``min_steps`` .. ``max_steps``. A learner that had to wait for the frame (it is ahead)
@@ -39,6 +41,9 @@ PUBLISH_SHARE = 0.25
 MAX_PUBLISH_PERIOD_S = 1.0
 #: a learner that waited for its frame gets this many times the last frame's steps (up to max)
 GROWTH = 1.25
+#: a frame this close to its publication time (of the stream's clock) is published: a camera's
+#: timestamps jitter, and 30 fps stamps three frames apart may fall a nanosecond short of 0.1 s
+PUBLISH_SLACK_NS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -57,10 +62,11 @@ class StepBudget:
     """Learning steps and publications per frame from the time a live learner has (see the
     module docstring). share: of the frame interval, the part the learner may spend on a frame
     (0: no budget, every frame gets ``max_steps`` and is published); min_steps, max_steps: the
-    bounds of a frame's steps."""
+    bounds of a frame's steps; publish_every_s: the shortest time between two publications on
+    the stream's clock (0: no such bound)."""
 
     def __init__(self, share: float, min_steps: int, max_steps: int,
-                 min_interval_s: float = MIN_INTERVAL_S) -> None:
+                 min_interval_s: float = MIN_INTERVAL_S, publish_every_s: float = 0.0) -> None:
         if not 0.0 <= share <= 1.0:
             raise ValueError(f"share must be in [0, 1], got {share}")
         if not 1 <= min_steps <= max_steps:
@@ -69,6 +75,10 @@ class StepBudget:
         self.min_steps = min_steps
         self.max_steps = max_steps
         self.min_interval_s = min_interval_s
+        if publish_every_s < 0:
+            raise ValueError(f"publish_every_s must be >= 0, got {publish_every_s}")
+        self.publish_every_ns = round(publish_every_s * 1e9)
+        self._last_published_sensor_ns: int | None = None
         self._intervals: deque[float] = deque(maxlen=WINDOW)
         self._speeds: deque[float] = deque(maxlen=WINDOW)
         self._overheads: deque[float] = deque(maxlen=WINDOW)
@@ -97,14 +107,22 @@ class StepBudget:
             self._speeds.append(steps / learn_seconds)
         self._overheads.append(max(0.0, frame_seconds - learn_seconds))
 
-    def published(self, seconds: float, now: float) -> None:
-        """What was learned was published, in ``seconds``, at time ``now`` (seconds)."""
+    def published(self, seconds: float, now: float, sensor_ns: int) -> None:
+        """What was learned was published, in ``seconds``, at time ``now`` (seconds), the frame
+        taken by the sensor at ``sensor_ns`` (the stream's clock, ns)."""
         self._publishing.append(seconds)
         self._last_published = now
+        self._last_published_sensor_ns = sensor_ns
 
-    def publish_due(self, now: float) -> bool:
+    def publish_due(self, now: float, sensor_ns: int) -> bool:
         """Whether to publish after this frame (time ``now``, seconds, as given to
-        `published`): its period is over, or the learner is ahead (it waited for the frame)."""
+        `published`; taken by the sensor at ``sensor_ns``): ``publish_every_s`` of the stream's
+        clock went by since the last publication (or that clock went back: a looped file, a
+        restarted camera), and the learner's own period is over or it is ahead (it waited for
+        the frame)."""
+        last = self._last_published_sensor_ns
+        if last is not None and 0 <= sensor_ns - last < self.publish_every_ns - PUBLISH_SLACK_NS:
+            return False
         return self._waited or now - self._last_published >= self.last.publish_period_s
 
     def next(self) -> Budget:

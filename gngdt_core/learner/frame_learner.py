@@ -117,8 +117,17 @@ class LearnerOptions(Settings):
     object_confirm_frames: int = param(5, Interval(int, 1),
                                        "a cluster is an object once seen in this many learned "
                                        "frames in a row")
+    # measured: publishing (segmentation, clusters, ids, ghosts, messages) cost as much as the
+    # learning itself; a view at 10 Hz is what viewers and planners take (docs/performance.md)
+    publish_every_s: float = param(0.1, Interval(float, 0.0),
+                                   "publish what was learned (topology, objects, scene, status) "
+                                   "at most this often, in seconds of the stream's own clock "
+                                   "(the frames' sensor times: every third frame at 30 fps, the "
+                                   "same frames on every replay of a file); the last frame of a "
+                                   "stream, and one the stream stops after, are always "
+                                   "published; 0: after every learned frame")
     scene_every_frames: int = param(3, Interval(int, 0),
-                                    "publish the foxglove scene every this many learned frames; "
+                                    "publish the foxglove scene every this many publications; "
                                     "0: never")
     pose_workspace_m: float = _pose_limit("workspace_m")
     pose_workspace_around: str = _pose_limit("workspace_around")
@@ -213,6 +222,9 @@ class FrameLearner:
         #: checks every posed cloud before it is learned
         self.poses = PoseChecker(config.options.pose_limits())
         self._rng = np.random.default_rng(seed)
+        # what is published draws its own samples: how often a learner publishes (the load may
+        # decide) never changes what it learns
+        self._analysis_rng = np.random.default_rng(None if seed is None else (seed, 1))
         self._object_finders = {name: ObjectFinder(name, config.options.min_cluster_size,
                                               config.options.object_confirm_frames)
                           for name in CLUSTERINGS}
@@ -355,7 +367,7 @@ class FrameLearner:
         model = self.model
         if count == 0 or model is None or model.n_nodes_ == 0:
             return Ghosts()
-        chosen = positions[self._rng.choice(len(positions), size=count, replace=False)]
+        chosen = positions[self._analysis_rng.choice(len(positions), size=count, replace=False)]
         seen, ghost = ghost_nodes(model.positions_, chosen, pose,
                                   self.options.ghost_distance_m, model.view_depth_margin)
         return Ghosts(int(seen.sum()), float(ghost.sum() / seen.sum()) if seen.any() else 0.0)
@@ -369,7 +381,7 @@ class FrameLearner:
         count = min(len(positions), self.options.quantization_sample)
         if count == 0 or colors is None:
             return {}
-        chosen = self._rng.choice(len(positions), size=count, replace=False)
+        chosen = self._analysis_rng.choice(len(positions), size=count, replace=False)
         errors = self.model.quantization_error(self.placed(positions[chosen]), colors[chosen])
         return {name: float(value) for name, value in errors.items()}
 

@@ -75,6 +75,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: an idle learner looks at its other duties (a stop, the stream's end, a frame left
+#: unpublished) at least this often (seconds); a frame wakes it at once
+IDLE_WAIT_S = 0.01
 #: the outcome a malformed cloud is acknowledged with
 MALFORMED = "malformed"
 #: why a cloud was not learned, as much as an acknowledgement carries
@@ -183,8 +186,6 @@ class LearnerService:
                  learner: FrameLearner, checkpoint: Path | None = None,
                  instances: LearnerInstances | None = None,
                  pool_bytes: int | None = None) -> None:
-        import zenoh
-
         self.camera = camera
         self.options = config.options
         self.learner = learner
@@ -194,14 +195,12 @@ class LearnerService:
         self.latencies = LatencyWindow()
         self.instances = instances or LearnerInstances(session, camera)
         #: with tracking, every frame goes to the tracker thread (`start`); else latest wins
-        self.frames = FrameQueue() if learner.tracking is not None else None
+        self.frames = FrameQueue() if learner.tracking is not None else FrameQueue(1)
         self.handover = Handover()
         #: frames tracked and handed over, not learned or acknowledged yet; when one last was
         self._candidates: list[Tracked] = []
         self._map_learned_at = 0.0
-        self.points = session.declare_subscriber(
-            topic(camera, "points"),
-            zenoh.handlers.RingChannel(1) if self.frames is None else self.frames.put)
+        self.points = session.declare_subscriber(topic(camera, "points"), self.frames.put)
         self.tracker: TrackerThread | None = None
         self._eos = session.declare_subscriber(topic(camera, "eos"), self._on_eos)
         self._topology = declare_publisher(session, topic(camera, "topology"),
@@ -223,7 +222,8 @@ class LearnerService:
         options = self.options
         self.budget = StepBudget(options.frame_time_share,
                                  min(options.min_samples_per_frame, options.samples_per_frame),
-                                 options.samples_per_frame)
+                                 options.samples_per_frame,
+                                 publish_every_s=options.publish_every_s)
         self.calibration = LatestCalibration(learner)
         self._tracking: list = []  # the calibration subscriber and tf publisher (--track)
         if learner.tracking is not None:
@@ -234,10 +234,13 @@ class LearnerService:
                                   latest_wins=False)]
         #: the last publication (its errors and cluster counts go into every status)
         self._published: Publication | None = None
-        #: the last learned frame (stamp, positions, colours), kept to settle on at the end
-        self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None] | None = None
-        #: the last learned frame was not published yet (the budget put it off)
-        self._unpublished = False
+        #: the last learned frame (stamp, positions, colours, sensor time ns), kept to settle on
+        self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None, int] | None = None
+        #: when (`time.perf_counter`) the last learned frame was learned, if not published yet
+        #: (the budget put it off): published once the stream pauses as long
+        self._unpublished: float | None = None
+        #: publications so far (the scene goes with every ``scene_every_frames``-th)
+        self._publications = 0
         #: the last frame learned, and the last one done with (learned or not)
         self.learned_sequence = self.handled_sequence = -1
         self._settled_end = 0.0  # the end of stream (its arrival time) already settled on
@@ -274,7 +277,8 @@ class LearnerService:
         every = self.options.scene_every_frames
         # the scene (~27 ms at 3,000 nodes) only for someone who takes it: `gngdt log` without
         # --mcap or --foxglove does not subscribe to it
-        due = published.figures.counters.frames_used % every == 1 % every if every else False
+        due = every and self._publications % every == 0
+        self._publications += 1
         if every and (settled or (due and self._scene.matching_status.matching)):
             scene = scene_message(published, stamp)
             self._scene.put(scene.SerializeToString(), attachment=attachment)
@@ -348,10 +352,10 @@ class LearnerService:
         learned_at = time.perf_counter()
         self.budget.learned(learner.last_steps, counters.learning_seconds - learning_before,
                             learned_at - started)
-        self.last_frame = (stamp, cloud.positions, cloud.colors)
+        self.last_frame = (stamp, cloud.positions, cloud.colors, cloud.sensor_ns)
         self.learned_sequence = stamp.sequence
-        self._unpublished = True
-        if self.budget.publish_due(learned_at):
+        self._unpublished = learned_at
+        if self.budget.publish_due(learned_at, cloud.sensor_ns):
             latency_ms = self.publish_learned(learned_at)
             log.debug("frame %d: %d points, received after %.1f ms, topology after %.1f ms",
                       stamp.sequence, len(cloud.positions), received_ms, latency_ms)
@@ -391,10 +395,11 @@ class LearnerService:
         """Publish the last learned frame (learned at ``now``, `time.perf_counter`; default
         now) and count the time it took in the budget; the latency in ms."""
         now = time.perf_counter() if now is None else now
-        latency_ms = self.publish(*self.last_frame)
-        self.budget.published(time.perf_counter() - now, now)
+        stamp, positions, colors, sensor_ns = self.last_frame
+        latency_ms = self.publish(stamp, positions, colors)
+        self.budget.published(time.perf_counter() - now, now, sensor_ns)
         self.latencies.add(latency_ms)
-        self._unpublished = False
+        self._unpublished = None
         return latency_ms
 
     def _publish_pose(self, arrival: Arrival, result: FrameResult) -> None:
@@ -430,10 +435,11 @@ class LearnerService:
         if not self.end.finished(self.handled_sequence):
             return False
         if self.last_frame is not None and self.end.received_at != self._settled_end:
-            stamp, positions, colors = self.last_frame
+            stamp, positions, colors, _ = self.last_frame
             self.publish(stamp, positions, colors,
                          settled=self.learner.settle(positions, colors))
             self._settled_end = self.end.received_at
+            self._unpublished = None  # the settled network is the last word
         return True
 
     def run(self, exit_on_eos: bool) -> int:
@@ -454,23 +460,28 @@ class LearnerService:
                         waited = False
                         continue
                 else:
-                    sample = self.points.try_recv()
+                    sample = self.frames.get(0.0)
                     if sample is not None:
                         self.handle(sample, waited)
                         waited = False
                         continue
                 waited = True
-                if self._unpublished:  # idle: what it learned is not left unpublished
+                if self._unpublished is not None and (  # what it learned is not left unpublished
+                        time.perf_counter() - self._unpublished >= self.options.publish_every_s):
                     self.publish_learned()
                     continue
                 if self.stream_over() and exit_on_eos:
                     break
-                time.sleep(0.002)
+                # idle until there is something to do (a frame, or one tracked), not polling
+                if self.tracker is not None:
+                    self.handover.wait(IDLE_WAIT_S)
+                else:
+                    self.frames.wait(IDLE_WAIT_S)
         return 0
 
     def start(self) -> None:
         """With tracking: the tracker thread, posing every frame as it comes."""
-        if self.frames is not None and self.tracker is None:
+        if self.learner.tracking is not None and self.tracker is None:
             self.tracker = TrackerThread(self.learner, self.frames, self.handover,
                                          lambda: self.calibration.intrinsics, self._publish_pose)
             self.tracker.start()

@@ -69,6 +69,12 @@ class FrameQueue:
                 self._arrived.wait(timeout_s)
             return self._samples.popleft() if self._samples else None
 
+    def wait(self, timeout_s: float) -> None:
+        """Until a sample waits (taking none), at most ``timeout_s`` seconds."""
+        with self._arrived:
+            if not self._samples:
+                self._arrived.wait(timeout_s)
+
 
 @dataclass(frozen=True)
 class Tracked:
@@ -84,17 +90,25 @@ class Handover:
 
     def __init__(self) -> None:
         self._frames: list[Tracked] = []
-        self._lock = threading.Lock()
+        self._handed = threading.Condition()
 
     def put(self, tracked: Tracked) -> None:
-        with self._lock:
+        with self._handed:
             self._frames.append(tracked)
+            self._handed.notify()
 
     def take(self) -> list[Tracked]:
         """Every frame handed over since the last call."""
-        with self._lock:
+        with self._handed:
             frames, self._frames = self._frames, []
         return frames
+
+    def wait(self, timeout_s: float) -> None:
+        """Until the tracker hands a frame over (or one waits already), at most
+        ``timeout_s`` seconds."""
+        with self._handed:
+            if not self._frames:
+                self._handed.wait(timeout_s)
 
 
 class TrackerThread(threading.Thread):

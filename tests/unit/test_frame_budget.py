@@ -20,13 +20,14 @@ def fed(budget: StepBudget, frames: int, interval_ms: float, steps_per_s: float,
     at ``steps_per_s`` and taking ``overhead_s`` besides; publishing takes ``publish_s``."""
     clock = 0.0
     for index in range(frames):
-        budget.arrived(index, round(1_000 * MS + index * interval_ms * MS))
+        sensor_ns = round(1_000 * MS + index * interval_ms * MS)
+        budget.arrived(index, sensor_ns)
         steps = budget.next().steps
         seconds = steps / steps_per_s
         budget.learned(steps, seconds, seconds + overhead_s)
         clock += seconds + overhead_s
-        if budget.publish_due(clock):
-            budget.published(publish_s, clock)
+        if budget.publish_due(clock, sensor_ns):
+            budget.published(publish_s, clock, sensor_ns)
             clock += publish_s
     return budget
 
@@ -73,8 +74,8 @@ def test_publishing_takes_at_most_its_share_and_learning_gets_the_rest() -> None
     assert last.publish_period_s == pytest.approx(0.080)
     assert last.seconds == pytest.approx(0.8 * 0.040 - 0.005 - 0.020 * 0.040 / 0.080)
     assert budget.next().steps == int(2e5 * last.seconds)
-    budget.published(0.020, 100.0)
-    assert not budget.publish_due(100.05) and budget.publish_due(100.081)
+    budget.published(0.020, 100.0, 5_000 * MS)
+    assert not budget.publish_due(100.05, 6_000 * MS) and budget.publish_due(100.081, 6_000 * MS)
 
 
 def test_a_learner_that_waits_for_its_frames_is_not_starved() -> None:
@@ -88,10 +89,35 @@ def test_a_learner_that_waits_for_its_frames_is_not_starved() -> None:
         steps = budget.next().steps
         budget.learned(steps, steps / 2e5, steps / 2e5 + 0.02)
         clock += steps / 2e5 + 0.02
-        assert budget.publish_due(clock)
-        budget.published(0.02, clock)
+        assert budget.publish_due(clock, index * 33 * MS)
+        budget.published(0.02, clock, index * 33 * MS)
         clock += 0.02
         assert steps == 10_000
+
+
+def test_publications_follow_the_streams_clock_not_the_machines() -> None:
+    """Every third frame of a 30 fps stream is published at 0.1 s, whatever the wall clock
+    says (a replay paced by the learner is ahead on every frame), stamps that fall a little short
+    of the period included, and again when the clock goes back (a looped file); 0 publishes every
+    frame."""
+    def published(budget: StepBudget, jitter_ns: int) -> list[int]:
+        chosen = []
+        for index in range(30):
+            sensor_ns = 1_000 * MS + round(index * 1e9 / 30) + (jitter_ns if index % 2 else 0)
+            budget.arrived(index, sensor_ns, waited=True)
+            if budget.publish_due(float(index), sensor_ns):
+                budget.published(0.01, float(index), sensor_ns)
+                chosen.append(index)
+        return chosen
+
+    every_third = list(range(0, 30, 3))
+    budget = StepBudget(0.0, 1, 10, publish_every_s=0.1)
+    assert published(budget, 0) == every_third
+    assert published(budget, 0) == every_third  # the clock went back (a looped file): afresh
+    assert published(StepBudget(0.0, 1, 10, publish_every_s=0.1), -MS) == every_third
+    assert published(StepBudget(0.0, 1, 10), 0) == list(range(30))
+    with pytest.raises(ValueError):
+        StepBudget(0.0, 1, 10, publish_every_s=-1.0)
 
 
 def test_no_budget_before_the_first_measurements_or_when_off() -> None:
