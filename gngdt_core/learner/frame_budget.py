@@ -85,6 +85,7 @@ class StepBudget:
         self._publishing: deque[float] = deque(maxlen=WINDOW)
         self._last_stamp: tuple[int, int] | None = None
         self._waited = False
+        self._skipped = False  # frames before the last one were dropped on the way
         self._last_published = -np.inf
         self.last = Budget(max_steps, 0.0, 0.0)
 
@@ -97,6 +98,7 @@ class StepBudget:
             seconds = (capture_time_ns - self._last_stamp[1]) * 1e-9
             if 0 < frames and seconds > 0:
                 self._intervals.append(seconds / frames)
+        self._skipped = self._last_stamp is not None and sequence - self._last_stamp[0] > 1
         self._last_stamp = (sequence, capture_time_ns)
         self._waited = waited
 
@@ -119,10 +121,14 @@ class StepBudget:
         `published`; taken by the sensor at ``sensor_ns``): ``publish_every_s`` of the stream's
         clock went by since the last publication (or that clock went back: a looped file, a
         restarted camera), and the learner's own period is over or it is ahead (it waited for
-        the frame)."""
+        the frame). With the stream's clock (``publish_every_s`` > 0) a learner that drops no
+        frames (a replay it paces) publishes what that clock says, whatever its own pace: the
+        same frames on every run."""
         last = self._last_published_sensor_ns
         if last is not None and 0 <= sensor_ns - last < self.publish_every_ns - PUBLISH_SLACK_NS:
             return False
+        if self.publish_every_ns and not self._skipped:
+            return True
         return self._waited or now - self._last_published >= self.last.publish_period_s
 
     def next(self) -> Budget:

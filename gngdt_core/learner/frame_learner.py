@@ -115,8 +115,8 @@ class LearnerOptions(Settings):
     objects_from: str = param(SEGMENTS.name, OneOf(tuple(CLUSTERINGS)),
                               "clustering whose clusters are published as objects")
     object_confirm_frames: int = param(5, Interval(int, 1),
-                                       "a cluster is an object once seen in this many learned "
-                                       "frames in a row")
+                                       "a cluster is an object once seen in this many "
+                                       "publications (`publish_every_s`) in a row")
     # measured: publishing (segmentation, clusters, ids, ghosts, messages) cost as much as the
     # learning itself; a view at 10 Hz is what viewers and planners take (docs/performance.md)
     publish_every_s: float = param(0.1, Interval(float, 0.0),
@@ -124,7 +124,7 @@ class LearnerOptions(Settings):
                                    "at most this often, in seconds of the stream's own clock "
                                    "(the frames' sensor times: every third frame at 30 fps, the "
                                    "same frames on every replay of a file); the last frame of a "
-                                   "stream, and one the stream stops after, are always "
+                                   "stream, and one the stream stalls after, are always "
                                    "published; 0: after every learned frame")
     scene_every_frames: int = param(3, Interval(int, 0),
                                     "publish the foxglove scene every this many publications; "

@@ -6,14 +6,15 @@ learner's profile forgets nodes that stand for nothing any more and rehearses ea
 a moving camera; a map in a fixed frame grows with the surface seen). Each frame gets the
 learning steps that fit in its share of the time between frames, so the learner keeps up on a
 busy machine. With ``--track``, clouds without a pose are placed by aligning them to the map,
-and the camera's pose is published on ``gngdt/<cam>/tf``. After each learned frame the learner
-publishes the topology (edges per property, every clustering of
-`gngdt.core.clustering.CLUSTERINGS` with persistent cluster ids, and persistent node ids), the
-objects (one per confirmed cluster of ``objects_from``, as a
-foxglove SceneUpdate) and a status message, and every ``scene_every_frames`` frames the whole
-scene as a foxglove SceneUpdate; a queryable on the topology key answers a late joiner with the
-latest topology (`gngdt.services.learner.serve`). The model is checkpointed periodically and on
-SIGINT/SIGTERM, and resumed from the checkpoint on start (`gngdt.services.learner.checkpoints`).
+and the camera's pose is published on ``gngdt/<cam>/tf``. At most every ``publish_every_s``
+of the stream's clock (0.1 s), and after the stream's last frame, the learner publishes the
+topology (edges per property, every clustering of `gngdt.core.clustering.CLUSTERINGS` with
+persistent cluster ids, and persistent node ids), the objects (one per confirmed cluster of
+``objects_from``, as a foxglove SceneUpdate) and a status message, and with every
+``scene_every_frames``-th publication the whole scene as a foxglove SceneUpdate; a queryable
+on the topology key answers a late joiner with the latest topology
+(`gngdt.services.learner.serve`). The model is checkpointed periodically and on SIGINT/SIGTERM,
+and resumed from the checkpoint on start (`gngdt.services.learner.checkpoints`).
 """
 
 from __future__ import annotations
@@ -65,12 +66,17 @@ def add_learning_arguments(group: Any) -> None:
     group.add_argument("--objects-from", metavar="CLUSTERING",
                        help="clustering published as objects on gngdt/<cam>/objects (default "
                        f"segments; any of {', '.join(CLUSTERINGS)})")
+    group.add_argument("--publish-every", type=float, metavar="SECONDS",
+                       help="publish what was learned (topology, objects, scene, status) at "
+                       "most this often, in seconds of the stream's own clock (default 0.1: "
+                       "every third frame at 30 fps; the last frame always; 0: every learned "
+                       "frame)")
     group.add_argument("--object-confirm-frames", type=int, metavar="FRAMES",
                        help="a cluster is published as an object once seen in this many "
-                       "learned frames in a row (default 5; 1: at once)")
+                       "publications in a row (default 5; 1: at once)")
     group.add_argument("--scene-every", type=int, metavar="FRAMES",
-                       help="publish the foxglove scene on gngdt/<cam>/scene every this many "
-                       "learned frames (default 3; 0: never)")
+                       help="publish the foxglove scene on gngdt/<cam>/scene with every this "
+                       "many publications (default 3; 0: never)")
     add_pose_limit_arguments(group)
     group.add_argument("--track", action="store_true", default=None,
                        help="estimate the camera's pose of clouds that come without one by "
@@ -106,7 +112,8 @@ def profile_from_args(args: argparse.Namespace) -> Profile:
     flags = {"samples_per_frame": "samples_per_frame", "min_cluster_size": "min_cluster_size",
              "checkpoint_every_frames": "checkpoint_every", "seed": "seed",
              "objects_from": "objects_from", "object_confirm_frames": "object_confirm_frames",
-             "scene_every_frames": "scene_every", "track": "track"}
+             "scene_every_frames": "scene_every", "publish_every_s": "publish_every",
+             "track": "track"}
     options = {name: getattr(args, flag) for name, flag in flags.items()}
     options.update({f"pose_{name}": value for name, value in pose_limit_values(args).items()})
     return load_profile(args.params).with_overrides(

@@ -75,6 +75,11 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: a stream that sent nothing for this long (seconds of this machine's clock) has its last
+#: learned frame published, if its own clock did not publish it (a camera that stopped); a
+#: replay paced by the learner sends its next frame sooner, so its publications stay the ones
+#: its clock chose
+STALLED_STREAM_S = 1.0
 #: an idle learner looks at its other duties (a stop, the stream's end, a frame left
 #: unpublished) at least this often (seconds); a frame wakes it at once
 IDLE_WAIT_S = 0.01
@@ -237,7 +242,7 @@ class LearnerService:
         #: the last learned frame (stamp, positions, colours, sensor time ns), kept to settle on
         self.last_frame: tuple[FrameStamp, np.ndarray, np.ndarray | None, int] | None = None
         #: when (`time.perf_counter`) the last learned frame was learned, if not published yet
-        #: (the budget put it off): published once the stream pauses as long
+        #: (the budget put it off): published if the stream stalls (`STALLED_STREAM_S`)
         self._unpublished: float | None = None
         #: publications so far (the scene goes with every ``scene_every_frames``-th)
         self._publications = 0
@@ -467,7 +472,7 @@ class LearnerService:
                         continue
                 waited = True
                 if self._unpublished is not None and (  # what it learned is not left unpublished
-                        time.perf_counter() - self._unpublished >= self.options.publish_every_s):
+                        time.perf_counter() - self._unpublished >= STALLED_STREAM_S):
                     self.publish_learned()
                     continue
                 if self.stream_over() and exit_on_eos:

@@ -38,20 +38,51 @@ CAMERA_CHANNELS = {
 }
 
 
-@pytest.fixture(scope="module")
-def recorded_run(tmp_path_factory, tabletop_recording: Path) -> dict[str, Path]:
-    """``gngdt run`` of the 8-frame tabletop with ``--mcap``: the .rrd and the MCAP it wrote."""
-    out = tmp_path_factory.mktemp("recorded-run")
+def _recorded(out: Path, recording: Path, *options: str) -> dict[str, Path]:
+    """``gngdt run`` of ``recording`` with ``--mcap`` and ``options``: the .rrd and the MCAP
+    it wrote."""
     paths = {"rrd": out / "run.rrd", "mcap": out / "run.mcap"}
     completed = subprocess.run(
-        [sys.executable, "-m", "gngdt.services.cli", "run", str(tabletop_recording),
+        [sys.executable, "-m", "gngdt.services.cli", "run", str(recording),
          "--save", str(paths["rrd"]), "--mcap", str(paths["mcap"]),
-         "--samples-per-frame", "10000", "--rate", "0.25"],  # every frame learned
+         "--samples-per-frame", "10000", *options],
         cwd=REPO_ROOT, capture_output=True, text=True, timeout=150)
     assert completed.returncode == 0, completed.stdout + completed.stderr
     assert f"mcap:               {paths['mcap']}" in completed.stdout
     assert ".rrd size:" in completed.stdout and "1 frame in 3" in completed.stdout
     return paths
+
+
+@pytest.fixture(scope="module")
+def recorded_run(tmp_path_factory, tabletop_recording: Path) -> dict[str, Path]:
+    """The 8-frame tabletop, every learned frame published (``--publish-every 0``)."""
+    return _recorded(tmp_path_factory.mktemp("recorded-run"), tabletop_recording,
+                     "--publish-every", "0")
+
+
+@pytest.mark.timeout(200)
+def test_a_replay_publishes_on_its_own_clock(tmp_path: Path, tabletop_recording: Path) -> None:
+    """By default what was learned is published at most every 0.1 s of the recording's own
+    time, counted from the frames' stamps as the contract says, and the last frame settled:
+    the same frames on any machine (a replay stalled for a second may add one)."""
+    from gngdt.io.mcap.reader import read_frames
+    from gngdt.schemas.topology import decode_topology
+
+    stamps = [frame.timestamp_ns for frame in read_frames(tabletop_recording)]
+    expected, last = [], None
+    for sequence, stamp in enumerate(stamps):
+        if last is None or stamp - last >= 100_000_000 - 2_000_000:
+            expected.append(sequence)
+            last = stamp
+    expected.append(len(stamps) - 1)  # the settled network
+    assert 2 < len(set(expected)) < len(stamps)  # the recording shows the rule, not its edge
+    messages = _decoded(_recorded(tmp_path, tabletop_recording)["mcap"])
+    published = [decode_topology(entry[1].SerializeToString()).frame_sequence
+                 for entry in messages["/camera/topology"]]
+    statuses = [entry[1] for entry in messages["/camera/learner/status"]]
+    assert statuses[-1].settled and statuses[-1].frames_used == len(stamps)
+    assert set(expected) <= set(published) and len(set(published)) < len(stamps), published
+    assert published[-1] == len(stamps) - 1
 
 
 def _decoded(path: Path) -> dict[str, list[tuple[int, object, str]]]:

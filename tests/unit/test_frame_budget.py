@@ -104,8 +104,9 @@ def test_publications_follow_the_streams_clock_not_the_machines() -> None:
         chosen = []
         for index in range(30):
             sensor_ns = 1_000 * MS + round(index * 1e9 / 30) + (jitter_ns if index % 2 else 0)
-            budget.arrived(index, sensor_ns, waited=True)
-            if budget.publish_due(float(index), sensor_ns):
+            # a paced replay: never a frame dropped, and the learner not always seen waiting
+            budget.arrived(index, sensor_ns, waited=index % 4 == 0)
+            if budget.publish_due(float(index) * 1e-3, sensor_ns):
                 budget.published(0.01, float(index), sensor_ns)
                 chosen.append(index)
         return chosen
@@ -115,9 +116,24 @@ def test_publications_follow_the_streams_clock_not_the_machines() -> None:
     assert published(budget, 0) == every_third
     assert published(budget, 0) == every_third  # the clock went back (a looped file): afresh
     assert published(StepBudget(0.0, 1, 10, publish_every_s=0.1), -MS) == every_third
-    assert published(StepBudget(0.0, 1, 10), 0) == list(range(30))
+    assert published(StepBudget(0.0, 1, 10, publish_every_s=1e-9), 0) == list(range(30))
     with pytest.raises(ValueError):
         StepBudget(0.0, 1, 10, publish_every_s=-1.0)
+
+
+def test_a_learner_dropping_frames_keeps_publishing_to_its_share_on_the_streams_clock() -> None:
+    """Frames dropped on the way (a live camera faster than the learner): a publication the
+    stream's clock allows still waits for the learner's own period."""
+    budget = fed(StepBudget(0.8, 1_000, 10_000, publish_every_s=0.1), 30, 40.0, 2e5, 0.005,
+                 publish_s=0.020)
+    budget.published(0.020, 100.0, 5_000 * MS)
+    budget.arrived(1_000, 6_000 * MS)  # after a gap in the sequence numbers
+    assert not budget.publish_due(100.05, 6_000 * MS) and budget.publish_due(100.081, 6_000 * MS)
+    budget.published(0.020, 100.081, 6_000 * MS)
+    budget.arrived(1_001, 6_040 * MS)  # the next in sequence
+    assert not budget.publish_due(100.09, 6_040 * MS)  # 40 ms of stream time: not yet
+    budget.arrived(1_002, 6_100 * MS)
+    assert budget.publish_due(100.09, 6_100 * MS)  # none dropped: the stream's clock decides
 
 
 def test_no_budget_before_the_first_measurements_or_when_off() -> None:
