@@ -80,4 +80,6 @@ def test_forgeries_with_another_roles_credentials_are_not_recorded_and_do_not_st
                     in make_reader(file).iter_messages()]
     assert not [topic for topic, data in recorded if b"forged" in data]
     assert [topic for topic, _ in recorded].count("/camera/eos") == 1
-    assert [topic for topic, _ in recorded].count("/camera/objects") >= learned
+    # the learner's own objects are recorded: every publication's (the stream's clock chooses
+    # them: at least one before the end) and the settled network's
+    assert [topic for topic, _ in recorded].count("/camera/objects") >= 2
