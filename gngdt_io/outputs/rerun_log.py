@@ -81,7 +81,8 @@ class DisplayRates:
         cap = (f", at most {self.max_cloud_points:,} points" if self.max_cloud_points else "")
         return (f"colour {every(self.image_every)} ({colour}), depth {every(self.depth_every)}, "
                 f"topology {every(self.topology_every)}, cloud {every(self.cloud_every)}{cap}, "
-                "metrics and objects every frame (--keep-everything: all in full)")
+                "metrics and objects each time the learner publishes them (--keep-everything: "
+                "all in full)")
 
 
 def edge_lines(positions: np.ndarray, pairs: np.ndarray, ids: np.ndarray) -> Any:
