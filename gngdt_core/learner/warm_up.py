@@ -79,6 +79,7 @@ def warm_up_tracking(params: object = None) -> None:
     from gngdt.core.gas.model import GNGDT
     from gngdt.core.odometry.map_odometry import MapOdometry
     from gngdt.core.odometry.map_surface import MapSurface
+    from gngdt.core.sensor.depth import organize
 
     points, colors = sample_organized_frame()
     valid = np.isfinite(points[..., 2])
@@ -86,6 +87,12 @@ def warm_up_tracking(params: object = None) -> None:
     model.partial_fit(points[valid], colors[valid], n_steps=5_000, camera_pose=np.eye(4))
     odometry = MapOdometry(params, strides=(2,), iterations=(2,), gates_m=(0.1,), min_points=6)
     odometry.reset(np.eye(4)).track(points, colors, MapSurface.from_model(model))
+    # a decoded cloud's points and colours are strided views of its packed records
+    records = np.zeros(int(valid.sum()), dtype=[("xyz", "<f4", (3,)), ("rgb", "u1", (3,))])
+    records["xyz"], records["rgb"] = points[valid], colors[valid]
+    height, width = points.shape[:2]
+    organize(records["xyz"], records["rgb"], width, height, width, width, width / 2,
+             height / 2, 2)
 
 
 def run_groups(groups: list[tuple[str, Callable[[], object]]],

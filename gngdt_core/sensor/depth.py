@@ -96,12 +96,13 @@ def organize(points: np.ndarray, colors: np.ndarray | None, width: int, height: 
 
     if stride < 1:
         raise ValueError(f"stride must be >= 1, got {stride}")
-    points = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
+    # views as they come (a decoded cloud's are strided): copying them costs 6x the kernel
+    points = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     shape = (-(-height // stride), -(-width // stride), 3)
     organized = np.full(shape, np.nan, dtype=np.float32)
     image = np.zeros(shape, dtype=np.uint8)
     pixels = (np.zeros((0, 3), dtype=np.uint8) if colors is None
-              else np.ascontiguousarray(np.asarray(colors, dtype=np.uint8).reshape(-1, 3)))
+              else np.asarray(colors, dtype=np.uint8).reshape(-1, 3))
     OK.organize_points(points, pixels, float(fx), float(fy), float(cx), float(cy), int(width),
                        int(height), int(stride), organized, image)
     return organized, None if colors is None else image
