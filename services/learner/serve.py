@@ -1,12 +1,14 @@
 """The learner on zenoh: subscribe to a camera's clouds, learn each through the `FrameLearner`,
 publish what it learned, answer late joiners, checkpoint, stop at the stream's end when asked.
 
-Latest frame wins: the points subscriber keeps only the newest cloud (a zenoh ring channel of size
-1), so when learning falls behind, stale frames are dropped (counted from sequence gaps) and memory
-stays bounded; a capture reading a file sends one frame at a time, each once the learner
+Latest frame wins: the points subscriber keeps only the newest cloud (a `FrameQueue` of one), so
+when learning falls behind, stale frames are dropped (counted from sequence gaps) and memory stays
+bounded; a capture reading a file sends one frame at a time, each once the learner
 acknowledged the one before (``learner/ack``). With ``--track`` every frame is posed as it arrives,
 in the tracker's own thread (`gngdt.services.learner.tracking`), and the learner learns the frames
-that add most to the map. With ``frame_time_share`` > 0 (off by default) each frame gets the
+that add most to the map. What was learned is published at most every ``publish_every_s`` of
+the stream's own clock (the frames' stamps choose which), and the stream's last frame settled.
+With ``frame_time_share`` > 0 (off by default) each frame gets the
 learning steps that fit in that share of the time between frames, and what was learned is published
 less often when publishing would not fit (`gngdt.core.learner.frame_budget`; the status reports the
 budget). Objects and scene are published latest-wins (congestion control DROP): a consumer that

@@ -46,7 +46,8 @@ MAX_MAP_AGE_S = 0.25
 
 
 class FrameQueue:
-    """Points samples waiting for the tracker, oldest first (filled from zenoh's thread)."""
+    """Points samples waiting to be taken (by the tracker; without one, by the learner: a queue
+    of one, the latest wins), oldest first, filled from zenoh's thread."""
 
     def __init__(self, capacity: int = QUEUE_FRAMES) -> None:
         self._samples: deque = deque(maxlen=capacity)
