@@ -28,7 +28,8 @@ def test_capture_runs_with_a_setting_out_of_range_and_names_it(
     with open(log, "wb") as output:
         capture = subprocess.Popen(
             [sys.executable, "-m", "gngdt.services.cli", "capture", str(one_frame_recording),
-             "--fast", "--zenoh-connect", router_endpoint, "--wait-subscribers", "0"],
+             "--fast", "--zenoh-connect", router_endpoint, "--wait-subscribers", "0",
+             "--wait-learner", "0"],  # no learner here: not a minute's wait for one
             cwd=REPO_ROOT, stdout=output, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             start_new_session=True, env={**os.environ, name: value})
     try:
