@@ -89,8 +89,9 @@ def organize(points: np.ndarray, colors: np.ndarray | None, width: int, height: 
     its calibration); colors: (N, 3) uint8 or None. Each point goes back to the pixel it came
     from. Returns (height, width, 3) float32 points, NaN where no point lands, and the colours
     there (zero elsewhere) or None. Points behind the camera or off the image are dropped.
-    ``stride``: only every stride-th row and column, the same as the whole image's
-    ``[::stride, ::stride]`` (a tracker that looks at no finer pixels: 1/16 of the writes at 4).
+    ``stride``: only every stride-th row and column, (ceil(height / stride), ceil(width /
+    stride), 3) each, the same as the whole image's ``[::stride, ::stride]`` (for a tracker that
+    looks at no finer pixels).
     """
     from gngdt.core.kernels import odometry as OK  # numba: loaded when first used
 
