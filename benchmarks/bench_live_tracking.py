@@ -17,6 +17,7 @@ same run: the frames the learner learned (before the tracker thread, only those 
 from __future__ import annotations
 
 import argparse
+import itertools
 import subprocess
 import sys
 import tempfile
@@ -24,7 +25,7 @@ import threading
 from pathlib import Path
 
 import numpy as np
-from bench_tracking import ate
+from bench_tracking import ate, rpe
 from pipeline_runs import TRANSPORTS, BenchPipeline, CpuWindow, load_average
 from procstat import busy_processes
 
@@ -90,6 +91,7 @@ def report(status, end, poses: dict[int, np.ndarray], truth: list[np.ndarray],
     sequences = sorted(sequence for sequence in poses if sequence < len(truth))
     error = ate([poses[s] for s in sequences], [truth[s] for s in sequences])[0] \
         if len(sequences) >= 3 else float("nan")
+    worst = worst_step(poses, truth, sequences)
     lost = ", ".join(f"{reason} {count}" for reason, count in
                      sorted(status.frames_lost_by_reason.items())) or "none"
     per_frame = ", ".join(f"{name} {percent * window.seconds * 10 / max(sent, 1):.1f}"
@@ -99,7 +101,21 @@ def report(status, end, poses: dict[int, np.ndarray], truth: list[np.ndarray],
           f"{status.frames_used} ({status.frames_used / max(sent, 1):.1%}: the frames the "
           f"learner alone would have posed), lost {status.frames_lost_tracking} ({lost}), "
           f"dropped before tracking {status.frames_dropped}; ATE {error * 1000:.1f} mm over "
-          f"{len(sequences)} posed frames; CPU ms per frame sent: {per_frame}", flush=True)
+          f"{len(sequences)} posed frames ({worst}); CPU ms per frame sent: {per_frame}",
+          flush=True)
+
+
+def worst_step(poses: dict[int, np.ndarray], truth: list[np.ndarray],
+               sequences: list[int]) -> str:
+    """The worst error of the camera's motion between two posed frames in a row, and where (a
+    wrong lock shows as one large step, a slow drift as none)."""
+    if len(sequences) < 2:
+        return "no steps"
+    errors = [rpe([poses[a], poses[b]], [truth[a], truth[b]])["t_max"]
+              for a, b in itertools.pairwise(sequences)]
+    worst = int(np.argmax(errors))
+    return (f"worst step error {errors[worst] * 1000:.1f} mm, frames {sequences[worst]} -> "
+            f"{sequences[worst + 1]}")
 
 
 def main() -> None:
