@@ -98,8 +98,8 @@ def test_a_learner_that_waits_for_its_frames_is_not_starved() -> None:
 def test_publications_follow_the_streams_clock_not_the_machines() -> None:
     """Every third frame of a 30 fps stream is published at 0.1 s, whatever the wall clock
     says (a replay paced by the learner is ahead on every frame), stamps that fall a little short
-    of the period included, and again when the clock goes back (a looped file); 0 publishes every
-    frame."""
+    of the period included, and again when the clock goes back (a looped file); a period shorter
+    than the frames' publishes every frame."""
     def published(budget: StepBudget, jitter_ns: int) -> list[int]:
         chosen = []
         for index in range(30):
