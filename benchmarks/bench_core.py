@@ -8,7 +8,8 @@ and cached load time.
 With ``--cpp PATH`` (a build of ``benchmarks/gng_cpp_driver.cpp``: gng_collection's plain C++
 GNG, built outside the repository as that file says) the same sizes are timed in C++ on Data2's
 positions in the same run, and the ratio printed: with strict IEEE floats and with subnormals
-flushed to zero (as a -ffast-math build runs). gngdt never depends on it.
+flushed to zero (as a -ffast-math build runs), beside GNG-DT and beside gngdt's own plain GNG on
+positions alone (the same task as the C++). gngdt never depends on it.
 
 Then forgetting (``utility_k``) and the learner's whole profile (forgetting and rehearsal,
 ``replay_share``) at 1,000 nodes against the same network without either, in the same run: on
@@ -31,14 +32,14 @@ import time
 
 import numpy as np
 
-from gngdt.core import GNGDT
+from gngdt.core import GNG, GNGDT
 from gngdt.eval.reference import ReferenceGNGDT
 from gngdt.eval.synthetic import make_data2
 
 _FIRST_CALL = """
 import time
 t0 = time.perf_counter()
-from gngdt.core import GNGDT
+from gngdt.core import GNG, GNGDT
 from gngdt.eval.synthetic import make_data2
 positions, colors, _ = make_data2(n_points=2000, random_state=0)
 t1 = time.perf_counter()
@@ -63,8 +64,8 @@ def saturated_model(positions: np.ndarray, colors: np.ndarray, n_nodes: int) -> 
     return model
 
 
-def steps_per_second(learner: GNGDT | ReferenceGNGDT, positions: np.ndarray,
-                     colors: np.ndarray, n_steps: int, repeat: int = 1) -> float:
+def steps_per_second(learner: GNG | GNGDT | ReferenceGNGDT, positions: np.ndarray,
+                     colors: np.ndarray | None, n_steps: int, repeat: int = 1) -> float:
     """Median steps/s (thread CPU time: other work on the machine does not count) of
     ``repeat`` calls of ``n_steps`` steps each, the learner going on from call to call."""
     rates = []
@@ -88,19 +89,34 @@ def cpp_steps_per_second(driver: str, positions: np.ndarray, sizes: dict[int, in
     return dict(zip(sizes, rates, strict=True))
 
 
+def plain_gng_rates(positions: np.ndarray, sizes: tuple[int, ...], fast_steps: int,
+                    repeat: int) -> dict[int, float]:
+    """Steps/s of gngdt's own plain GNG on positions alone (the C++ GNG's task) at each size."""
+    rates = {}
+    for n_nodes in sizes:
+        model = GNG(max_nodes=n_nodes, random_state=0)
+        model.fit(positions, n_steps=500 * n_nodes + 200_000)
+        rates[n_nodes] = steps_per_second(model, positions, None, fast_steps, repeat)
+    return rates
+
+
 def cpp_comparison(driver: str, positions: np.ndarray, rates: dict[int, float],
-                   fast_steps: int) -> None:
-    """gngdt's steps/s beside the C++ GNG's at each size, strict IEEE and subnormals flushed."""
+                   fast_steps: int, repeat: int) -> None:
+    """gngdt's steps/s (GNG-DT, and its plain GNG on positions alone) beside the C++ GNG's at
+    each size, strict IEEE and subnormals flushed."""
     # the C++ search is brute force (O(nodes) a step): fewer steps at the larger sizes
     sizes = {nodes: max(30_000, fast_steps * 100 // nodes) for nodes in rates}
     ieee = cpp_steps_per_second(driver, positions, sizes, flush_subnormals=False)
     ftz = cpp_steps_per_second(driver, positions, sizes, flush_subnormals=True)
-    print("beside gng_collection's plain C++ GNG (one topology, positions only), same run:")
-    print(f"{'nodes':>7} {'gngdt steps/s':>15} {'C++ steps/s':>13} {'ratio':>7} "
+    plain = plain_gng_rates(positions, tuple(rates), fast_steps, repeat)
+    print("beside gng_collection's plain C++ GNG (one topology, positions only), same run; "
+          "GNG-DT also keeps colour, normals (eq. 16 each step) and three topologies:")
+    print(f"{'nodes':>7} {'learner':>8} {'gngdt steps/s':>15} {'C++ steps/s':>13} {'ratio':>7} "
           f"{'C++ FTZ steps/s':>16} {'ratio':>7}")
-    for nodes, rate in rates.items():
-        print(f"{nodes:>7} {rate:>15,.0f} {ieee[nodes]:>13,.0f} {rate / ieee[nodes]:>7.2f} "
-              f"{ftz[nodes]:>16,.0f} {rate / ftz[nodes]:>7.2f}")
+    for nodes in rates:
+        for learner, rate in (("GNG-DT", rates[nodes]), ("GNG", plain[nodes])):
+            print(f"{nodes:>7} {learner:>8} {rate:>15,.0f} {ieee[nodes]:>13,.0f} "
+                  f"{rate / ieee[nodes]:>7.2f} {ftz[nodes]:>16,.0f} {rate / ftz[nodes]:>7.2f}")
 
 
 def forgetting_speed(positions: np.ndarray, colors: np.ndarray, fast_steps: int,
@@ -178,7 +194,7 @@ def main() -> None:
         print(f"{n_nodes:>7} {rates[n_nodes]:>15,.0f} {naive:>15,.0f} "
               f"{rates[n_nodes] / naive:>8,.0f}")
     if args.cpp:
-        cpp_comparison(args.cpp, positions, rates, fast_steps)
+        cpp_comparison(args.cpp, positions, rates, fast_steps, args.repeat)
     forgetting_speed(positions, colors, fast_steps, 20 if args.quick else 60)
 
 

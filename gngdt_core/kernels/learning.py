@@ -41,6 +41,7 @@ from gngdt.core.kernels.layout import (
     I_NEXT_ID,
     I_NODES,
     I_STEPS,
+    MODE_GNG,
     MODE_GNGDT,
     P_ALPHA,
     P_BETA,
@@ -205,6 +206,9 @@ def _learn_steps(samples, sample_colors, order, net, fparams, iparams, candidate
     grow_sq = fparams[P_GROW_DISTANCE] * fparams[P_GROW_DISTANCE]
     # in GNG / GNG-W colour is part of the input vector and follows the single topology
     col_follows_pos = mode != MODE_GNGDT
+    # winners by position alone: GNG-DT, and GNG without colour (its distance is then the same),
+    # which search the grid once it is worth it
+    by_position = mode == MODE_GNGDT or (mode == MODE_GNG and not has_col)
 
     n = istate[I_NODES]
     t = istate[I_STEPS]
@@ -245,7 +249,7 @@ def _learn_steps(samples, sample_colors, order, net, fparams, iparams, candidate
         if phase == lam:
             phase = 0
         # Step 2 (and the error of Step 3)
-        if mode == MODE_GNGDT:
+        if by_position:
             if grid_on:
                 s1, s2, err_add, second = nearest_two_grid(net, n, x0, x1, x2, dim, cell_size,
                                                            inv_cell)
@@ -352,7 +356,7 @@ def _learn_steps(samples, sample_colors, order, net, fparams, iparams, candidate
             # keep grid cells about GRID_CELL_SPACINGS node spacings wide (amortised O(n) per
             # lambda steps); the cell size only affects speed, never the winners found
             target_cell = GRID_CELL_SPACINGS * spacing
-            if mode == MODE_GNGDT and n >= GRID_MIN_NODES and spacing > 0.0 and (
+            if by_position and n >= GRID_MIN_NODES and spacing > 0.0 and (
                 not grid_on
                 or cell_size > GRID_CELL_TOLERANCE * target_cell
                 or target_cell > GRID_CELL_TOLERANCE * cell_size

@@ -13,10 +13,62 @@ from gngdt.core.kernels._numba import flush_tiny, inlined
 from gngdt.core.kernels.grid import _node_sq_dist, _sq_dist
 from gngdt.core.kernels.layout import COL_BIT, NOR_BIT, POS_BIT
 
+# Newton steps on the characteristic cubic before `smallest_eigenvalue` takes the closed form.
+NEWTON_MAX_STEPS = 40
+
+
+@inlined
+def _smallest_eigenvalue_trig(q, p2, a00, a01, a02, a11, a12, a22):
+    """The smallest eigenvalue in closed form (trigonometric solution of the cubic); ``q`` is
+    the trace / 3, ``p2`` > 0 the squared Frobenius norm of (A - qI)."""
+    b00 = a00 - q
+    b11 = a11 - q
+    b22 = a22 - q
+    p = math.sqrt(p2 / 6.0)
+    det = (
+        b00 * (b11 * b22 - a12 * a12)
+        - a01 * (a01 * b22 - a12 * a02)
+        + a02 * (a01 * a12 - b11 * a02)
+    ) / (p * p * p)
+    half_det = min(1.0, max(-1.0, det / 2.0))
+    phi = math.acos(half_det) / 3.0
+    return q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+
+
+@inlined
+def smallest_eigenvalue(q, p2, a00, a01, a02, a11, a12, a22):
+    """The smallest eigenvalue of a symmetric 3x3 matrix (``q``, ``p2`` as
+    `_smallest_eigenvalue_trig`).
+
+    A covariance (positive semi-definite: every coefficient of its characteristic cubic
+    ``l^3 - tr l^2 + c2 l - det`` has the sign that leaves no negative root) takes Newton's
+    method from 0: the cubic is increasing and concave left of its smallest root, so the steps
+    rise monotonically to it, and they stop when one no longer rises (full precision; one to a
+    few steps for a surface's points, where that root is far below the others). Other matrices,
+    and the rare ones whose two smallest roots nearly coincide (slow steps), take the closed form
+    (an arccosine and a cosine, several times the cost).
+    """
+    trace = a00 + a11 + a22
+    c2 = a00 * a11 + a00 * a22 + a11 * a22 - a01 * a01 - a02 * a02 - a12 * a12
+    det = (a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02)
+           + a02 * (a01 * a12 - a11 * a02))
+    if trace >= 0.0 and c2 >= 0.0 and det >= 0.0:
+        root = 0.0
+        for _ in range(NEWTON_MAX_STEPS):
+            value = ((root - trace) * root + c2) * root - det
+            slope = (3.0 * root - 2.0 * trace) * root + c2
+            if not slope > 0.0:
+                break
+            step = root - value / slope
+            if not step > root:
+                return root
+            root = step
+    return _smallest_eigenvalue_trig(q, p2, a00, a01, a02, a11, a12, a22)
+
 
 @njit(cache=True)
 def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
-    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (closed form).
+    """Unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix.
 
     Returns (x, y, z, ok); ok is False when the eigenvector is not unique (e.g. an isotropic or
     rank-one matrix), in which case the vector is zero.
@@ -29,15 +81,7 @@ def smallest_eigenvector(a00, a01, a02, a11, a12, a22):
     p2 = b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1
     if p2 <= 0.0:
         return 0.0, 0.0, 0.0, False
-    p = math.sqrt(p2 / 6.0)
-    det = (
-        b00 * (b11 * b22 - a12 * a12)
-        - a01 * (a01 * b22 - a12 * a02)
-        + a02 * (a01 * a12 - b11 * a02)
-    ) / (p * p * p)
-    half_det = min(1.0, max(-1.0, det / 2.0))
-    phi = math.acos(half_det) / 3.0
-    smallest = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+    smallest = smallest_eigenvalue(q, p2, a00, a01, a02, a11, a12, a22)
     # rows of (A - smallest I); the eigenvector is orthogonal to all of them
     m00 = a00 - smallest
     m11 = a11 - smallest

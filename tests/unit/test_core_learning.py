@@ -251,6 +251,17 @@ def test_baselines_keep_one_topology_and_learn_colour(cls):
     assert labels.shape == (40,) and labels.min() == 0
 
 
+def test_gng_without_colour_learns_gngdts_positions_and_edges():
+    # the same distance (position alone), so the same winners, moves and edges: GNG takes
+    # GNG-DT's grid search then, and must find the very nodes its brute force would
+    positions, _, _ = make_data2(n_points=5_000, random_state=0)
+    gng = GNG(max_nodes=120, lambda_=100, random_state=0).fit(positions, n_steps=30_000)
+    gngdt = GNGDT(max_nodes=120, lambda_=100, random_state=0).fit(positions, n_steps=30_000)
+    assert gng.n_nodes_ == 120
+    np.testing.assert_array_equal(gng.positions_, gngdt.positions_)
+    np.testing.assert_array_equal(gng.edges("pos"), gngdt.edges("pos"))
+
+
 def test_gngw_weights_change_the_result():
     positions, colors, _ = make_data1(0.01, n_points=3_000, random_state=0)
     a = GNGW(max_nodes=40, lambda_=100, random_state=0).fit(positions, colors, n_steps=8_000)

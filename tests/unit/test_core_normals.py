@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from gngdt.core import GNGDT
+from gngdt.core.kernels.normals import smallest_eigenvector
 
 
 def curved_surface(rng: np.random.Generator, count: int = 20_000) -> np.ndarray:
@@ -63,3 +64,33 @@ def test_normal_angle_is_validated(bad: float) -> None:
 def test_normal_refresh_steps_is_validated() -> None:
     with pytest.raises(ValueError, match="normal_refresh_steps"):
         GNGDT(normal_refresh_steps=0).check_params()
+
+
+def random_symmetric(rng: np.random.Generator, eigenvalues: np.ndarray) -> np.ndarray:
+    """A symmetric 3x3 matrix with these eigenvalues, in a random orientation."""
+    rotation, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return rotation @ np.diag(eigenvalues) @ rotation.T
+
+
+@pytest.mark.parametrize("spectrum", [
+    "surface",  # a covariance of points on a surface: the smallest root far below the others
+    "edge",  # two small roots, well apart
+    "blob",  # three roots within 1 % of each other: Newton's steps are slow, the closed form ends
+    "indefinite",  # not a covariance: the closed form alone
+])
+def test_the_smallest_eigenvector_is_eighs(spectrum: str) -> None:
+    rng = np.random.default_rng(6)
+    for _ in range(200):
+        scale = 10.0 ** rng.uniform(-6, 3)
+        eigenvalues = {
+            "surface": [rng.uniform(0, 1e-4), rng.uniform(0.3, 1), rng.uniform(1, 2)],
+            "edge": [rng.uniform(0, 0.01), rng.uniform(0.05, 0.1), rng.uniform(1, 2)],
+            "blob": [1.0, 1.004, 1.009],
+            "indefinite": [rng.uniform(-2, -1), rng.uniform(0, 1), rng.uniform(1, 2)],
+        }[spectrum]
+        matrix = random_symmetric(rng, scale * np.array(eigenvalues))
+        *vector, ok = smallest_eigenvector(*matrix[np.triu_indices(3)])
+        assert ok
+        expected = np.linalg.eigh(matrix)[1][:, 0]
+        assert min(np.linalg.norm(vector - expected),
+                   np.linalg.norm(vector + expected)) < 1e-6, (spectrum, eigenvalues)
