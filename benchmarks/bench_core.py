@@ -39,7 +39,7 @@ from gngdt.eval.synthetic import make_data2
 _FIRST_CALL = """
 import time
 t0 = time.perf_counter()
-from gngdt.core import GNG, GNGDT
+from gngdt.core import GNGDT
 from gngdt.eval.synthetic import make_data2
 positions, colors, _ = make_data2(n_points=2000, random_state=0)
 t1 = time.perf_counter()
