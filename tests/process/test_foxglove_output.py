@@ -6,7 +6,6 @@ from __future__ import annotations
 import itertools
 import os
 import shutil
-import statistics
 import subprocess
 import sys
 import time
@@ -318,11 +317,12 @@ def test_logger_survives_an_objects_topic_flooded_with_ids(
     assert put > 100
     rounds = f"logger RSS after each round (MB): {[round(mb) for mb in rss]}, {put} messages"
     assert max(rss[1:]) < rss[1] + queue_mb + 150, rounds
-    # a leak climbs round after round; a busy machine only fills the inbox more (up to its
-    # bound), in any round: the last three rounds against the first three (a run beside other
-    # work gave 302, 310, 393 then 335, 408, 411 MB, no leak: the first two alone were too low
-    # a reference)
-    assert statistics.median(rss[4:]) < max(rss[1:4]) + queue_mb + 30, rounds
+    # a leak climbs round after round and lifts every round, the lowest too; a busy machine
+    # only fills the inbox more (up to its bound) and the allocator keeps more, in any round:
+    # the floor of the last three rounds against the first three's highest. (14 rounds of a
+    # quiet run swung 294-477 MB with no trend, so one or two high rounds are no leak: CI once
+    # gave 299, 296, 299 then 305, 398, 426 MB)
+    assert min(rss[4:]) < max(rss[1:4]) + queue_mb + 30, rounds
     log_text = Path(logger.log_path).read_text()
     assert "more than the limit" in log_text  # the oversized updates were refused, counted
     rows = sum(chunk.num_rows for chunk in RrdReader(str(rrd_path)).stream().collect().stream()
