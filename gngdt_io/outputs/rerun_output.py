@@ -7,8 +7,10 @@ clouds for every Nth frame (by frame sequence), colour as JPEG, clouds capped in
 ``--keep-everything`` logs every frame in full.
 
 Crash safety: the ``.rrd`` is flushed every ``RRD_FLUSH_SECONDS`` (10 s), so a logger killed
-outright (``kill -9``) leaves a file rerun reads up to the last flush (without the footer, which
-only makes rerun scan it whole); SIGINT/SIGTERM lose nothing. An existing ``--save`` file is
+outright (``kill -9``) leaves every message flushed before on disk (without the footer, which
+only makes rerun scan it whole); a kill in the middle of a flush leaves its last message
+partial, and rerun's reader then refuses the file until that tail is cut. SIGINT/SIGTERM lose
+nothing. An existing ``--save`` file is
 never overwritten: a restarted logger writes ``<name>.1.rrd`` (then ``.2``, ...) beside it and
 says so.
 """
