@@ -12,10 +12,11 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import logging
+import os
 import sys
 import time
 
-__all__ = ["TrimPacer", "release_free_memory"]
+__all__ = ["TrimPacer", "release_free_memory", "resident_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -26,6 +27,19 @@ if sys.platform.startswith("linux"):
         _libc.malloc_trim.argtypes = [ctypes.c_size_t]
     except (OSError, AttributeError):  # not glibc (musl has no malloc_trim)
         _libc = None
+
+
+_PAGE_BYTES = os.sysconf("SC_PAGE_SIZE") if hasattr(os, "sysconf") else 4096
+
+
+def resident_bytes() -> int | None:
+    """This process's resident memory now (bytes, from ``/proc/self/statm``: a few
+    microseconds); None where there is no ``/proc``."""
+    try:
+        with open("/proc/self/statm", "rb") as statm:
+            return int(statm.read().split()[1]) * _PAGE_BYTES
+    except (OSError, IndexError, ValueError):
+        return None
 
 
 def release_free_memory() -> bool:

@@ -11,11 +11,13 @@ a thread hands them to the server, so a slow client never blocks a subscriber.
 What clients may cost is bounded in bytes (`gngdt.io.outputs.foxglove_clients`): each gets at
 most ``--foxglove-backlog`` (8) queued messages, beyond which the SDK drops its oldest, and no
 message larger than ``--foxglove-client-mb`` (48) over the backlog is sent (said once per
-topic), so a client holds at most that many megabytes; at most ``--foxglove-max-clients`` (16)
-are served (a newer one is dropped, said); one that has acknowledged nothing for
-``STALL_SECONDS`` while data waited for it is dropped as too slow, said; the memory of clients
-gone goes back to the system. Before: 40 clients that never read took a logger from 257 MB to
-2.7 GB, kept after they left.
+topic), so a client holds at most that many megabytes; all of them together hold at most
+``--foxglove-total-mb`` (256: past it, the client furthest behind is dropped, said, and the
+guard is asked before every message of a megabyte or more, so a loaded machine cannot outrun
+it); at most ``--foxglove-max-clients`` (16) are served (a newer one is dropped, said); one that
+has acknowledged nothing for ``STALL_SECONDS`` while data waited for it is dropped as too slow,
+said; the memory of clients gone goes back to the system. Before: 40 clients that never read
+took a logger from 257 MB to 2.7 GB, kept after they left.
 
 Foxglove has no latched topics: a client that connects late would never get the calibration
 (sent at start and on change) nor, once a recording has ended, anything at all. So each
@@ -50,8 +52,14 @@ DEFAULT_FOXGLOVE_PORT = 8765
 DEFAULT_BACKLOG = 8
 #: megabytes a client's queue may hold: no message larger than this over the backlog is sent
 DEFAULT_CLIENT_MB = 48
+#: megabytes all clients may hold together (the logger's memory over what it was without them)
+DEFAULT_TOTAL_MB = 256
 #: clients served at once
 DEFAULT_MAX_CLIENTS = 16
+#: a message this large or larger first asks the guard whether the clients hold too much
+LARGE_MESSAGE_BYTES = 1_000_000
+#: messages held back for the clients' memory are said at most this often
+HELD_BACK_SAID_EVERY_S = 30.0
 #: how often the clients are watched (`ClientGuard.poll`), seconds
 GUARD_PERIOD_S = 0.1
 #: a channel quiet this long gets its last message again (late clients, ended streams)
@@ -194,11 +202,12 @@ class FoxgloveOutput(Output):
 
     def __init__(self, host: str, port: int, backlog: int = DEFAULT_BACKLOG,
                  republish_s: float = REPUBLISH_SECONDS, client_mb: float = DEFAULT_CLIENT_MB,
-                 max_clients: int = DEFAULT_MAX_CLIENTS) -> None:
+                 max_clients: int = DEFAULT_MAX_CLIENTS,
+                 total_mb: float = DEFAULT_TOTAL_MB) -> None:
         from gngdt.io.outputs.foxglove_clients import ClientGuard
 
         self.server = FoxgloveServer(host, port, backlog)
-        self.guard = ClientGuard(self.server.port, max_clients)
+        self.guard = ClientGuard(self.server.port, max_clients, total_bytes=total_mb * 1e6)
         self._guard_due = False
         self._registrations = _Registrations(self._on_registration)
         #: largest message sent: a client's backlog of them fits in ``client_mb``
@@ -210,7 +219,8 @@ class FoxgloveOutput(Output):
         self._lock = threading.Lock()
         self._wake = threading.Event()
         self._closing = False
-        self.sent = self.replaced = self.skipped = self.republished = 0
+        self.sent = self.replaced = self.skipped = self.republished = self.held_back = 0
+        self._held_back_said_at = -HELD_BACK_SAID_EVERY_S
         self._thread = threading.Thread(target=self._run, name="foxglove", daemon=True)
         self._thread.start()
 
@@ -228,6 +238,11 @@ class FoxgloveOutput(Output):
                            metavar="MB", help="megabytes a Foxglove client's queue may hold: "
                            "no message larger than this over --foxglove-backlog is sent "
                            f"(default {DEFAULT_CLIENT_MB:g})")
+        group.add_argument("--foxglove-total-mb", type=float, default=DEFAULT_TOTAL_MB,
+                           metavar="MB", help="megabytes all Foxglove clients may hold "
+                           "together (the logger's memory over what it was without them); past "
+                           "it the client furthest behind is dropped "
+                           f"(default {DEFAULT_TOTAL_MB:g})")
         group.add_argument("--foxglove-max-clients", type=int, default=DEFAULT_MAX_CLIENTS,
                            metavar="N", help="Foxglove clients served at once; a newer one is "
                            f"dropped (default {DEFAULT_MAX_CLIENTS})")
@@ -238,6 +253,7 @@ class FoxgloveOutput(Output):
             check_bindable(*split_bind(args.bind, DEFAULT_FOXGLOVE_PORT))
         for option, default, low in (("backlog", DEFAULT_BACKLOG, 1),
                                      ("client_mb", DEFAULT_CLIENT_MB, 1),
+                                     ("total_mb", DEFAULT_TOTAL_MB, 1),
                                      ("max_clients", DEFAULT_MAX_CLIENTS, 1)):
             value = getattr(args, f"foxglove_{option}", default)
             if not low <= value <= 1e6:  # also NaN
@@ -250,7 +266,7 @@ class FoxgloveOutput(Output):
             return None
         host, port = split_bind(args.bind, DEFAULT_FOXGLOVE_PORT)
         return cls(host, port, args.foxglove_backlog, client_mb=args.foxglove_client_mb,
-                   max_clients=args.foxglove_max_clients)
+                   max_clients=args.foxglove_max_clients, total_mb=args.foxglove_total_mb)
 
     def describe(self) -> str:
         return f"serving Foxglove at {self.server.url} ({FOXGLOVE_STEPS} > {self.server.url})"
@@ -318,9 +334,27 @@ class FoxgloveOutput(Output):
         item.sent_at = time.monotonic()
         if only_if_listened and not channel.has_sinks():
             return False
+        if len(item.payload) >= LARGE_MESSAGE_BYTES and self.guard.over_total():
+            self._hold_back(item)
+            return False
         channel.log(item.payload, log_time=item.log_time_ns)
         self.sent += 1
         return True
+
+    def _hold_back(self, item: _Latest) -> None:
+        """The clients hold more than --foxglove-total-mb: ``item`` (large) is not sent, the
+        guard acts now rather than at its next period (a loaded machine fills queues fast)."""
+        self.held_back += 1
+        now = time.monotonic()
+        if now - self._held_back_said_at >= HELD_BACK_SAID_EVERY_S:
+            self._held_back_said_at = now
+            log.warning("Foxglove: the clients hold %.0f MB, more than %.0f MB "
+                        "(--foxglove-total-mb): messages of a megabyte or more (%s) are held "
+                        "back until their queues drain (%d so far; said at most every %.0f s)",
+                        self.guard.held_bytes() / 1e6, self.guard.total_bytes / 1e6,
+                        item.topic, self.held_back, HELD_BACK_SAID_EVERY_S)
+        if self.guard.drop_due():
+            self.guard.poll()
 
     def close(self) -> None:
         self._closing = True
@@ -329,6 +363,8 @@ class FoxgloveOutput(Output):
         self._registrations.close()
         self.server.stop()
         log.info("Foxglove: %d messages sent (%d again for late clients), %d replaced by newer "
-                 "ones before they were sent, %d skipped; %d clients refused, %d dropped as too "
-                 "slow", self.sent, self.republished, self.replaced, self.skipped,
-                 self.guard.refused, self.guard.dropped_slow)
+                 "ones before they were sent, %d skipped, %d held back for the clients' memory; "
+                 "%d clients refused, %d dropped as too slow, %d for the memory they held",
+                 self.sent, self.republished, self.replaced, self.skipped, self.held_back,
+                 self.guard.refused, self.guard.dropped_slow,
+                 self.guard.dropped_for_memory)

@@ -11,6 +11,12 @@ end and frees the client's queue.
 - a client cap: beyond ``max_clients`` connections the newest are dropped, each said once;
 - a client too slow: one that has had data waiting in its socket and acknowledged none of it
   for ``stall_s`` is dropped, said once;
+- a total in bytes: what the clients hold together is this process's resident memory over what
+  it was with no client connected. Past ``total_bytes``, the client furthest behind (data
+  waiting, nothing acknowledged for ``MEMORY_STALL_SECONDS``) is dropped, said, one every
+  ``MEMORY_DROP_PAUSE_S`` while the total stays over (its queue is freed by the SDK's thread,
+  then given back). `over_total` is cheap enough to ask before every large message (the
+  server holds large ones back meanwhile);
 - memory back: when clients leave, the free pages are given back (`gngdt.io.memory`).
 
 Linux only (``/proc``, ``TCP_INFO``); elsewhere the guard says once that it cannot watch.
@@ -29,7 +35,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from gngdt.io.memory import TrimPacer
+from gngdt.io.memory import TrimPacer, resident_bytes
 
 __all__ = ["STALL_SECONDS", "ClientGuard"]
 
@@ -37,6 +43,12 @@ log = logging.getLogger(__name__)
 
 #: a client with data waiting that acknowledges nothing for this long is too slow: dropped
 STALL_SECONDS = 5.0
+#: over the total, only a client that has acknowledged nothing this long while data waited for it
+#: is dropped (one reading, even slowly, acknowledges within a poll or two)
+MEMORY_STALL_SECONDS = 0.5
+#: over the total, one client is dropped at most this often: the memory of the last one takes
+#: that long to be freed and given back
+MEMORY_DROP_PAUSE_S = 0.3
 #: struct tcp_info (linux/tcp.h): tcpi_bytes_acked, a u64 at byte 120 (Linux 4.2 and later)
 _BYTES_ACKED = struct.Struct("=Q")
 _BYTES_ACKED_OFFSET = 120
@@ -92,20 +104,27 @@ class ClientGuard:
     """Watches the connections of the Foxglove server on ``port`` (see the module docstring);
     `poll` every half second or so."""
 
-    def __init__(self, port: int, max_clients: int, stall_s: float = STALL_SECONDS) -> None:
+    def __init__(self, port: int, max_clients: int, stall_s: float = STALL_SECONDS,
+                 total_bytes: float | None = None) -> None:
         self.port = port
         self.max_clients = max_clients
         self.stall_s = stall_s
+        self.total_bytes = total_bytes
         self.available = sys.platform.startswith("linux") and Path("/proc/self/fd").is_dir()
         self._clients: dict[tuple, _Client] = {}
         #: peers shut down, until the SDK has closed their connection
         self._shut: set[tuple] = set()
         #: every peer connected at the last poll
         self._connected: set[tuple] = set()
-        self._trim = TrimPacer()
-        #: clients dropped for being too many / too slow
+        self._trim = TrimPacer(min_interval_s=MEMORY_DROP_PAUSE_S)
+        #: this process's resident bytes with no client connected (the lowest seen since)
+        self._resident_alone = resident_bytes()
+        #: when the total was last found over (a client dropped if one was behind enough)
+        self._memory_checked_at = -MEMORY_DROP_PAUSE_S
+        #: clients dropped for being too many / too slow / holding more than the total
         self.refused = 0
         self.dropped_slow = 0
+        self.dropped_for_memory = 0
         if not self.available:
             log.warning("Foxglove: this system cannot be watched for slow or surplus clients "
                         "(Linux only); each may queue up to its backlog")
@@ -127,6 +146,35 @@ class ClientGuard:
             self._trim.soon()
         self._connected = connected
         self._trim.poll()
+        resident = resident_bytes()
+        if resident is not None and self._resident_alone is not None and (
+                not connected or resident < self._resident_alone):
+            self._resident_alone = resident
+
+    @property
+    def connected(self) -> set[tuple]:
+        """The peers (address, port) of the server's connections at the last `poll`."""
+        return set(self._connected)
+
+    def held_bytes(self) -> int:
+        """What the clients hold now, as this process's resident memory over what it was with
+        none connected (0 where that cannot be read)."""
+        resident = resident_bytes()
+        if resident is None or self._resident_alone is None:
+            return 0
+        return max(0, resident - self._resident_alone)
+
+    def over_total(self) -> bool:
+        """Whether the clients hold more than ``total_bytes`` (a few microseconds: ask it
+        before every large message)."""
+        return (self.available and self.total_bytes is not None
+                and self.held_bytes() > self.total_bytes)
+
+    def drop_due(self, now: float | None = None) -> bool:
+        """Whether the clients hold more than ``total_bytes`` and `poll` would act on it now
+        (drop the client furthest behind, give memory back)."""
+        now = time.monotonic() if now is None else now
+        return now - self._memory_checked_at >= MEMORY_DROP_PAUSE_S and self.over_total()
 
     def _drop(self, peer: tuple, connection: socket.socket) -> None:
         self._shut.add(peer)
@@ -161,7 +209,33 @@ class ClientGuard:
                         "(--foxglove-max-clients)", _address(peer), len(kept),
                         self.max_clients)
             self._drop(peer, connection)
-        return {peer for _, peer, _ in kept[:self.max_clients]}
+        kept = kept[:self.max_clients]
+        if self.drop_due(now):
+            self._memory_checked_at = now
+            self._trim.soon()  # what the queues drained meanwhile, too
+            behind = self._furthest_behind(kept, now)
+            if behind is not None:
+                self.dropped_for_memory += 1
+                peer, connection = behind
+                log.warning("Foxglove client %s dropped: the clients hold %.0f MB, more than "
+                            "%.0f MB (--foxglove-total-mb), and it was furthest behind (nothing "
+                            "read for %.1f s)", _address(peer), self.held_bytes() / 1e6,
+                            self.total_bytes / 1e6, now - self._clients[peer].progress_at)
+                self._drop(peer, connection)
+                kept = [item for item in kept if item[1] != peer]
+        return {peer for _, peer, _ in kept}
+
+    def _furthest_behind(self, kept: list[tuple[float, tuple, socket.socket]],
+                         now: float) -> tuple[tuple, socket.socket] | None:
+        """(peer, connection) of the client longest without progress, if that is at least
+        ``MEMORY_STALL_SECONDS``."""
+        stalled = [(self._clients[peer].progress_at, peer, connection)
+                   for _, peer, connection in kept
+                   if now - self._clients[peer].progress_at >= MEMORY_STALL_SECONDS]
+        if not stalled:
+            return None
+        _, peer, connection = min(stalled, key=lambda item: item[0])
+        return peer, connection
 
 
 def _address(peer: tuple) -> str:
