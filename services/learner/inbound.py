@@ -95,6 +95,34 @@ class LatestCalibration:
 
 
 @dataclass(frozen=True)
+class Received:
+    """A points sample's bytes, copied out of zenoh on arrival: a sample kept waiting in a queue
+    would hold its shared-memory buffer, and a capture whose pool is full sends over the network
+    (measured: 230 of 300 clouds while the tracker's queue waited for the first map)."""
+
+    #: None: larger than the limit, not copied
+    payload: bytes | None
+    payload_size: int
+    attachment: bytes | None
+    #: it came through shared memory (diagnostics)
+    shared: bool = False
+
+
+def points_limit_bytes(max_cloud_points: int) -> int:
+    """Bytes a points payload may take (a foreign layout's widest stride, and its header)."""
+    return max_cloud_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
+
+
+def receive(sample: zenoh.Sample, limit_bytes: int) -> Received:
+    """``sample``'s bytes (its payload only within ``limit_bytes``), out of zenoh's buffers."""
+    from gngdt.services.plumbing.session import through_shared_memory
+
+    size = len(sample.payload)
+    return Received(sample.payload.to_bytes() if size <= limit_bytes else None, size,
+                    attachment_bytes(sample), through_shared_memory(sample))
+
+
+@dataclass(frozen=True)
 class Arrival:
     """One points sample as the learner takes it: its ``stamp`` (None: its attachment is not a
     frame stamp), the decoded ``cloud``, or why it is malformed (``problem``)."""
@@ -102,16 +130,22 @@ class Arrival:
     stamp: FrameStamp | None
     cloud: PointsMessage | None = None
     problem: str = ""
+    #: it came through shared memory (diagnostics)
+    shared: bool = False
 
 
-def arrive(sample: zenoh.Sample, max_cloud_points: int) -> Arrival:
-    """Decode one points sample (payload bounded by ``max_cloud_points`` before any copy); a
-    malformed one says why instead."""
+def arrive(received: Received, max_cloud_points: int) -> Arrival:
+    """Decode one points sample (`receive` bounded its payload before any copy); a malformed one
+    says why instead."""
+    from gngdt.schemas.messages import MessageError
+
     stamp = None
     try:
-        stamp = FrameStamp.from_attachment(attachment_bytes(sample))
-        limit = max_cloud_points * MAX_POINT_STRIDE_BYTES + 64 * 1024
-        return Arrival(stamp, decode_points(payload_bytes(sample, limit), attachment_bytes(sample),
-                                            max_cloud_points))
+        stamp = FrameStamp.from_attachment(received.attachment)
+        if received.payload is None:
+            raise MessageError(f"{received.payload_size} bytes, more than the limit of "
+                               f"{points_limit_bytes(max_cloud_points)}")
+        return Arrival(stamp, decode_points(received.payload, received.attachment,
+                                            max_cloud_points), shared=received.shared)
     except ValueError as error:  # MessageError is a ValueError
-        return Arrival(stamp, problem=str(error))
+        return Arrival(stamp, problem=str(error), shared=received.shared)

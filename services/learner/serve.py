@@ -51,6 +51,7 @@ from gngdt.services.learner.inbound import (
     Arrival,
     EndOfStream,
     LatestCalibration,
+    Received,
     arrive,
     payload_bytes,
 )
@@ -70,7 +71,7 @@ from gngdt.services.learner.tracking import (
     TrackerThread,
 )
 from gngdt.services.plumbing import lifecycle
-from gngdt.services.plumbing.session import declare_publisher, through_shared_memory
+from gngdt.services.plumbing.session import declare_publisher
 
 if TYPE_CHECKING:
     import zenoh
@@ -202,7 +203,9 @@ class LearnerService:
         self.latencies = LatencyWindow()
         self.instances = instances or LearnerInstances(session, camera)
         #: with tracking, every frame goes to the tracker thread (`start`); else latest wins
-        self.frames = FrameQueue() if learner.tracking is not None else FrameQueue(1)
+        max_points = self.options.max_cloud_points
+        self.frames = (FrameQueue(max_points) if learner.tracking is not None
+                       else FrameQueue(max_points, capacity=1))
         self.handover = Handover()
         #: frames tracked and handed over, not learned or acknowledged yet; when one last was
         self._candidates: list[Tracked] = []
@@ -297,21 +300,18 @@ class LearnerService:
         self._status.put(status.SerializeToString(), attachment=attachment)
         return latency_ms
 
-    def handle(self, sample: zenoh.Sample, waited: bool = False) -> None:
+    def handle(self, received: Received, waited: bool = False) -> None:
         """Decode, learn and (when due) publish one points sample (no tracking), then
         acknowledge it. ``waited``: the learner was idle until it came (it keeps up)."""
-        self.take(Tracked(self._arrived(sample), None), waited)
-
-    def _arrived(self, sample: zenoh.Sample) -> Arrival:
-        self.learner.counters.frames_received += 1
-        self.clouds_shared += through_shared_memory(sample)
-        return arrive(sample, self.options.max_cloud_points)
+        self.take(Tracked(arrive(received, self.options.max_cloud_points), None), waited)
 
     def take(self, tracked: Tracked, waited: bool = False, learn: bool = True) -> None:
         """One frame done with: learned (``learn``) and published when due, or not (a bad one
         counted and skipped, a tracked one not chosen), then acknowledged (a capture reading a
         file waits for that before its next frame)."""
         arrival = tracked.arrival
+        self.learner.counters.frames_received += 1
+        self.clouds_shared += arrival.shared
         if arrival.cloud is None:
             self.learner.counters.malformed_messages += 1
             log.warning("points message skipped: %s", arrival.problem)
@@ -467,9 +467,9 @@ class LearnerService:
                         waited = False
                         continue
                 else:
-                    sample = self.frames.get(0.0)
-                    if sample is not None:
-                        self.handle(sample, waited)
+                    received = self.frames.get(0.0)
+                    if received is not None:
+                        self.handle(received, waited)
                         waited = False
                         continue
                 waited = True

@@ -22,7 +22,13 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from gngdt.core.learner.results import FrameResult
-from gngdt.services.learner.inbound import Arrival, arrive
+from gngdt.services.learner.inbound import (
+    Arrival,
+    Received,
+    arrive,
+    points_limit_bytes,
+    receive,
+)
 
 if TYPE_CHECKING:
     import zenoh
@@ -47,24 +53,27 @@ MAX_MAP_AGE_S = 0.25
 
 class FrameQueue:
     """Points samples waiting to be taken (by the tracker; without one, by the learner: a queue
-    of one, the latest wins), oldest first, filled from zenoh's thread."""
+    of one, the latest wins), oldest first, filled from zenoh's thread. Each is copied out of
+    zenoh as it arrives (`receive`: its payload within the limit of ``max_cloud_points``)."""
 
-    def __init__(self, capacity: int = QUEUE_FRAMES) -> None:
-        self._samples: deque = deque(maxlen=capacity)
+    def __init__(self, max_cloud_points: int, capacity: int = QUEUE_FRAMES) -> None:
+        self._samples: deque[Received] = deque(maxlen=capacity)
+        self._limit_bytes = points_limit_bytes(max_cloud_points)
         self._arrived = threading.Condition()
         self.dropped = 0
 
     def put(self, sample: zenoh.Sample) -> None:
+        received = receive(sample, self._limit_bytes)
         with self._arrived:
             self.dropped += len(self._samples) == self._samples.maxlen
-            self._samples.append(sample)
+            self._samples.append(received)
             self._arrived.notify()
 
     def __len__(self) -> int:
         with self._arrived:
             return len(self._samples)
 
-    def get(self, timeout_s: float) -> zenoh.Sample | None:
+    def get(self, timeout_s: float) -> Received | None:
         with self._arrived:
             if not self._samples:
                 self._arrived.wait(timeout_s)
@@ -131,15 +140,15 @@ class TrackerThread(threading.Thread):
     def run(self) -> None:
         try:
             while not self.stopping.is_set():
-                sample = self.queue.get(0.1)
-                if sample is not None:
-                    self.handover.put(self.track(sample))
+                received = self.queue.get(0.1)
+                if received is not None:
+                    self.handover.put(self.track(received))
         except BaseException as error:  # said and acted on by the learner's loop
             self.failure = error
 
-    def track(self, sample: zenoh.Sample) -> Tracked:
+    def track(self, received: Received) -> Tracked:
         """Decode one sample and, when its cloud has no pose, find it."""
-        arrival = arrive(sample, self.learner.options.max_cloud_points)
+        arrival = arrive(received, self.learner.options.max_cloud_points)
         cloud = arrival.cloud
         if cloud is None or cloud.pose is not None:
             return Tracked(arrival, None)

@@ -144,6 +144,31 @@ def test_a_full_pool_sends_over_the_network_instead(router_endpoint: str) -> Non
 
 
 @pytest.mark.timeout(60)
+def test_the_learners_queue_holds_copies_not_the_captures_pool(router_endpoint: str) -> None:
+    """The tracker's queue keeps up to 32 clouds while the first map is learned. Holding the
+    samples kept the capture's pool (8 clouds) full, and the rest went over the network: 230 of
+    300 clouds in one live run. The queue copies each one out as it arrives."""
+    from gngdt.services.learner.tracking import FrameQueue
+
+    session = open_config(client_config([router_endpoint]))
+    queue = FrameQueue(max_cloud_points=100_000)
+    subscription = session.declare_subscriber(KEY, queue.put)
+    try:
+        sent = payloads(6, 1_000_000)
+        publisher = publish(router_endpoint, sent, pool_bytes=int(2.5 * 2**20))  # room for 2
+        deadline = time.monotonic() + 10
+        while len(queue) < 6 and time.monotonic() < deadline:
+            time.sleep(0.01)
+    finally:
+        subscription.undeclare()
+        session.close()
+    waiting = [queue.get(0.0) for _ in range(len(queue))]
+    assert [received.payload for received in waiting] == sent
+    assert all(received.shared for received in waiting)
+    assert (publisher.sent_shared, publisher.sent_network) == (6, 0)
+
+
+@pytest.mark.timeout(60)
 def test_pool_size_zero_leaves_payloads_to_zenoh(router_endpoint: str, subscriber) -> None:
     _, received = subscriber
     sent = payloads(2, 1_000_000)
