@@ -33,7 +33,7 @@ from gngdt.io.ros2.messages import (
 from gngdt.io.ros2.wire import QOS_SENSOR_DATA, QOS_TF, Durability, Qos
 from gngdt.io.tf_tree import TransformError, TransformTree
 from gngdt.schemas.wire import MAX_CLOCK_OFFSET_NS, FrameStamp
-from gngdt.services.capture import CapturePublisher
+from gngdt.services.capture import CapturePublisher, cloud_of
 from gngdt.services.ros2.worker import Handler, Worker
 
 if TYPE_CHECKING:
@@ -244,16 +244,16 @@ class RosToGngdt:
                             "are stamped with their arrival time", (capture_time - now) / 1e9)
                 self._simulated_time = True
             capture_time = now
-        positions = colors = None
+        cloud = None
         if frame.pose_error:
             self.counts.frames_without_pose += 1
             if self.counts.frames_without_pose <= WARN_FIRST:
                 log.warning("frame %d has no pose in %r: %s; its images are published, not its "
                             "cloud", frame.index, self.fixed_frame, frame.pose_error)
         else:
-            positions, colors = self.to_cloud(frame)
-        self.publisher.publish_frame(frame, FrameStamp(self._sequence, capture_time), positions,
-                                     colors)
+            cloud, _ = cloud_of(frame, self.to_cloud, self.publisher.camera, capture_time)
+        self.publisher.publish_frame(frame, FrameStamp(self._sequence, capture_time), None, None,
+                                     cloud=cloud)
         self._sequence += 1
         self.counts.frames_published += 1
 
