@@ -94,9 +94,10 @@ class GngdtToRos:
         self.clouds.start()
         self.learned.start()
 
-    @staticmethod
-    def _feed(worker: Worker, stream: str):
+    def _feed(self, worker: Worker, stream: str):
         def on_sample(sample: zenoh.Sample) -> None:
+            if stream == "points" and not self._cloud_wanted():
+                return  # not even copied: a cloud is megabytes, and nobody would get it
             attachment = sample.attachment
             worker.put(stream, sample.payload.to_bytes(),
                        None if attachment is None else attachment.to_bytes())
@@ -109,6 +110,10 @@ class GngdtToRos:
     def _wanted(self, stream: str) -> bool:
         return self.publishers[stream].has_subscribers
 
+    def _cloud_wanted(self) -> bool:
+        """A cloud's points or its pose (/tf) has a subscriber."""
+        return self._wanted("points") or self._wanted("tf")
+
     # --- clouds -------------------------------------------------------------------------------
 
     def _on_cloud(self, stream: str, payload: bytes, attachment: bytes | None) -> None:
@@ -117,7 +122,7 @@ class GngdtToRos:
         from gngdt.schemas.clouds import MAX_CLOUD_POINTS, cloud_pose, msg_to_cloud
         from gngdt.schemas.messages import parse_message, timestamp_to_ns
 
-        if not (self._wanted("points") or self._wanted("tf")):
+        if not self._cloud_wanted():
             return
         message = parse_message(PointCloud, payload)
         stamp_ns = timestamp_to_ns(message.timestamp)
