@@ -210,12 +210,14 @@ def open_ros2_session(endpoints: list[str], wait_s: float) -> zenoh.Session:
 def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, domain: int,
            to_cloud: FrameToCloud) -> None:
     """Translate until a stop signal; everything declared is undeclared on the way out."""
+    from gngdt.io.memory import map_large_buffers
     from gngdt.io.ros2.messages import OK, WARN, Status
     from gngdt.io.ros2.node import Ros2Node
     from gngdt.services.plumbing import lifecycle
     from gngdt.services.ros2.inbound import CameraTopics, RosToGngdt
     from gngdt.services.ros2.outbound import GngdtToRos, ros_topics
 
+    map_large_buffers()  # images in and clouds out: each freed at once, not kept in arenas
     node = Ros2Node(ros, f"gngdt_{args.cam}", domain_id=domain)
     outbound = GngdtToRos(gngdt, node, args.cam, args.camera_frame or args.cam,
                           1.0 / args.graph_rate)
