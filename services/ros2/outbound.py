@@ -67,6 +67,8 @@ class GngdtToRos:
 
     def __init__(self, session: zenoh.Session, node: Ros2Node, camera: str, camera_frame: str,
                  graph_period_s: float) -> None:
+        import zenoh
+
         self.camera = camera
         self.camera_frame = camera_frame
         self.graph_period_s = graph_period_s
@@ -86,8 +88,9 @@ class GngdtToRos:
         self._shown_objects: set[int] = set()
         self._last_graph = -float("inf")
         self._status: tuple[float, LearnerStatusInfo] | None = None
-        self._subscribers = [
-            session.declare_subscriber(topic(camera, stream), self._feed(worker, stream))
+        self._subscribers = [  # called on zenoh's thread, not through a queue of 256 samples
+            session.declare_subscriber(topic(camera, stream), zenoh.handlers.Callback(
+                self._feed(worker, stream), None, indirect=False))
             for worker, stream in ((self.clouds, "points"), (self.learned, "topology"),
                                    (self.learned, "objects"), (self.learned, "learner/status"),
                                    (self.learned, "tf"))]
