@@ -225,6 +225,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
     tokens = [gngdt.liveliness().declare_token(alive_key(args.cam, BRIDGE))]
     try:
         if not args.no_input:
+            to_cloud.warm_up()  # numba's kernels loaded before the first frame, not on it
             inbound = RosToGngdt(
                 gngdt, node, args.cam,
                 CameraTopics(args.color_topic, args.depth_topic, args.camera_info_topic),
