@@ -1,6 +1,7 @@
 """Kept pixels of a depth frame deprojected straight into a PointCloud's packed points (x, y, z
 float32 and red, green, blue uint8, 15 bytes a point): compiled passes over the depth image
-instead of deprojecting into arrays, then copying them field by field into the wire buffer."""
+instead of deprojecting into arrays, then copying them field by field into the wire buffer.
+Without the GIL: the ROS 2 bridge's zenoh thread takes it to queue the next image meanwhile."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 from numba import njit
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def count_kept(depth, min_depth, max_depth):
     """How many pixels of the (H, W) ``depth`` `kept_pixels` keeps (nothing allocated)."""
     lo = np.float32(min_depth)
@@ -23,7 +24,7 @@ def count_kept(depth, min_depth, max_depth):
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def pack_kept(depth, min_depth, max_depth, slope_u, slope_v, rgb, ranks, every, out):
     """The pixels of the (H, W) ``depth`` that `kept_pixels` keeps, each packed into ``out``
     (uint8, 15 bytes a point) as ``(slope_u[col] * z, slope_v[row] * z, z)`` float32
@@ -63,7 +64,7 @@ def pack_kept(depth, min_depth, max_depth, slope_u, slope_v, rgb, ranks, every, 
     return k
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def kept_pixels(depth, min_depth, max_depth):
     """`Deprojector._depth_metres` in one pass: (H*W,) float32 depth in metres of the flat
     ``depth`` (millimetres, uint16 or float with NaN) and the flat indices of the pixels within
