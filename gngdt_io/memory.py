@@ -43,7 +43,7 @@ def map_large_buffers(threshold_bytes: int = LARGE_BUFFER_BYTES) -> bool:
     the system when it is freed; True when set. glibc does so from 128 kB on, but raises that
     threshold (up to 32 MB) each time such a buffer is freed: from then on the images of a
     flood were carved out of its per-thread arenas and their pages kept there (the ROS 2
-    bridge's peak under a 4K flood: 843 MB, 713 MB with the threshold fixed)."""
+    bridge's peak under a 4K flood: 866-892 MB, ~690 MB with the threshold fixed)."""
     if _libc is None:
         return False
     return bool(_libc.mallopt(_M_MMAP_THRESHOLD, threshold_bytes))
