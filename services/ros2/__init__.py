@@ -217,7 +217,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
     from gngdt.services.ros2.inbound import CameraTopics, RosToGngdt
     from gngdt.services.ros2.outbound import GngdtToRos, ros_topics
 
-    map_large_buffers()  # images in and clouds out: each freed at once, not kept in arenas
+    map_large_buffers()  # 4K images and large clouds: each freed at once, not kept in arenas
     node = Ros2Node(ros, f"gngdt_{args.cam}", domain_id=domain)
     outbound = GngdtToRos(gngdt, node, args.cam, args.camera_frame or args.cam,
                           1.0 / args.graph_rate)
