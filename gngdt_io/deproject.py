@@ -14,7 +14,7 @@ import numpy as np
 from gngdt.core.parameters import Interval, Settings, param
 from gngdt.core.sensor.depth import veil_pixels
 from gngdt.io.frame import CameraIntrinsics, Frame
-from gngdt.io.pack_points import kept_pixels, pack_pixels
+from gngdt.io.pack_points import count_kept, kept_pixels, pack_kept
 from gngdt.schemas.clouds import MAX_CLOUD_POINTS, cloud_to_wire, cloud_wire_buffer
 
 #: the point cap of the clouds `gngdt run` learns from (capture's ``--max-points`` under run, and
@@ -24,18 +24,25 @@ from gngdt.schemas.clouds import MAX_CLOUD_POINTS, cloud_to_wire, cloud_wire_buf
 RUN_POINT_CAP = 50_000
 
 
+def axis_slopes(intrinsics: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray]:
+    """Ray slopes of each column ``(u - cx) / fx``, (W,), and of each row ``(v - cy) / fy``,
+    (H,): float32, computed in float64."""
+    if intrinsics.fx <= 0 or intrinsics.fy <= 0:
+        raise ValueError(f"intrinsics: focal lengths must be positive, got {intrinsics}")
+    u = (np.arange(intrinsics.width, dtype=np.float64) - intrinsics.cx) / intrinsics.fx
+    v = (np.arange(intrinsics.height, dtype=np.float64) - intrinsics.cy) / intrinsics.fy
+    return u.astype(np.float32), v.astype(np.float32)
+
+
 def ray_map(intrinsics: CameraIntrinsics) -> np.ndarray:
     """Per-pixel ray slopes ``((u - cx) / fx, (v - cy) / fy)``: (H, W, 2) float32.
 
     A point at depth z (metres) seen at pixel (u, v) is ``(slope_x * z, slope_y * z, z)``.
     """
-    if intrinsics.fx <= 0 or intrinsics.fy <= 0:
-        raise ValueError(f"intrinsics: focal lengths must be positive, got {intrinsics}")
-    u = (np.arange(intrinsics.width, dtype=np.float64) - intrinsics.cx) / intrinsics.fx
-    v = (np.arange(intrinsics.height, dtype=np.float64) - intrinsics.cy) / intrinsics.fy
+    slope_u, slope_v = axis_slopes(intrinsics)
     rays = np.empty((intrinsics.height, intrinsics.width, 2), dtype=np.float32)
-    rays[..., 0] = u[None, :]
-    rays[..., 1] = v[:, None]
+    rays[..., 0] = slope_u[None, :]
+    rays[..., 1] = slope_v[:, None]
     return rays
 
 
@@ -78,6 +85,13 @@ class Deprojector:
         self.max_depth_m = max_depth_m
         self._intrinsics: CameraIntrinsics | None = None
         self._slopes: tuple[np.ndarray, np.ndarray] | None = None
+        self._axis_intrinsics: CameraIntrinsics | None = None
+        self._axis_slopes: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def depth_range(self) -> tuple[float, float]:
+        """The depths kept, metres: [nearest, farthest] (a depth of 0 is never kept)."""
+        return max(self.min_depth_m, 1e-6), self.max_depth_m
 
     def slopes_for(self, intrinsics: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray]:
         """Flat contiguous ray slopes (H*W,) float32 x and y of ``intrinsics`` (cached)."""
@@ -87,6 +101,14 @@ class Deprojector:
                             np.ascontiguousarray(rays[..., 1]).reshape(-1))
             self._intrinsics = intrinsics
         return self._slopes
+
+    def axis_slopes_for(self, intrinsics: CameraIntrinsics) -> tuple[np.ndarray, np.ndarray]:
+        """`axis_slopes` of ``intrinsics`` (cached): the ray map's (W,) and (H,) float32 axes,
+        a few kB where `slopes_for` holds 66 MB at 3840x2160."""
+        if self._axis_slopes is None or intrinsics != self._axis_intrinsics:
+            self._axis_slopes = axis_slopes(intrinsics)
+            self._axis_intrinsics = intrinsics
+        return self._axis_slopes
 
     def __call__(
         self, depth_mm: np.ndarray, color: np.ndarray | None, intrinsics: CameraIntrinsics,
@@ -141,6 +163,15 @@ class Deprojector:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Flat (H*W,) float32 depth in metres and the flat indices of the kept pixels; checks
         that depth, colour and calibration sizes agree."""
+        depth_mm = self.checked_depth(depth_mm, color, intrinsics)
+        # NaN compares False, so it is dropped with the out-of-range depths (one compiled pass)
+        return kept_pixels(depth_mm.reshape(-1), *self.depth_range)
+
+    @staticmethod
+    def checked_depth(depth_mm: np.ndarray, color: np.ndarray | None,
+                      intrinsics: CameraIntrinsics) -> np.ndarray:
+        """``depth_mm`` C-contiguous, once its size agrees with the colour's and the
+        calibration's (else ValueError)."""
         if depth_mm.shape != (intrinsics.height, intrinsics.width):
             raise ValueError(
                 f"depth image {depth_mm.shape[1]}x{depth_mm.shape[0]} does not match "
@@ -151,9 +182,7 @@ class Deprojector:
                 f"colour image {color.shape[1]}x{color.shape[0]} does not match "
                 f"depth {depth_mm.shape[1]}x{depth_mm.shape[0]}"
             )
-        # NaN compares False, so it is dropped with the out-of-range depths (one compiled pass)
-        return kept_pixels(np.ascontiguousarray(depth_mm).reshape(-1),
-                           max(self.min_depth_m, 1e-6), self.max_depth_m)
+        return np.ascontiguousarray(depth_mm)
 
 
 def voxel_keys(positions: np.ndarray, voxel_size_m: float) -> np.ndarray:
@@ -197,6 +226,10 @@ def voxel_downsample(
     return mean_positions, mean_colors
 
 
+#: `uniform_subset` draws this many numbers at a time
+SUBSET_BLOCK = 1 << 20
+
+
 def uniform_subset(n: int, k: int, rng: np.random.Generator | None) -> np.ndarray:
     """(k,) int64 sorted indices: a uniform random k-subset of ``range(n)``, 0 < k < n.
 
@@ -207,8 +240,11 @@ def uniform_subset(n: int, k: int, rng: np.random.Generator | None) -> np.ndarra
     if not 0 < k < n:
         raise ValueError(f"need 0 < k < n, got k={k}, n={n}")
     rng = rng or np.random.default_rng()
-    share = min(1.0, (k + 4.0 * np.sqrt(k) + 10.0) / n)
-    drawn = np.flatnonzero(rng.random(n, dtype=np.float32) < np.float32(share))
+    share = np.float32(min(1.0, (k + 4.0 * np.sqrt(k) + 10.0) / n))
+    # drawn a block at a time (the same stream as one draw of n): no (n,) arrays
+    drawn = np.concatenate([
+        np.flatnonzero(rng.random(min(SUBSET_BLOCK, n - start), dtype=np.float32) < share) + start
+        for start in range(0, n, SUBSET_BLOCK)])
     if drawn.size < k:  # fewer than expected by over 4 standard deviations
         return np.sort(rng.choice(n, size=k, replace=False))
     return np.delete(drawn, rng.choice(drawn.size, size=drawn.size - k, replace=False))
@@ -255,29 +291,35 @@ class FrameToCloud:
         """The frame's cloud serialised (`gngdt.schemas.clouds.cloud_to_wire` of what calling it
         gives, byte for byte, the same draws of the point cap) and its point count. Without a
         voxel grid the kept pixels are deprojected straight into the buffer
-        (`gngdt.io.pack_points`): no arrays of points in between."""
+        (`gngdt.io.pack_points`): no arrays of points, nor of the image's size, in between."""
         if self.options.voxel_size_m is not None:
             positions, colors = self(frame)
             return cloud_to_wire(positions, colors, timestamp_ns=timestamp_ns,
                                  frame_id=frame_id, pose=pose), len(positions)
         deproject, intrinsics = self._deproject, frame.intrinsics
-        z, valid = deproject._depth_metres(self._depth(frame), frame.color, intrinsics)
-        if valid.size > self._max_points:  # the same draw as `with_pixels`
-            valid = valid.take(uniform_subset(valid.size, self._max_points, self._rng))
-        slope_x, slope_y = deproject.slopes_for(intrinsics)
-        wire, start = cloud_wire_buffer(valid.size, True, timestamp_ns=timestamp_ns,
+        depth = deproject.checked_depth(self._depth(frame), frame.color, intrinsics)
+        kept = count_kept(depth, *deproject.depth_range)
+        count = min(kept, self._max_points)
+        # the ranks among the kept pixels of those deprojected: the same draw as `with_pixels`
+        ranks = (uniform_subset(kept, count, self._rng) if kept > count
+                 else np.empty(0, dtype=np.int64))
+        slope_u, slope_v = deproject.axis_slopes_for(intrinsics)
+        wire, start = cloud_wire_buffer(count, True, timestamp_ns=timestamp_ns,
                                         frame_id=frame_id, pose=pose)
-        pack_pixels(z, slope_x, slope_y, np.asarray(frame.color, dtype=np.uint8).reshape(-1, 3),
-                    valid, np.frombuffer(wire, dtype=np.uint8, offset=start))
-        return wire, valid.size
+        pack_kept(depth, *deproject.depth_range, slope_u, slope_v,
+                  np.asarray(frame.color, dtype=np.uint8).reshape(-1, 3), ranks, kept == count,
+                  np.frombuffer(wire, dtype=np.uint8, offset=start))
+        return wire, count
 
     @staticmethod
     def warm_up() -> None:
         """Load the compiled deprojection kernels (numba's cache, or compile them) now, not on
         the first frame."""
         kept_pixels(np.zeros(1, np.uint16), 0.1, 10.0)
-        pack_pixels(np.ones(1, np.float32), np.ones(1, np.float32), np.ones(1, np.float32),
-                    np.zeros((1, 3), np.uint8), np.zeros(1, np.int64), np.zeros(15, np.uint8))
+        depth = np.full((1, 1), 1000, np.uint16)
+        count_kept(depth, 0.1, 10.0)
+        pack_kept(depth, 0.1, 10.0, np.ones(1, np.float32), np.ones(1, np.float32),
+                  np.zeros((1, 3), np.uint8), np.zeros(0, np.int64), True, np.zeros(15, np.uint8))
 
     def with_pixels(self, frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """As calling it (the same draws of the point cap), with the (N,) int64 flat pixel

@@ -45,7 +45,7 @@ _BLUE_FIRST = frozenset({"bgr8", "8UC3", "bgra8"})
 
 
 def decode_pixels(
-    data: bytes,
+    data: bytes | np.ndarray,
     *,
     width: int,
     height: int,
@@ -53,7 +53,8 @@ def decode_pixels(
     encoding: str,
     big_endian: bool = False,
 ) -> np.ndarray:
-    """Pixels of a raw image buffer as a writable C-contiguous array.
+    """Pixels of a raw image buffer (bytes, or a uint8 array viewing them) as a writable
+    C-contiguous array (the one copy made).
 
     Returns (H, W, 3) uint8 RGB for colour encodings (bgr8/8UC3 reordered, alpha dropped),
     (H, W) uint8 for mono8/8UC1, (H, W) uint16 for mono16/16UC1, (H, W) float32 for 32FC1.

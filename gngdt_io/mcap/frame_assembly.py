@@ -146,6 +146,10 @@ class FrameAssembler:
                 "%s: dropping unpaired image at %d ns", self.path, other.popleft().stamp_ns
             )
         other.popleft()
+        # and those of this role: a later image of the other role is no older than the partner
+        same = self.pending[role]
+        while same and same[0].stamp_ns < partner.stamp_ns - self.max_skew_ns:
+            logger.debug("%s: dropping unpaired image at %d ns", self.path, same.popleft().stamp_ns)
         color, depth = (image, partner) if role == "color" else (partner, image)
         labels = next(
             (item.pixels for item in self.labels if item.stamp_ns == color.stamp_ns), None

@@ -90,7 +90,8 @@ def deserialize(data: bytes, ros_type: str) -> Any:
     """The rosbags message object of CDR bytes (its arrays are read-only views of ``data``);
     :class:`Ros2MessageError` for anything malformed."""
     try:
-        return typestore().deserialize_cdr(data, ros_type)
+        # a memoryview: rosbags slices off the CDR header, which would copy bytes (an image)
+        return typestore().deserialize_cdr(memoryview(data), ros_type)
     except Exception as error:  # rosbags raises assorted errors on damaged bytes
         raise Ros2MessageError(f"not a valid {ros_type}: {type(error).__name__}: {error}"
                                ) from None
@@ -287,8 +288,8 @@ def decode_image(data: bytes, max_pixels: int) -> ImageMessage:
         raise Ros2MessageError(f"image {message.width}x{message.height} exceeds the limit of "
                                f"{max_pixels} pixels")
     try:
-        pixels = decode_pixels(
-            message.data.tobytes(), width=int(message.width), height=int(message.height),
+        pixels = decode_pixels(  # the one copy: from the view of ``data``
+            message.data, width=int(message.width), height=int(message.height),
             step=int(message.step), encoding=message.encoding,
             big_endian=bool(message.is_bigendian))
     except MessageError as error:

@@ -128,16 +128,18 @@ class Ros2Subscription(_Endpoint):
         super().__init__(node, entity_id, EntityKind.SUBSCRIPTION, topic, ros_type, type_hash,
                          qos)
         self._callback = callback
+        # on zenoh's own thread: a Python callback is otherwise handed its samples through a
+        # queue of up to 256 (zenoh-python's default), where an image flood piled up hundreds
+        # of MB of them waiting for the GIL; ``callback`` only queues a sample, boundedly
+        on_sample = zenoh.handlers.Callback(self._on_sample, None, indirect=False)
         if self.qos.durability == Durability.TRANSIENT_LOCAL:
-            import zenoh.ext
+            from zenoh import ext
 
-            history = zenoh.ext.HistoryConfig(detect_late_publishers=True,
-                                              max_samples=self.qos.depth)
-            self._sub = zenoh.ext.declare_advanced_subscriber(
-                session, self.key, self._on_sample, history=history, allowed_origin=REMOTE)
+            history = ext.HistoryConfig(detect_late_publishers=True, max_samples=self.qos.depth)
+            self._sub = ext.declare_advanced_subscriber(
+                session, self.key, on_sample, history=history, allowed_origin=REMOTE)
         else:
-            self._sub = session.declare_subscriber(self.key, self._on_sample,
-                                                   allowed_origin=REMOTE)
+            self._sub = session.declare_subscriber(self.key, on_sample, allowed_origin=REMOTE)
         self._token = session.liveliness().declare_token(self.token_key)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -215,7 +217,8 @@ class Ros2Node:
         callback: SampleCallback,
         qos: Qos = QOS_DEFAULT_10,
     ) -> Ros2Subscription:
-        """Subscription on ``topic``; ``callback`` runs on a zenoh thread."""
+        """Subscription on ``topic``; ``callback`` runs on zenoh's network thread (holding up
+        everything else the session receives): it should only queue the sample."""
         sub = Ros2Subscription(
             self._session,
             self.info,

@@ -210,12 +210,14 @@ def open_ros2_session(endpoints: list[str], wait_s: float) -> zenoh.Session:
 def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, domain: int,
            to_cloud: FrameToCloud) -> None:
     """Translate until a stop signal; everything declared is undeclared on the way out."""
+    from gngdt.io.memory import map_large_buffers
     from gngdt.io.ros2.messages import OK, WARN, Status
     from gngdt.io.ros2.node import Ros2Node
     from gngdt.services.plumbing import lifecycle
     from gngdt.services.ros2.inbound import CameraTopics, RosToGngdt
     from gngdt.services.ros2.outbound import GngdtToRos, ros_topics
 
+    map_large_buffers()  # 4K images and large clouds: each freed at once, not kept in arenas
     node = Ros2Node(ros, f"gngdt_{args.cam}", domain_id=domain)
     outbound = GngdtToRos(gngdt, node, args.cam, args.camera_frame or args.cam,
                           1.0 / args.graph_rate)
@@ -223,6 +225,7 @@ def bridge(args: argparse.Namespace, gngdt: zenoh.Session, ros: zenoh.Session, d
     tokens = [gngdt.liveliness().declare_token(alive_key(args.cam, BRIDGE))]
     try:
         if not args.no_input:
+            to_cloud.warm_up()  # numba's kernels loaded before the first frame, not on it
             inbound = RosToGngdt(
                 gngdt, node, args.cam,
                 CameraTopics(args.color_topic, args.depth_topic, args.camera_info_topic),

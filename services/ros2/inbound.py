@@ -33,8 +33,8 @@ from gngdt.io.ros2.messages import (
 from gngdt.io.ros2.wire import QOS_SENSOR_DATA, QOS_TF, Durability, Qos
 from gngdt.io.tf_tree import TransformError, TransformTree
 from gngdt.schemas.wire import MAX_CLOCK_OFFSET_NS, FrameStamp
-from gngdt.services.capture import CapturePublisher
-from gngdt.services.ros2.worker import Worker
+from gngdt.services.capture import CapturePublisher, cloud_of
+from gngdt.services.ros2.worker import Handler, Worker
 
 if TYPE_CHECKING:
     import zenoh
@@ -60,6 +60,13 @@ TF_WINDOW_NS = 10_000_000_000
 QOS_TF_STATIC = Qos(durability=Durability.TRANSIENT_LOCAL, depth=100)
 #: bad frames, frames without pose, transforms refused: warned one by one up to this many
 WARN_FIRST = 5
+
+
+def camera_worker(handle: Handler) -> Worker:
+    """The worker of a camera's samples: of the images of each role and of CameraInfo only the
+    newest waits (a live camera: the newest frame wins; under a flood up to 64 MB of images
+    waited), transforms in order."""
+    return Worker("camera", handle, capacity=8, latest_only=("color", "depth", "camera_info"))
 
 
 @dataclass(frozen=True)
@@ -103,7 +110,7 @@ class RosToGngdt:
         self.assembler = FrameAssembler(
             Path(topics.color), None, max_skew_ns, on_bad_frame=self._bad_frame,
             poses=self._pose if fixed_frame else None, max_held_bytes=max_held_bytes)
-        self.worker = Worker("camera", self._on_sample, capacity=8)
+        self.worker = camera_worker(self._on_sample)
         self._sequence = 0
         self._image_stamp_ns: int | None = None  # the latest image's: poses are looked up near
         self._pruned_at = 0.0
@@ -237,16 +244,16 @@ class RosToGngdt:
                             "are stamped with their arrival time", (capture_time - now) / 1e9)
                 self._simulated_time = True
             capture_time = now
-        positions = colors = None
+        cloud = None
         if frame.pose_error:
             self.counts.frames_without_pose += 1
             if self.counts.frames_without_pose <= WARN_FIRST:
                 log.warning("frame %d has no pose in %r: %s; its images are published, not its "
                             "cloud", frame.index, self.fixed_frame, frame.pose_error)
         else:
-            positions, colors = self.to_cloud(frame)
-        self.publisher.publish_frame(frame, FrameStamp(self._sequence, capture_time), positions,
-                                     colors)
+            cloud, _ = cloud_of(frame, self.to_cloud, self.publisher.camera, capture_time)
+        self.publisher.publish_frame(frame, FrameStamp(self._sequence, capture_time), None, None,
+                                     cloud=cloud)
         self._sequence += 1
         self.counts.frames_published += 1
 

@@ -67,6 +67,8 @@ class GngdtToRos:
 
     def __init__(self, session: zenoh.Session, node: Ros2Node, camera: str, camera_frame: str,
                  graph_period_s: float) -> None:
+        import zenoh
+
         self.camera = camera
         self.camera_frame = camera_frame
         self.graph_period_s = graph_period_s
@@ -86,17 +88,19 @@ class GngdtToRos:
         self._shown_objects: set[int] = set()
         self._last_graph = -float("inf")
         self._status: tuple[float, LearnerStatusInfo] | None = None
-        self._subscribers = [
-            session.declare_subscriber(topic(camera, stream), self._feed(worker, stream))
+        self._subscribers = [  # called on zenoh's thread, not through a queue of 256 samples
+            session.declare_subscriber(topic(camera, stream), zenoh.handlers.Callback(
+                self._feed(worker, stream), None, indirect=False))
             for worker, stream in ((self.clouds, "points"), (self.learned, "topology"),
                                    (self.learned, "objects"), (self.learned, "learner/status"),
                                    (self.learned, "tf"))]
         self.clouds.start()
         self.learned.start()
 
-    @staticmethod
-    def _feed(worker: Worker, stream: str):
+    def _feed(self, worker: Worker, stream: str):
         def on_sample(sample: zenoh.Sample) -> None:
+            if stream == "points" and not self._cloud_wanted():
+                return  # not even copied: a cloud is megabytes, and nobody would get it
             attachment = sample.attachment
             worker.put(stream, sample.payload.to_bytes(),
                        None if attachment is None else attachment.to_bytes())
@@ -109,6 +113,10 @@ class GngdtToRos:
     def _wanted(self, stream: str) -> bool:
         return self.publishers[stream].has_subscribers
 
+    def _cloud_wanted(self) -> bool:
+        """A cloud's points or its pose (/tf) has a subscriber."""
+        return self._wanted("points") or self._wanted("tf")
+
     # --- clouds -------------------------------------------------------------------------------
 
     def _on_cloud(self, stream: str, payload: bytes, attachment: bytes | None) -> None:
@@ -117,7 +125,7 @@ class GngdtToRos:
         from gngdt.schemas.clouds import MAX_CLOUD_POINTS, cloud_pose, msg_to_cloud
         from gngdt.schemas.messages import parse_message, timestamp_to_ns
 
-        if not (self._wanted("points") or self._wanted("tf")):
+        if not self._cloud_wanted():
             return
         message = parse_message(PointCloud, payload)
         stamp_ns = timestamp_to_ns(message.timestamp)

@@ -151,3 +151,16 @@ def test_a_voxel_too_small_for_the_extent_is_refused_not_wrapped() -> None:
     positions = np.array([[0.0, 0.0, 0.0], [1000.0, 1000.0, 1000.0]], dtype=np.float32)
     with pytest.raises(ValueError, match="too small"):
         voxel_downsample(positions, None, 1e-6)
+
+
+def test_uniform_subset_drawn_in_blocks_is_one_draw(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The random numbers are drawn a block at a time: the same subset (and the generator left
+    in the same state) whatever the block, so clouds stay the same draw for draw."""
+    import gngdt.io.deproject as deproject
+
+    whole = np.random.default_rng(5)
+    expected = uniform_subset(10_007, 600, whole)
+    monkeypatch.setattr(deproject, "SUBSET_BLOCK", 1000)
+    blocks = np.random.default_rng(5)
+    np.testing.assert_array_equal(uniform_subset(10_007, 600, blocks), expected)
+    assert blocks.integers(1 << 62) == whole.integers(1 << 62)

@@ -232,6 +232,22 @@ def test_images_decoded_as_drivers_send_them() -> None:
     np.testing.assert_array_equal(np.asarray(again.data).view("<u2").reshape(2, 3), millimetres)
 
 
+def test_an_image_is_copied_once_when_decoded() -> None:
+    """Under an image flood every copy of a 4K frame counts: the pixels are the one copy."""
+    import tracemalloc
+
+    rgb = np.random.default_rng(2).integers(0, 256, (1080, 1920, 3), dtype=np.uint8)
+    data = image_message("rgb8", 1080, 1920, 1920 * 3, rgb)
+    tracemalloc.start()
+    try:
+        image = m.decode_image(data, max_pixels=1920 * 1080)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    np.testing.assert_array_equal(image.pixels, rgb)
+    assert peak < 1.1 * rgb.nbytes
+
+
 def test_bad_images_are_refused_with_a_reason() -> None:
     ok = np.zeros(24, np.uint8)
     for data, reason in ((image_message("rgb8", 2, 4, 8, ok), "step"),

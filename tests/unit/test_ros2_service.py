@@ -111,6 +111,34 @@ def test_worker_bounded_and_latest_wins() -> None:
     assert worker.counts.dropped == 2 and worker.counts.received == 6
 
 
+def test_camera_worker_holds_the_newest_image_of_each_role() -> None:
+    """A flooded bridge: of the images waiting while a frame is handled only the newest colour
+    and depth stay (and CameraInfo); transforms all wait, in order."""
+    from gngdt.services.ros2.inbound import camera_worker
+
+    recorder = Recorder()
+    worker = camera_worker(recorder).start()
+    try:
+        recorder.gate.clear()
+        worker.put("tf", b"tf0", None)
+        deadline = time.monotonic() + 10
+        while worker.idle() or worker._queue:  # the thread holds it
+            assert time.monotonic() < deadline
+            time.sleep(0.01)
+        for k in range(5):
+            worker.put("camera_info", f"i{k}".encode(), None)
+            worker.put("color", f"c{k}".encode(), None)
+            worker.put("depth", f"d{k}".encode(), None)
+            worker.put("tf", f"tf{k + 1}".encode(), None)
+        recorder.gate.set()
+        wait_idle(worker)
+    finally:
+        worker.stop()
+    assert recorder.seen == [("tf", b"tf0"), ("tf", b"tf1"), ("tf", b"tf2"), ("tf", b"tf3"),
+                             ("tf", b"tf4"), ("camera_info", b"i4"), ("color", b"c4"),
+                             ("depth", b"d4"), ("tf", b"tf5")]
+
+
 def test_transform_window_forgets_old_samples_and_keeps_lookups() -> None:
     tree = TransformTree()
     tree.add("odom", "base", 0, (0, 0, 0), (0, 0, 0, 1), static=True)
