@@ -172,33 +172,36 @@ def add_residual(q0, q1, q2, d0, d1, d2, w, r, jac, hessian, gradient):
 
 
 @njit(cache=True, nogil=True)
-def normal_equations(points, anchors, directions, offsets, weights, centre, huber, hessian,
-                     gradient):
+def normal_equations(points, node, anchors, directions, offsets, weights, inliers, centre, huber,
+                     hessian, gradient):
     """Add one residual family's Gauss-Newton system to ``hessian`` (6, 6) and ``gradient`` (6,).
 
-    Residual of row k: ``r = directions[k] . (points[k] - anchors[k]) + offsets[k]`` (a plane's
-    normal and offset 0 for point-to-plane; a colour gradient and the intensity difference for
-    colour), Huber-weighted with threshold ``huber`` and weighted by ``weights[k]`` (0: skipped).
-    ``points`` (M, 3) in the map frame under the current pose; the Jacobian of ``r`` over the
-    twist about ``centre`` is ``((points[k] - centre) x d, d)``. Returns (sum of weighted squared
-    residuals, sum of weights).
+    Residual of row k, paired with node ``node[k]``: ``r = directions[node[k]] . (points[k] -
+    anchors[node[k]]) + offsets[k]`` (a colour gradient and the intensity difference for
+    colour), Huber-weighted with threshold ``huber`` and weighted by ``weights[k]`` (rows not
+    ``inliers``, or of weight 0, skipped). ``points`` (M, 3) in the map frame under the current
+    pose; ``anchors``, ``directions`` (N, 3) per node (indexed here: gathering them into (M, 3)
+    arrays first took a third of the colour system's time). The Jacobian of ``r`` over the
+    twist about ``centre`` is ``((points[k] - centre) x d, d)``. Returns (sum of weighted
+    squared residuals, sum of weights).
     """
     cost = 0.0
     total = 0.0
     jac = np.empty(6)
     for k in range(points.shape[0]):
-        if weights[k] <= 0.0:
+        if not inliers[k] or weights[k] <= 0.0:
             continue
-        d0 = directions[k, 0]
-        d1 = directions[k, 1]
-        d2 = directions[k, 2]
+        n = node[k]
+        d0 = directions[n, 0]
+        d1 = directions[n, 1]
+        d2 = directions[n, 2]
         p0 = points[k, 0]
         p1 = points[k, 1]
         p2 = points[k, 2]
-        r = (d0 * (p0 - anchors[k, 0]) + d1 * (p1 - anchors[k, 1]) + d2 * (p2 - anchors[k, 2])
+        r = (d0 * (p0 - anchors[n, 0]) + d1 * (p1 - anchors[n, 1]) + d2 * (p2 - anchors[n, 2])
              + offsets[k])
         a = abs(r)
-        w = weights[k] if a <= huber[k] else weights[k] * huber[k] / a
+        w = weights[k] if a <= huber else weights[k] * huber / a
         add_residual(p0 - centre[0], p1 - centre[1], p2 - centre[2], d0, d1, d2, w, r, jac,
                      hessian, gradient)
         cost += w * r * r

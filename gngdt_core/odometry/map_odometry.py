@@ -519,10 +519,8 @@ class MapOdometry:
         offsets = surface.intensity[node] - intensity
         offsets -= np.median(offsets[inliers])  # exposure: up to the frame's median offset
         hessian, gradient = np.zeros((6, 6)), np.zeros(6)
-        OK.normal_equations(world, anchors[node], surface.gradients[node], offsets,
-                            np.where(inliers, weight, 0.0), centre,
-                            np.full(len(world), p.huber_sigma * p.color_sigma), hessian,
-                            gradient)
+        OK.normal_equations(world, node, anchors, surface.gradients, offsets, weight, inliers,
+                            centre, p.huber_sigma * p.color_sigma, hessian, gradient)
         factor = p.color_weight * (float(np.median(sigma[inliers])) / p.color_sigma) ** 2
         return factor * hessian, factor * gradient
 
