@@ -100,12 +100,12 @@ class Received:
     would hold its shared-memory buffer, and a capture whose pool is full sends over the network
     (measured: 230 of 300 clouds while the tracker's queue waited for the first map)."""
 
-    #: None: larger than the limit, not copied
+    #: None: not copied, ``problem`` says why (larger than the limit)
     payload: bytes | None
-    payload_size: int
     attachment: bytes | None
     #: it came through shared memory (diagnostics)
     shared: bool = False
+    problem: str = ""
 
 
 def points_limit_bytes(max_cloud_points: int) -> int:
@@ -115,11 +115,15 @@ def points_limit_bytes(max_cloud_points: int) -> int:
 
 def receive(sample: zenoh.Sample, limit_bytes: int) -> Received:
     """``sample``'s bytes (its payload only within ``limit_bytes``), out of zenoh's buffers."""
+    from gngdt.schemas.messages import MessageError
     from gngdt.services.plumbing.session import through_shared_memory
 
-    size = len(sample.payload)
-    return Received(sample.payload.to_bytes() if size <= limit_bytes else None, size,
-                    attachment_bytes(sample), through_shared_memory(sample))
+    payload, problem = None, ""
+    try:
+        payload = payload_bytes(sample, limit_bytes)
+    except MessageError as error:
+        problem = str(error)
+    return Received(payload, attachment_bytes(sample), through_shared_memory(sample), problem)
 
 
 @dataclass(frozen=True)
@@ -143,8 +147,7 @@ def arrive(received: Received, max_cloud_points: int) -> Arrival:
     try:
         stamp = FrameStamp.from_attachment(received.attachment)
         if received.payload is None:
-            raise MessageError(f"{received.payload_size} bytes, more than the limit of "
-                               f"{points_limit_bytes(max_cloud_points)}")
+            raise MessageError(received.problem)
         return Arrival(stamp, decode_points(received.payload, received.attachment,
                                             max_cloud_points), shared=received.shared)
     except ValueError as error:  # MessageError is a ValueError
