@@ -40,7 +40,7 @@ class Clustering(_message.Message):
     def __init__(self, name: _Optional[str] = ..., labels: _Optional[_Union[PackedArray, _Mapping]] = ..., cluster_count: _Optional[int] = ..., cluster_ids: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
 
 class Topology(_message.Message):
-    __slots__ = ("timestamp", "frame_sequence", "steps", "frame_id", "positions", "colors", "normals", "errors", "edges", "clusterings", "quantization_error", "node_ids")
+    __slots__ = ("timestamp", "frame_sequence", "steps", "frame_id", "positions", "colors", "normals", "errors", "edges", "clusterings", "quantization_error", "node_ids", "settled")
     class QuantizationErrorEntry(_message.Message):
         __slots__ = ("key", "value")
         KEY_FIELD_NUMBER: _ClassVar[int]
@@ -60,6 +60,7 @@ class Topology(_message.Message):
     CLUSTERINGS_FIELD_NUMBER: _ClassVar[int]
     QUANTIZATION_ERROR_FIELD_NUMBER: _ClassVar[int]
     NODE_IDS_FIELD_NUMBER: _ClassVar[int]
+    SETTLED_FIELD_NUMBER: _ClassVar[int]
     timestamp: _timestamp_pb2.Timestamp
     frame_sequence: int
     steps: int
@@ -72,7 +73,8 @@ class Topology(_message.Message):
     clusterings: _containers.RepeatedCompositeFieldContainer[Clustering]
     quantization_error: _containers.ScalarMap[str, float]
     node_ids: PackedArray
-    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., steps: _Optional[int] = ..., frame_id: _Optional[str] = ..., positions: _Optional[_Union[PackedArray, _Mapping]] = ..., colors: _Optional[_Union[PackedArray, _Mapping]] = ..., normals: _Optional[_Union[PackedArray, _Mapping]] = ..., errors: _Optional[_Union[PackedArray, _Mapping]] = ..., edges: _Optional[_Iterable[_Union[EdgeSet, _Mapping]]] = ..., clusterings: _Optional[_Iterable[_Union[Clustering, _Mapping]]] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., node_ids: _Optional[_Union[PackedArray, _Mapping]] = ...) -> None: ...
+    settled: bool
+    def __init__(self, timestamp: _Optional[_Union[datetime.datetime, _timestamp_pb2.Timestamp, _Mapping]] = ..., frame_sequence: _Optional[int] = ..., steps: _Optional[int] = ..., frame_id: _Optional[str] = ..., positions: _Optional[_Union[PackedArray, _Mapping]] = ..., colors: _Optional[_Union[PackedArray, _Mapping]] = ..., normals: _Optional[_Union[PackedArray, _Mapping]] = ..., errors: _Optional[_Union[PackedArray, _Mapping]] = ..., edges: _Optional[_Iterable[_Union[EdgeSet, _Mapping]]] = ..., clusterings: _Optional[_Iterable[_Union[Clustering, _Mapping]]] = ..., quantization_error: _Optional[_Mapping[str, float]] = ..., node_ids: _Optional[_Union[PackedArray, _Mapping]] = ..., settled: _Optional[bool] = ...) -> None: ...
 
 class LearnerStatus(_message.Message):
     __slots__ = ("timestamp", "frame_sequence", "frame_id", "steps", "steps_per_second", "nodes", "frames_received", "frames_used", "frames_dropped", "malformed_messages", "latency_ms", "latency_p50_ms", "latency_p99_ms", "quantization_error", "cluster_counts", "settle_reason", "seen_nodes", "ghost_share", "ghost_distance_m", "nodes_forgotten", "frames_other_frame", "frames_pose_rejected", "pose_problem", "frame_budget_ms", "frame_steps", "frames_lost_tracking", "tracking", "settled", "frames_posed", "frames_lost_by_reason")

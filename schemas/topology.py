@@ -69,6 +69,8 @@ class TopologySnapshot:
     cluster_counts: dict[str, int] = field(default_factory=dict)
     node_ids: np.ndarray | None = None
     cluster_ids: dict[str, np.ndarray] = field(default_factory=dict)
+    #: the learner's final network on the stream's last frame: nothing newer will come
+    settled: bool = False
 
     @property
     def node_count(self) -> int:
@@ -102,6 +104,7 @@ def encode_topology(
     quantization_error: Mapping[str, float] | None = None,
     node_ids: np.ndarray | None = None,
     cluster_ids: Mapping[str, np.ndarray] | None = None,
+    settled: bool = False,
 ) -> gngdt_pb2.Topology:
     """Build a ``gngdt.Topology``; see :class:`TopologySnapshot` for shapes.
 
@@ -112,7 +115,8 @@ def encode_topology(
     positions = _node_array(positions, "positions", np.shape(positions)[0], 3)
     count = positions.shape[0]
     message = gngdt_pb2.Topology(
-        frame_sequence=int(frame_sequence), steps=int(steps), frame_id=frame_id
+        frame_sequence=int(frame_sequence), steps=int(steps), frame_id=frame_id,
+        settled=bool(settled),
     )
     ns_to_timestamp(timestamp_ns, message.timestamp)
     message.positions.CopyFrom(pack_array(positions, np.float32))
@@ -275,4 +279,5 @@ def decode_topology(
         cluster_counts=cluster_counts,
         node_ids=_decode_node_array(message, "node_ids", np.int64, None, count),
         cluster_ids=cluster_ids,
+        settled=message.settled,
     )

@@ -32,9 +32,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class StreamSample:
-    """One sample of one camera's stream: ``gngdt/<camera>/<stream>``. The learner's status and
-    the end of stream are decoded once, when first read (ValueError when malformed), for the
-    logger's bookkeeping and every output alike."""
+    """One sample of one camera's stream: ``gngdt/<camera>/<stream>``. The learner's status,
+    a topology's settled flag and the end of stream are decoded once, when first read
+    (ValueError when malformed), for the logger's bookkeeping and every output alike."""
 
     camera: str
     #: ``color``, ``points``, ``learner/status``, ...
@@ -52,6 +52,15 @@ class StreamSample:
         from gngdt.schemas.status import decode_status
 
         return decode_status(self.payload)
+
+    @cached_property
+    def settled_topology(self) -> bool:
+        """Whether the ``topology`` sample is the learner's settled, final network (only its
+        flag is read; ValueError when the message is malformed)."""
+        from gngdt.schemas import gngdt_pb2
+        from gngdt.schemas.messages import parse_message
+
+        return parse_message(gngdt_pb2.Topology, self.payload).settled
 
     @cached_property
     def stream_end(self) -> StreamEndInfo:

@@ -231,8 +231,6 @@ class RerunOutput(Output):
         #: per such camera, its last cloud without a pose (sequence, positions, colors), drawn
         #: in the world when that frame's transform arrives (a tracked camera's: after learning)
         self._waiting: dict[str, tuple[int, Any, Any]] = {}
-        #: per camera, the last frame sequence of its stream (its end of stream)
-        self._last_sequence: dict[str, int] = {}
         self._last_flush = time.monotonic()
 
     @classmethod
@@ -309,8 +307,6 @@ class RerunOutput(Output):
             rerun_log.objects(paths, decode_object_boxes(payload))
         elif stream == "learner/status":
             rerun_log.status(paths, sample.status)
-        elif stream == "eos":
-            self._last_sequence[sample.camera] = sample.stream_end.last_frame_sequence
 
     def _points(self, camera: str, paths: EntityPaths, payload: bytes, sequence: int) -> None:
         from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
@@ -353,11 +349,9 @@ class RerunOutput(Output):
 
     def _topology(self, camera: str, paths: EntityPaths, snapshot: Any, sequence: int) -> None:
         rerun_log = self.rerun_log
-        # the stream's last frame is always drawn: after its end the learner settles on it and
-        # publishes the final network again under the same frame sequence
-        last = self._last_sequence.get(camera)
-        draw = (last is not None and snapshot.frame_sequence >= last) or rerun_log.due(
-            paths, "topology", sequence, rerun_log.rates.topology_every)
+        # the settled network is always drawn: the file opens on it
+        draw = snapshot.settled or rerun_log.due(paths, "topology", sequence,
+                                                 rerun_log.rates.topology_every)
         framed = camera in rerun_log.framings
         rerun_log.topology(paths, snapshot, draw)
         if not framed and camera in rerun_log.framings:

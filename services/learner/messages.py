@@ -16,8 +16,9 @@ from gngdt.core.learner.results import LearnerFigures, Publication
 from gngdt.schemas.wire import FrameStamp
 
 
-def topology_message(published: Publication, stamp: FrameStamp) -> Any:
-    """The ``gngdt.Topology`` of a learned frame."""
+def topology_message(published: Publication, stamp: FrameStamp, settled: bool = False) -> Any:
+    """The ``gngdt.Topology`` of a learned frame (``settled``: the final network, settled on
+    the stream's last frame)."""
     from gngdt.schemas.topology import encode_topology
 
     learned = published.learned
@@ -27,7 +28,7 @@ def topology_message(published: Publication, stamp: FrameStamp) -> Any:
         steps=published.steps, frame_sequence=stamp.sequence,
         timestamp_ns=stamp.capture_time_ns, frame_id=published.frame_id,
         quantization_error=published.quantization_error, node_ids=published.node_ids,
-        cluster_ids=learned.cluster_ids)
+        cluster_ids=learned.cluster_ids, settled=settled)
 
 
 def objects_message(published: Publication, stamp: FrameStamp) -> Any:

@@ -216,6 +216,9 @@ class LearnerService:
         self._topology = declare_publisher(session, topic(camera, "topology"),
                                            ENCODING_TOPOLOGY, latest_wins=True,
                                            pool_bytes=pool_bytes)
+        # the settled network is the last word: nothing newer supersedes it, so it must arrive
+        self._settled_topology = declare_publisher(session, topic(camera, "topology"),
+                                                   ENCODING_TOPOLOGY, latest_wins=False)
         self._status = declare_publisher(session, topic(camera, "learner/status"),
                                          ENCODING_STATUS, latest_wins=False)
         self._ack = declare_publisher(session, topic(camera, "learner/ack"), ENCODING_FRAME_ACK,
@@ -277,10 +280,11 @@ class LearnerService:
         ``scene_every_frames`` frames, and the settled last one) the scene, then the status;
         the latency in ms."""
         published = self.learner.publication(positions, colors, final=bool(settled))
-        payload = topology_message(published, stamp).SerializeToString()
+        payload = topology_message(published, stamp, bool(settled)).SerializeToString()
         attachment = stamp.to_attachment()
         latency_ms = (time.time_ns() - stamp.capture_time_ns) * 1e-6
-        self._topology.put(payload, attachment=attachment)
+        (self._settled_topology if settled else self._topology).put(payload,
+                                                                    attachment=attachment)
         self.latest.set(payload, attachment)
         self._objects.put(objects_message(published, stamp).SerializeToString(),
                           attachment=attachment)
@@ -502,8 +506,9 @@ class LearnerService:
             checkpoints.save(self.learner, self.checkpoint)
         self._token.undeclare()
         self.instances.close()
-        for entity in (self._queryable, self._eos, self.points, self._topology, self._status,
-                       self._ack, self._objects, self._scene, *self._tracking):
+        for entity in (self._queryable, self._eos, self.points, self._topology,
+                       self._settled_topology, self._status, self._ack, self._objects,
+                       self._scene, *self._tracking):
             entity.undeclare()
         if self.learner.counters.frames_received:
             log.info("%d of %d clouds arrived through shared memory", self.clouds_shared,

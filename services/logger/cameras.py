@@ -24,19 +24,22 @@ DEFAULT_MAX_CAMERAS = 16
 class CameraProgress:
     """What the logger knows about one camera's stream, to decide when it is over."""
 
-    last_topology_sequence: int = -1
     eos_last_sequence: int | None = None
     eos_at: float = 0.0
     #: when the camera's capture left without an end of stream (its liveliness token went)
     capture_gone_at: float | None = None
-    #: the learner said how learning on the stream's last frame stopped (its final network)
+    #: the learner's last status and last topology were its settled, final ones. Each is
+    #: judged on its own stream: the logger's subscribers hand samples over on threads of their
+    #: own, so the status may come before the topology sent ahead of it, and the end of stream
+    #: after both
     settled: bool = False
+    settled_topology: bool = False
 
     def finished(self, drain_seconds: float) -> bool:
         if self.eos_last_sequence is None:
             return (self.capture_gone_at is not None
                     and time.monotonic() - self.capture_gone_at > drain_seconds)
-        return ((self.last_topology_sequence >= self.eos_last_sequence and self.settled)
+        return ((self.settled and self.settled_topology)
                 or time.monotonic() - self.eos_at > drain_seconds)
 
 
@@ -102,15 +105,13 @@ class Cameras:
         progress = self.progress[sample.camera]
         camera, stream = sample.camera, sample.stream
         if stream == "topology":
-            progress.last_topology_sequence = max(progress.last_topology_sequence,
-                                                  sample.stamp.sequence)
-        elif stream == "learner/status" and sample.status.settled:
-            progress.settled = True
+            progress.settled_topology = sample.settled_topology
+        elif stream == "learner/status":
+            progress.settled = sample.status.settled
         elif stream == "eos":
             end = sample.stream_end
             progress.eos_last_sequence = end.last_frame_sequence
             progress.eos_at = time.monotonic()
-            progress.settled = False  # the learner settles on this stream's last frame after it
             log.info("%s: end of stream after %d frames", camera, end.frames_sent)
 
     def capture_seen(self, camera: str, alive: bool) -> bool:

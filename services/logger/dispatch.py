@@ -8,12 +8,10 @@ import time
 from gngdt.io.outputs import Output, StreamSample, split_key
 from gngdt.schemas.wire import FrameStamp
 from gngdt.services.logger.cameras import Cameras
+from gngdt.services.logger.inbox import LOGGED_STREAMS
 
 log = logging.getLogger(__name__)
 
-#: the streams of a camera the logger takes (others on ``gngdt/**`` are not its business)
-LOGGED_STREAMS = ("calibration", "color", "depth", "points", "tf", "topology", "objects",
-                  "learner/status", "eos")
 #: streams an output may thin: asked whether it wants a frame before the payload is copied
 THINNED_STREAMS = ("color", "depth", "points")
 

@@ -14,9 +14,10 @@ if TYPE_CHECKING:
 
 #: streams where only the newest sample matters when the logger falls behind
 LATEST_ONLY_STREAMS = ("color", "depth", "points", "objects")
-#: streams the loop's outputs do not take (the scene is the topology again, drawn for Foxglove;
-#: raw outputs such as --mcap record it)
-NOT_LOGGED_STREAMS = ("scene",)
+#: the streams of a camera the logger's loop takes (the scene is the topology again, drawn for
+#: Foxglove: raw outputs such as --mcap record it; acknowledgements are the capture's business)
+LOGGED_STREAMS = ("calibration", "color", "depth", "points", "tf", "topology", "objects",
+                  "learner/status", "eos")
 
 
 #: bytes a sample of each stream may take; larger ones are refused before they are copied
@@ -73,7 +74,7 @@ class Inbox:
     def put(self, sample: zenoh.Sample) -> None:
         key = str(sample.key_expr)
         stream = stream_of(key)
-        if stream in NOT_LOGGED_STREAMS:
+        if stream not in LOGGED_STREAMS:
             return
         size = len(sample.payload)
         if size > STREAM_BYTE_LIMITS.get(stream, OTHER_STREAM_BYTE_LIMIT) or size > self.max_bytes:

@@ -4,17 +4,36 @@ from __future__ import annotations
 
 import argparse
 import logging
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from gngdt.io.outputs import Output
 from gngdt.schemas.wire import ALL_KEYS, ANY_CAMERA, logger_alive_key, topic
 from gngdt.services.logger.cameras import Cameras, CaptureWatch
-from gngdt.services.logger.dispatch import LOGGED_STREAMS, Dispatcher
-from gngdt.services.logger.inbox import Inbox
+from gngdt.services.logger.dispatch import Dispatcher
+from gngdt.services.logger.inbox import LOGGED_STREAMS, Inbox
 from gngdt.services.plumbing import lifecycle
 from gngdt.services.plumbing.report import write_report
 from gngdt.services.plumbing.session import ZenohSetupError, open_session
 
+if TYPE_CHECKING:
+    import zenoh
+
 log = logging.getLogger(__name__)
+
+
+def receive_in_order(raw: list[Output], inbox: Inbox) -> Callable[[zenoh.Sample], None]:
+    """One callback for every sample: the raw outputs first, then the loop's inbox. The loop
+    ends on the learner's settled network: by then the raw outputs have it too, which they
+    might not through subscribers of their own (each hands samples over on its own thread)."""
+
+    def receive(sample: zenoh.Sample) -> None:
+        for output in raw:
+            output.receive(sample)
+        inbox.put(sample)
+
+    return receive
+
 
 def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
     """Subscribe to ``gngdt/**`` and drive ``outputs`` until stopped or every stream is over;
@@ -27,12 +46,12 @@ def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
         for output in outputs:
             output.close()
         raise
-    # only the streams the outputs log: a learner builds its scene only for a subscriber; raw
-    # outputs (--mcap, --foxglove) subscribe to everything themselves
-    declared = [session.declare_subscriber(topic(ANY_CAMERA, stream), inbox.put)
-                for stream in LOGGED_STREAMS]
-    declared += [session.declare_subscriber(ALL_KEYS, output.receive)
-                 for output in outputs if output.raw]
+    raw = [output for output in outputs if output.raw]
+    if raw:  # --mcap, --foxglove: one subscriber, so they have each sample before the loop
+        declared = [session.declare_subscriber(ALL_KEYS, receive_in_order(raw, inbox))]
+    else:  # only the streams the loop logs: a learner builds its scene only for a subscriber
+        declared = [session.declare_subscriber(topic(ANY_CAMERA, stream), inbox.put)
+                    for stream in LOGGED_STREAMS]
     captures = CaptureWatch()
     declared.append(session.liveliness().declare_subscriber(
         CaptureWatch.KEY, captures.on_token, history=True))

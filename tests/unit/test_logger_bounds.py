@@ -54,6 +54,44 @@ def test_a_capture_that_leaves_without_an_end_of_stream_ends_its_camera(dispatch
     assert not dispatcher.cameras.all_finished(drain_seconds=60.0)  # after the drain, not at once
 
 
+def _learned(dispatcher, camera: str, sequence: int, settled: bool) -> tuple:
+    """Handlers of a learner's topology and status of frame ``sequence`` (``settled``: its
+    final ones, after the end of stream)."""
+    from gngdt.schemas.status import encode_status
+    from gngdt.schemas.topology import encode_topology
+
+    attachment = FrameStamp(sequence, time.time_ns()).to_attachment()
+    topology = encode_topology(
+        positions=[[0.0, 0.0, 1.0]], colors=None, normals=None, errors=None, edges={},
+        clusterings={}, steps=10, frame_sequence=sequence, timestamp_ns=time.time_ns(),
+        frame_id="camera", settled=settled).SerializeToString()
+    status = encode_status(frame_sequence=sequence, settled=settled,
+                           settle_reason="settled" if settled else "").SerializeToString()
+    return (lambda: dispatcher.handle(f"gngdt/{camera}/topology", topology, attachment),
+            lambda: dispatcher.handle(f"gngdt/{camera}/learner/status", status, attachment))
+
+
+@pytest.mark.parametrize("order", ["topology, status, eos", "status, topology, eos",
+                                   "eos, status, topology", "status, eos, topology"])
+def test_a_stream_ends_on_the_settled_network_and_status_in_any_order(dispatcher,
+                                                                      order: str) -> None:
+    """The logger's subscribers hand samples over on threads of their own: the settled status
+    may come before the topology sent ahead of it, the end of stream after both."""
+    cameras = dispatcher.cameras
+    topology, status = _learned(dispatcher, "camera", 7, settled=False)
+    topology(), status()  # the last frame, learned and published before the learner settles
+    steps = {"topology": _learned(dispatcher, "camera", 7, settled=True)[0],
+             "status": _learned(dispatcher, "camera", 7, settled=True)[1],
+             "eos": lambda: _eos(dispatcher, "camera", 7)}
+    names = order.split(", ")
+    for name in names:
+        assert not cameras.all_finished(drain_seconds=60.0), f"finished before its {name}"
+        steps[name]()
+    assert cameras.all_finished(drain_seconds=60.0)
+    topology()  # a new stream's first network: the camera is not done until it settles too
+    assert not cameras.all_finished(drain_seconds=60.0)
+
+
 # ------------------------------------------------------------------------- cameras
 def test_garbage_on_new_camera_names_makes_no_camera_and_cameras_are_bounded() -> None:
     import rerun as rr
