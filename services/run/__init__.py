@@ -347,9 +347,9 @@ def replay(args: argparse.Namespace, pipeline: Pipeline, observed: Observed,
            stop: threading.Event, plan: RunPlan, learner: Child, logger: Child) -> str:
     """Start the capture and wait until it, the learner or the logger ends (or a stop signal);
     why the stream ended early, or ``""``."""
-    log.info("replaying %s", args.recording)
     capture = pipeline.start("capture", [str(args.recording), "--cam", args.cam],
                              child_settings(args, "capture", plan.veil_ratio))
+    log.info("replaying %s", args.recording)  # once every service's process is there
     wait_until(lambda: capture.process.poll() is not None
                or learner.process.poll() is not None or logger.process.poll() is not None,
                float("inf"), stop, pipeline)

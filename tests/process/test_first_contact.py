@@ -209,6 +209,13 @@ def test_run_from_a_folder_shadowing_gngdt_admits_only_its_children_and_leaves_n
     assert "shadowed" not in text
 
 
+def _command_line(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return "(gone)"
+
+
 @pytest.mark.timeout(120)
 def test_children_of_a_killed_run_stop_too(tabletop_recording: Path, tmp_path: Path) -> None:
     log_path = tmp_path / "run.log"
@@ -223,7 +230,12 @@ def test_children_of_a_killed_run_stop_too(tabletop_recording: Path, tmp_path: P
     finally:
         run.kill()  # SIGKILL: run cannot clean up; the kernel tells the children
         run.wait()
-    wait_for(lambda: not any(alive(pid) for pid in pids), 30, "the orphans to stop")
+    try:
+        wait_for(lambda: not any(alive(pid) for pid in pids), 30, "the orphans to stop")
+    except AssertionError:
+        lingering = {pid: _command_line(pid) for pid in pids if alive(pid)}
+        raise AssertionError(f"still running 30 s after the run was killed: {lingering}; the "
+                             f"run's log:\n{log_path.read_text()}") from None
 
 
 def test_run_refuses_a_bag_without_calibration_before_starting_anything(tmp_path: Path) -> None:
