@@ -5,9 +5,9 @@ asked, every stream as it is to an MCAP file (--mcap) and to a live Foxglove Web
 The outputs are `gngdt.io.outputs`, behind one interface.
 
 The logger stops on its own once every camera it knows of (from its first message, or from its
-capture's liveliness token, whichever comes first) has ended its stream (eos) and the topology of
-its last frame has arrived, or ``--eos-drain`` seconds after that eos (or after its capture left
-without one).
+capture's liveliness token, whichever comes first) has ended its stream (eos) and its learner's
+settled topology and settled status have arrived (in either order), or ``--eos-drain`` seconds
+after that eos (or after its capture left without one).
 """
 
 from __future__ import annotations
