@@ -27,13 +27,14 @@ from gngdt.schemas.wire import FrameStamp, topic
 if TYPE_CHECKING:
     import zenoh
 
+    from gngdt.schemas import gngdt_pb2
     from gngdt.schemas.status import LearnerStatusInfo, StreamEndInfo
 
 
 @dataclass(frozen=True)
 class StreamSample:
     """One sample of one camera's stream: ``gngdt/<camera>/<stream>``. The learner's status,
-    a topology's settled flag and the end of stream are decoded once, when first read
+    a topology and the end of stream are parsed once, when first read
     (ValueError when malformed), for the logger's bookkeeping and every output alike."""
 
     camera: str
@@ -54,13 +55,13 @@ class StreamSample:
         return decode_status(self.payload)
 
     @cached_property
-    def settled_topology(self) -> bool:
-        """Whether the ``topology`` sample is the learner's settled, final network (only its
-        flag is read; ValueError when the message is malformed)."""
+    def topology(self) -> gngdt_pb2.Topology:
+        """The ``topology`` sample's ``gngdt.Topology``, parsed but not validated (the logger
+        reads its settled flag, an output decodes it within its own limits)."""
         from gngdt.schemas import gngdt_pb2
         from gngdt.schemas.messages import parse_message
 
-        return parse_message(gngdt_pb2.Topology, self.payload).settled
+        return parse_message(gngdt_pb2.Topology, self.payload)
 
     @cached_property
     def stream_end(self) -> StreamEndInfo:

@@ -302,7 +302,7 @@ class RerunOutput(Output):
             self._transform(sample.camera, paths, payload, stamp.sequence)
         elif stream == "topology":
             self._topology(sample.camera, paths, decode_topology(
-                payload, max_nodes=self.max_topology_nodes), stamp.sequence)
+                sample.topology, max_nodes=self.max_topology_nodes), stamp.sequence)
         elif stream == "objects":
             rerun_log.objects(paths, decode_object_boxes(payload))
         elif stream == "learner/status":

@@ -105,7 +105,7 @@ class Cameras:
         progress = self.progress[sample.camera]
         camera, stream = sample.camera, sample.stream
         if stream == "topology":
-            progress.settled_topology = sample.settled_topology
+            progress.settled_topology = sample.topology.settled
         elif stream == "learner/status":
             progress.settled = sample.status.settled
         elif stream == "eos":
