@@ -11,7 +11,7 @@ import argparse
 import importlib
 import logging
 import os
-import sys
+from typing import NoReturn
 
 #: subcommand -> (module, one-line help). Order is the order shown by ``gngdt --help``.
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
@@ -151,5 +151,12 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def command() -> NoReturn:
+    """The `gngdt` executable: :func:`main`, then an exit that no leftover thread holds up."""
+    from gngdt.services.plumbing.lifecycle import exit_process
+
+    exit_process(main())
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    command()

@@ -11,12 +11,16 @@ Python handler only once the main thread wakes up.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
+import logging
 import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
+from typing import NoReturn
 
 # PARENT_ENV names the parent a child of `gngdt run` must not outlive (its pid)
 from gngdt.services.plumbing.environment import PARENT_ENV
@@ -25,6 +29,8 @@ from gngdt.services.plumbing.environment import PARENT_ENV
 STOP = threading.Event()
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 _PR_SET_PDEATHSIG = 1
+#: how long a finished command waits for threads it did not start to end (zenoh's callbacks)
+THREADS_GRACE_S = 5.0
 
 _graceful = False
 _signals_received: list[int] = []
@@ -92,3 +98,30 @@ def graceful() -> Iterator[threading.Event]:
 def stop_reason() -> str:
     """The first stop signal's name, or ``""`` if none came."""
     return signal.Signals(_signals_received[0]).name if _signals_received else ""
+
+
+def exit_process(code: int, grace_s: float = THREADS_GRACE_S) -> NoReturn:
+    """Exit with ``code`` once the other threads have ended, or after ``grace_s`` seconds without
+    the ones left.
+
+    zenoh-python runs each subscriber's callback on a non-daemon thread of its own. Those end when
+    the session drops the callback; a session whose router died can keep one (seen: a learner idle
+    for 77 minutes after its router was killed, waiting at exit for four such threads). Python
+    would wait for them forever, so the ones left after the grace are named and abandoned, once
+    the ``atexit`` handlers (logging's flush among them) have run.
+    """
+    deadline = time.monotonic() + grace_s
+    for thread in threading.enumerate():
+        if thread is not threading.current_thread() and not thread.daemon:
+            thread.join(max(0.0, deadline - time.monotonic()))
+    left = [thread.name for thread in threading.enumerate()
+            if thread is not threading.current_thread() and not thread.daemon and thread.is_alive()]
+    if not left:
+        sys.exit(code)
+    logging.getLogger(__name__).warning(
+        "exiting without %d thread(s) still running after %.0f s: %s (zenoh callbacks of a "
+        "session that did not close)", len(left), grace_s, ", ".join(left))
+    atexit._run_exitfuncs()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

@@ -1,11 +1,14 @@
 """Faults with real processes on loopback: torn checkpoints refused by a running learner's
 start-up, a logger killed outright leaves a readable .rrd and its restart does not clobber it,
-and every service reconnects after a router restart. (kill -9 of the learner and its resume
+every service reconnects after a router restart, and stops when asked after its router died,
+whatever threads are left. (kill -9 of the learner and its resume
 from the checkpoint: tests/process/test_pipeline.py.)"""
 
 from __future__ import annotations
 
 import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -14,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from helpers.checkpoints import trained_checkpoint
-from helpers.processes import log_text, wait_for
+from helpers.processes import log_text, wait_exit, wait_for
 from helpers.rrd import rrd_rows
 
 from gngdt.io.outputs.rerun_output import RRD_FLUSH_SECONDS
@@ -198,6 +201,46 @@ def test_services_reconnect_after_a_router_restart(
     for process in (capture, learner, logger):
         process.send_signal(signal.SIGINT)
         assert process.wait(30) == 0, log_text(process)
+
+
+@pytest.mark.timeout(180)
+def test_services_stop_when_asked_after_their_router_died(
+    free_port: int, tabletop_recording: Path, spawn: Callable, tmp_path: Path
+) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    connect = ("--zenoh-connect", endpoint)
+    router = _start_router(spawn, endpoint)
+    learner = spawn("learn", "--samples-per-frame", "2000", *connect)
+    logger = spawn("log", "--save", str(tmp_path / "orphan.rrd"), "--keep-running", *connect)
+    watch = TopologyWatch(endpoint)
+    try:
+        capture = spawn("capture", str(tabletop_recording), "--rate", "5", "--loop", *connect)
+        wait_for(lambda: watch.count() >= 2, 90, "topologies")
+    finally:
+        watch.session.close()
+    router.send_signal(signal.SIGKILL)
+    router.wait(10)
+    for process in (capture, learner, logger):
+        process.send_signal(signal.SIGTERM)
+    codes = [wait_exit(process, 60) for process in (capture, learner, logger)]
+    assert codes == [0, 0, 0], [log_text(process) for process in (capture, learner, logger)]
+
+
+def test_a_finished_command_exits_without_threads_that_never_end(tmp_path: Path) -> None:
+    """A thread that never ends (zenoh's callback thread of a session that did not close) holds
+    up no `gngdt` command: its exit code stands and its ``atexit`` handlers run."""
+    flushed = tmp_path / "flushed"
+    script = (
+        "import atexit, threading, pathlib\n"
+        "from gngdt.services.plumbing.lifecycle import exit_process\n"
+        f"atexit.register(pathlib.Path({str(flushed)!r}).write_text, 'yes')\n"
+        "threading.Thread(target=threading.Event().wait, name='pyo3-closure').start()\n"
+        "exit_process(3, grace_s=0.5)\n")
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 3, done.stderr
+    assert "1 thread(s) still running" in done.stderr and "pyo3-closure" in done.stderr
+    assert flushed.read_text() == "yes"
 
 
 def test_no_router_is_a_clear_error_not_a_hang(free_port: int) -> None:
