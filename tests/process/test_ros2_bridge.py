@@ -263,30 +263,39 @@ def gngdt_clouds(endpoint: str) -> tuple[object, list]:
     return session, clouds
 
 
-def publish_bad_input(sdk, driver: CameraDriver, color: np.ndarray, depth: np.ndarray,
-                      counted: Callable[[int, float], bool]) -> None:
-    """Six images the bridge must refuse as malformed: three of garbage on the colour key, a
-    yuv422 image, a frame over 640x480 (colour and depth). Each (or each frame's) waited for
-    until ``counted`` sees the status count it: the bridge holds at most 8 samples, and a burst
-    beyond that, on a machine too busy to keep up, would be dropped (counted as such) before
-    being refused. The oversized frame is sent again while it is not counted: the SDK's
-    publishers drop what a busy link cannot take (congestion control DROP), and a megabyte
-    image may go before it reaches the bridge."""
-    noise = sdk.ZenohSession.get_instance().session
-    for count, garbage in enumerate((b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3), 1):
-        noise.put(driver.publishers[COLOR].keyexpr, garbage)
-        assert counted(count, 30), f"{count} bad messages counted in the status"
-    driver.publishers[COLOR].publish(
-        header=driver.header(stamp=driver.time(sec=1, nanosec=0), frame_id="x"),
-        height=1, width=2, encoding="yuv422", is_bigendian=0, step=4, data=np.zeros(4, np.uint8))
-    assert counted(4, 30), "4 bad messages counted in the status"
-    big = np.zeros((481, 640, 3), np.uint8)  # one row over --max-frame-pixels
+def refused(send: Callable[[], None], refusals: Callable[[], int], what: str) -> None:
+    """Send a bad message until the bridge's status counts one more refusal than before it.
+
+    The SDK's publishers and a raw put drop what a busy link cannot take (congestion control
+    DROP), so one try can be lost before it reaches the bridge; a try is given 10 s (the status
+    comes once a second). A lost try counted late would only make the count larger."""
+    before = refusals()
     for _ in range(6):
-        driver.publish(big, np.zeros((481, 640), np.uint16), time.time_ns())
-        if counted(6, 10):
-            break
-    else:
-        raise AssertionError("the oversized frame was never counted in the status")
+        send()
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            if refusals() > before:
+                return
+            time.sleep(0.1)
+    raise AssertionError(f"{what} was never counted in the status ({before} before it)")
+
+
+def publish_bad_input(sdk, driver: CameraDriver, refusals: Callable[[], int]) -> None:
+    """Six images the bridge must refuse as malformed: three of garbage on the colour key, a
+    yuv422 image, a frame over 640x480 (colour and depth), each sent until counted (`refused`):
+    one at a time, since the bridge holds at most 8 samples, and a burst beyond that, on a
+    machine too busy to keep up, would be dropped (counted as such) before being refused."""
+    noise = sdk.ZenohSession.get_instance().session
+    for garbage in (b"", b"\x00\x01\x00\x00", bytes(range(256)) * 3):
+        refused(lambda garbage=garbage: noise.put(driver.publishers[COLOR].keyexpr, garbage),
+                refusals, f"{len(garbage)} bytes of garbage")
+    refused(lambda: driver.publishers[COLOR].publish(
+        header=driver.header(stamp=driver.time(sec=1, nanosec=0), frame_id="x"),
+        height=1, width=2, encoding="yuv422", is_bigendian=0, step=4,
+        data=np.zeros(4, np.uint8)), refusals, "a yuv422 image")
+    big = np.zeros((481, 640, 3), np.uint8)  # one row over --max-frame-pixels
+    refused(lambda: driver.publish(big, np.zeros((481, 640), np.uint16), time.time_ns()),
+            refusals, "a frame over --max-frame-pixels")
 
 
 def camera_in_world(stamp_ns: int, translation: tuple[float, float, float]):
@@ -333,26 +342,21 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
                     if latest else []
                 return {kv.key: kv.value for kv in ours[0].values} if ours else {}
 
-            def counted(bad: int, timeout_s: float) -> bool:
-                deadline = time.monotonic() + timeout_s
-                while time.monotonic() < deadline:
-                    values = status_values()
-                    if (int(values.get("camera/images/malformed", 0))
-                            + int(values.get("camera/calibrations_refused", 0)) >= bad):
-                        return True
-                    time.sleep(0.1)
-                return False
+            def refusals() -> int:
+                values = status_values()
+                return (int(values.get("camera/images/malformed", 0))
+                        + int(values.get("camera/calibrations_refused", 0)))
 
             try:
-                publish_bad_input(sdk, driver, color, depth, counted)
-                # 6 or more: the oversized frame may have been sent more than once; none of it
-                # made a cloud
+                publish_bad_input(sdk, driver, refusals)
+                # 6 or more: a message sent again may be counted twice; none made a cloud
                 values = status_values()
                 malformed = int(values["camera/images/malformed"])
                 assert malformed >= 6 and values["camera/frames_published"] == "0", str(values)
-                CameraDriver.publish(driver_with(driver, dict(driver.camera, fx=0.0, fy=0.0)),
-                                     color, depth, 1)
-                assert counted(malformed + 1, 30), "the uncalibrated CameraInfo counted"
+                uncalibrated = driver_with(driver, dict(driver.camera, fx=0.0, fy=0.0))
+                refused(lambda: CameraDriver.publish(uncalibrated, color, depth, 1), refusals,
+                        "an uncalibrated CameraInfo")
+                calibrations_refused = int(status_values()["camera/calibrations_refused"])
                 deadline = time.monotonic() + 60
                 while not any(frame_id == "world" for frame_id, _ in clouds):
                     assert time.monotonic() < deadline and bridge.poll() is None, \
@@ -361,9 +365,10 @@ def test_bad_input_is_counted_and_skipped_and_poses_come_from_tf(
                     tf.publish(transforms=[camera_in_world(stamp, (1.0, 2.0, 3.0))])
                     driver.publish(color, depth, stamp)
                     time.sleep(0.2)
-                # the uncalibrated CameraInfo counted once, and no good frame since
+                # the uncalibrated CameraInfo counted (each time sent), and no good frame since
                 assert int(status_values()["camera/images/malformed"]) == malformed
-                assert int(status_values()["camera/calibrations_refused"]) == 1
+                assert int(status_values()["camera/calibrations_refused"]) \
+                    == calibrations_refused >= 1
             finally:
                 driver.close()
                 tf.close()
