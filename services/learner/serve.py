@@ -57,6 +57,7 @@ from gngdt.services.learner.inbound import (
 )
 from gngdt.services.learner.messages import (
     PointsMessage,
+    decode_points,
     objects_message,
     scene_message,
     status_message,
@@ -539,9 +540,15 @@ def warm_up(config: LearnerConfig) -> None:
     """Compile (or load from numba's cache) every kernel the learner uses and encode each
     message once, before the first frame, logging each step (`gngdt run` shows them)."""
     from gngdt.core.learner.warm_up import logged_progress, sample_frame, warm_up_learner
+    from gngdt.schemas.clouds import cloud_to_wire
 
     learner = warm_up_learner(config, logged_progress(log))
     positions, colors, _ = sample_frame()
+    # a decoded cloud's points are a read-only strided view: numba compiles its own kernels
+    # for those (the finite check, as decoding and learning run it)
+    wire = cloud_to_wire(positions, colors, timestamp_ns=1, frame_id="warm-up", pose=None)
+    decoded = decode_points(bytes(wire), FrameStamp(0, time.time_ns()).to_attachment())
+    learner.learn(decoded.positions, decoded.colors, "world", np.eye(4), steps=1)
     published = learner.publication(positions, colors)
     stamp = FrameStamp(0, 1)
     topology_message(published, stamp)
