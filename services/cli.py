@@ -152,10 +152,17 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def command() -> NoReturn:
-    """The `gngdt` executable: :func:`main`, then an exit that no leftover thread holds up."""
+    """The `gngdt` executable: :func:`main`, then an exit that no leftover thread holds up (a
+    crash too: its traceback is logged, exit 1)."""
     from gngdt.services.plumbing.lifecycle import exit_process
 
-    exit_process(main())
+    try:
+        code = main()
+    except Exception:
+        logging.getLogger(__name__).critical("gngdt stopped on an unexpected error",
+                                             exc_info=True)
+        code = 1
+    exit_process(code)
 
 
 if __name__ == "__main__":
