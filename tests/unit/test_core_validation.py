@@ -102,4 +102,32 @@ def test_finite_rows_screen_is_exact_including_overflowing_sums():
     assert finite_rows(rows).tolist() == [True, False, True, False, False, True]
     huge = np.full((2, 3), 3e38, dtype=np.float32)  # finite, but the row sums overflow
     assert finite_rows(huge) is None
+    assert finite_rows(np.full((2, 3), 1.7e308)) is None  # float64 sums overflow too
     assert finite_rows(np.zeros((4, 3), dtype=np.uint8)) is None
+    half = np.ones((3, 3), dtype=np.float16)  # no numba kernel for float16: numpy's test
+    half[2, 1] = np.nan
+    assert finite_rows(half).tolist() == [True, True, False]
+
+
+def test_finite_rows_of_a_decoded_cloud_reads_its_strided_points():
+    """A decoded cloud's points are a read-only view with a 15-byte stride; a NaN in any field
+    of any row is found, wherever it is."""
+    from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+
+    from gngdt.core.gas.sampling import finite_rows
+    from gngdt.schemas.clouds import cloud_to_wire, msg_to_cloud
+
+    positions = np.random.default_rng(0).random((1000, 3), dtype=np.float32)
+    colors = np.zeros((1000, 3), dtype=np.uint8)
+    for row, column in [(None, None), (0, 0), (517, 1), (999, 2)]:
+        damaged = positions.copy()
+        if row is not None:
+            damaged[row, column] = np.nan if column != 1 else -np.inf
+        wire = cloud_to_wire(damaged, colors, timestamp_ns=1, frame_id="camera", pose=None)
+        points, _ = msg_to_cloud(PointCloud.FromString(bytes(wire)), copy=False)
+        assert points.strides[0] == 15 and not points.flags.writeable
+        finite = finite_rows(points)
+        if row is None:
+            assert finite is None
+        else:
+            assert np.flatnonzero(~finite).tolist() == [row]
