@@ -112,11 +112,12 @@ def test_mcap_holds_every_stream_with_foxglove_schemas(recorded_run) -> None:
     scenes = [entry[1] for entry in messages["/camera/scene"]]
     objects = [entry[1] for entry in messages["/camera/objects"]]
     # one objects update per learned frame and one for the settled network (published before
-    # the settled status the logger ends on); how many frames the learner kept up with depends
-    # on the machine's load, and so may whether a latest-wins update or two were dropped on the
-    # way to a busy logger
+    # the settled status the logger ends on); objects and scene are latest-wins (congestion
+    # control DROP, docs/contracts.md), so on a busy machine any but the settled network's may
+    # be dropped on the way to the logger (a fresh clone's suite beside other work kept 3 of 9
+    # objects updates and 1 scene): how many arrive is the machine's, not a property of gngdt
     learned = max(entry[1].frames_used for entry in messages["/camera/learner/status"])
-    assert learned >= 1 and 2 <= len(objects) <= learned + 1 and len(scenes) >= 2
+    assert learned >= 1 and 1 <= len(objects) <= learned + 1 and len(scenes) >= 1
     for update in scenes + objects:
         assert update.deletions[0].type == update.deletions[0].ALL  # the newest state only
     scene = scenes[-1]
@@ -170,7 +171,14 @@ def test_topologies_carry_persistent_node_and_cluster_ids(recorded_run) -> None:
     topologies = [decode_topology(entry[1].SerializeToString())
                   for entry in messages["/camera/topology"]]
     learned = max(entry[1].frames_used for entry in messages["/camera/learner/status"])
-    assert len(topologies) == learned + 1 >= 2  # each learned frame's, and the settled one
+    # each learned frame's and the settled one were published; topologies are latest-wins, all
+    # but the settled one (sent with congestion control BLOCK), so a busy logger may miss some
+    assert learned >= 1 and 1 <= len(topologies) <= learned + 1
+    assert topologies[-1].settled and not any(snapshot.settled for snapshot in topologies[:-1])
+    # in frame order, the settled network last (it is the last frame's, which may be there too)
+    sequences = [snapshot.frame_sequence for snapshot in topologies]
+    assert all(a < b for a, b in itertools.pairwise(sequences[:-1])), sequences
+    assert max(sequences) == sequences[-1], sequences
     previous = None
     for snapshot in topologies:
         assert snapshot.node_ids is not None and np.unique(snapshot.node_ids).size == len(
