@@ -168,19 +168,28 @@ def _start_router(spawn: Callable, endpoint: str):
     return router
 
 
+def _start_services(spawn: Callable, endpoint: str, recording: Path, rrd_path: Path,
+                    rate: str) -> tuple:
+    """A router on ``endpoint``, a learner, a logger saving ``rrd_path`` and a topology watch,
+    then a capture looping ``recording`` at ``rate``: (router, learner, logger, capture, watch)."""
+    connect = ("--zenoh-connect", endpoint)
+    router = _start_router(spawn, endpoint)
+    learner = spawn("learn", "--samples-per-frame", "2000", *connect)
+    logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
+    watch = TopologyWatch(endpoint)
+    capture = spawn("capture", str(recording), "--rate", rate, "--loop", *connect)
+    return router, learner, logger, capture, watch
+
+
 @pytest.mark.timeout(180)
 def test_services_reconnect_after_a_router_restart(
     free_port: int, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port}"
-    connect = ("--zenoh-connect", endpoint)
-    router = _start_router(spawn, endpoint)
     rrd_path = tmp_path / "reconnect.rrd"
-    learner = spawn("learn", "--samples-per-frame", "2000", *connect)
-    logger = spawn("log", "--save", str(rrd_path), "--keep-running", *connect)
-    watch = TopologyWatch(endpoint)
+    router, learner, logger, capture, watch = _start_services(
+        spawn, endpoint, tabletop_recording, rrd_path, "1")
     try:
-        capture = spawn("capture", str(tabletop_recording), "--rate", "1", "--loop", *connect)
         wait_for(lambda: watch.count() >= 3, 90, "topologies before the restart")
 
         router.send_signal(signal.SIGKILL)
@@ -207,14 +216,9 @@ def test_services_reconnect_after_a_router_restart(
 def test_services_stop_when_asked_after_their_router_died(
     free_port: int, tabletop_recording: Path, spawn: Callable, tmp_path: Path
 ) -> None:
-    endpoint = f"tcp/127.0.0.1:{free_port}"
-    connect = ("--zenoh-connect", endpoint)
-    router = _start_router(spawn, endpoint)
-    learner = spawn("learn", "--samples-per-frame", "2000", *connect)
-    logger = spawn("log", "--save", str(tmp_path / "orphan.rrd"), "--keep-running", *connect)
-    watch = TopologyWatch(endpoint)
+    router, learner, logger, capture, watch = _start_services(
+        spawn, f"tcp/127.0.0.1:{free_port}", tabletop_recording, tmp_path / "orphan.rrd", "5")
     try:
-        capture = spawn("capture", str(tabletop_recording), "--rate", "5", "--loop", *connect)
         wait_for(lambda: watch.count() >= 2, 90, "topologies")
     finally:
         watch.session.close()
