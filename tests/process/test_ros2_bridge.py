@@ -263,8 +263,10 @@ def gngdt_clouds(endpoint: str) -> tuple[object, list]:
     return session, clouds
 
 
-def refused(send: Callable[[], None], refusals: Callable[[], int], what: str) -> None:
-    """Send a bad message until the bridge's status counts one more refusal than before it.
+def refused(send: Callable[[], None], refusals: Callable[[], int], what: str,
+            count: int = 1) -> None:
+    """Send bad input until the bridge's status counts ``count`` more refusals than before it
+    (a frame's colour and depth images are two).
 
     The SDK's publishers and a raw put drop what a busy link cannot take (congestion control
     DROP), so one try can be lost before it reaches the bridge; a try is given 10 s (the status
@@ -274,7 +276,7 @@ def refused(send: Callable[[], None], refusals: Callable[[], int], what: str) ->
         send()
         deadline = time.monotonic() + 10
         while time.monotonic() < deadline:
-            if refusals() > before:
+            if refusals() >= before + count:
                 return
             time.sleep(0.1)
     raise AssertionError(f"{what} was never counted in the status ({before} before it)")
@@ -295,7 +297,7 @@ def publish_bad_input(sdk, driver: CameraDriver, refusals: Callable[[], int]) ->
         data=np.zeros(4, np.uint8)), refusals, "a yuv422 image")
     big = np.zeros((481, 640, 3), np.uint8)  # one row over --max-frame-pixels
     refused(lambda: driver.publish(big, np.zeros((481, 640), np.uint16), time.time_ns()),
-            refusals, "a frame over --max-frame-pixels")
+            refusals, "a frame over --max-frame-pixels (colour and depth)", count=2)
 
 
 def camera_in_world(stamp_ns: int, translation: tuple[float, float, float]):
