@@ -59,7 +59,7 @@ def finite_rows(array: np.ndarray) -> np.ndarray | None:
     """
     if not np.issubdtype(array.dtype, np.inexact):
         return None
-    if array.size == 0 or (array.dtype in _SCREENED and sum_is_finite(array)):
+    if array.dtype in _SCREENED and sum_is_finite(array):
         return None
     finite = np.isfinite(array).all(axis=1)
     return None if finite.all() else finite

@@ -544,11 +544,10 @@ def warm_up(config: LearnerConfig) -> None:
 
     learner = warm_up_learner(config, logged_progress(log))
     positions, colors, _ = sample_frame()
-    # a decoded cloud's points are a read-only strided view: numba compiles its own kernels
-    # for those (the finite check, as decoding and learning run it)
+    # a decoded cloud's points are a read-only strided view, for which numba compiles the
+    # finite check (decoding's and learning's) a variant of its own
     wire = cloud_to_wire(positions, colors, timestamp_ns=1, frame_id="warm-up", pose=None)
-    decoded = decode_points(bytes(wire), FrameStamp(0, time.time_ns()).to_attachment())
-    learner.learn(decoded.positions, decoded.colors, "world", np.eye(4), steps=1)
+    decode_points(bytes(wire), FrameStamp(0, time.time_ns()).to_attachment())
     published = learner.publication(positions, colors)
     stamp = FrameStamp(0, 1)
     topology_message(published, stamp)

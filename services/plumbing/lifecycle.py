@@ -100,6 +100,13 @@ def stop_reason() -> str:
     return signal.Signals(_signals_received[0]).name if _signals_received else ""
 
 
+def _waited_for_threads() -> list[threading.Thread]:
+    """The running threads Python's own exit would wait for: non-daemon, but this one."""
+    return [thread for thread in threading.enumerate()
+            if thread is not threading.current_thread() and not thread.daemon
+            and thread.is_alive()]
+
+
 def exit_process(code: int, grace_s: float = THREADS_GRACE_S) -> NoReturn:
     """Exit with ``code`` once the other threads have ended, or after ``grace_s`` seconds without
     the ones left.
@@ -111,11 +118,9 @@ def exit_process(code: int, grace_s: float = THREADS_GRACE_S) -> NoReturn:
     the ``atexit`` handlers (logging's flush among them) have run.
     """
     deadline = time.monotonic() + grace_s
-    for thread in threading.enumerate():
-        if thread is not threading.current_thread() and not thread.daemon:
-            thread.join(max(0.0, deadline - time.monotonic()))
-    left = [thread.name for thread in threading.enumerate()
-            if thread is not threading.current_thread() and not thread.daemon and thread.is_alive()]
+    for thread in _waited_for_threads():
+        thread.join(max(0.0, deadline - time.monotonic()))
+    left = [thread.name for thread in _waited_for_threads()]  # any started meanwhile too
     if not left:
         sys.exit(code)
     logging.getLogger(__name__).warning(
