@@ -70,6 +70,14 @@ def alive(pid: int) -> bool:
     return state != "Z"
 
 
+def command_line(pid: int) -> list[str]:
+    """The arguments ``pid`` was started with ([] once it is gone)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().decode().split("\0")[:-1]
+    except OSError:
+        return []
+
+
 def log_text(process) -> str:
     """What a process started by the ``spawn`` fixture has written so far."""
     return Path(process.log_path).read_text(errors="replace")

@@ -16,6 +16,7 @@ from helpers.processes import (
     alive,
     bound_sockets,
     children,
+    command_line,
     log_text,
     wait_for,
     with_default_sighup,
@@ -209,13 +210,6 @@ def test_run_from_a_folder_shadowing_gngdt_admits_only_its_children_and_leaves_n
     assert "shadowed" not in text
 
 
-def _command_line(pid: int) -> str:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-    except OSError:
-        return "(gone)"
-
-
 @pytest.mark.timeout(120)
 def test_children_of_a_killed_run_stop_too(tabletop_recording: Path, tmp_path: Path) -> None:
     log_path = tmp_path / "run.log"
@@ -233,7 +227,7 @@ def test_children_of_a_killed_run_stop_too(tabletop_recording: Path, tmp_path: P
     try:
         wait_for(lambda: not any(alive(pid) for pid in pids), 30, "the orphans to stop")
     except AssertionError:
-        lingering = {pid: _command_line(pid) for pid in pids if alive(pid)}
+        lingering = {pid: " ".join(command_line(pid)) for pid in pids if alive(pid)}
         raise AssertionError(f"still running 30 s after the run was killed: {lingering}; the "
                              f"run's log:\n{log_path.read_text()}") from None
 

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
-from helpers.processes import children, wait_for
+from helpers.processes import children, command_line, wait_for
 
 from gngdt.schemas.status import encode_stream_end
 from gngdt.schemas.wire import ENCODING_SCENE_UPDATE, FrameStamp
@@ -23,7 +23,7 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 
 def zenoh_config_of(pid: int) -> Path:
     """The --zenoh-config file a child of `gngdt run` was started with."""
-    arguments = Path(f"/proc/{pid}/cmdline").read_bytes().decode().split("\0")
+    arguments = command_line(pid)
     return Path(arguments[arguments.index("--zenoh-config") + 1])
 
 
