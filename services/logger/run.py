@@ -55,9 +55,11 @@ def run_logger(args: argparse.Namespace, outputs: list[Output]) -> int:
     captures = CaptureWatch()
     declared.append(session.liveliness().declare_subscriber(
         CaptureWatch.KEY, captures.on_token, history=True))
-    declared.append(session.liveliness().declare_token(logger_alive_key(str(session.zid()))))
     try:
         with lifecycle.graceful() as stop:
+            # ready (`gngdt run` waits for it) only once a stop signal would end the loop cleanly
+            declared.append(session.liveliness().declare_token(
+                logger_alive_key(str(session.zid()))))
             while not stop.is_set():
                 inbox.arrived.wait(0.05)
                 for key, payload, attachment in inbox.take():

@@ -22,6 +22,7 @@ from helpers.rrd import rrd_rows
 
 from gngdt.io.outputs.rerun_output import RRD_FLUSH_SECONDS
 from gngdt.schemas.topology import decode_topology
+from gngdt.schemas.wire import logger_alive_key
 from gngdt.services.plumbing.session import ZenohSetupError, client_config, open_config
 
 
@@ -144,13 +145,17 @@ def test_killed_logger_leaves_a_readable_rrd_and_a_restart_does_not_clobber_it(
 
 # ---------------------------------------------------------------------------------- router
 class TopologyWatch:
-    """Topology frame sequences seen through the router (its own reconnecting client)."""
+    """Topology frame sequences seen through the router (its own reconnecting client), and
+    whether a logger is ready (its token: a stop signal would end its loop cleanly)."""
 
     def __init__(self, endpoint: str) -> None:
         self.session = open_config(client_config([endpoint]))
         self.lock = threading.Lock()
         self.sequences: list[int] = []
         self.session.declare_subscriber("gngdt/camera/topology", self._on_topology)
+        self.logger_ready = threading.Event()
+        self.session.liveliness().declare_subscriber(
+            logger_alive_key(), lambda _sample: self.logger_ready.set(), history=True)
 
     def _on_topology(self, sample) -> None:
         snapshot = decode_topology(sample.payload.to_bytes())
@@ -220,6 +225,8 @@ def test_services_stop_when_asked_after_their_router_died(
         spawn, f"tcp/127.0.0.1:{free_port}", tabletop_recording, tmp_path / "orphan.rrd", "5")
     try:
         wait_for(lambda: watch.count() >= 2, 90, "topologies")
+        # seen failing in CI: a logger still starting up (its log empty) exits 130 when stopped
+        wait_for(watch.logger_ready.is_set, 90, "the logger")
     finally:
         watch.session.close()
     router.send_signal(signal.SIGKILL)
