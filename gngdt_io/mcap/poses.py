@@ -13,6 +13,7 @@ from typing import IO, Any
 import numpy as np
 
 from gngdt.core.sensor.geometry import TransformError
+from gngdt.io.errors import RecordingError
 from gngdt.io.frame import CameraPose
 from gngdt.io.mcap.decoding import DecodeFailure, MessageDecoder
 from gngdt.io.mcap.limits import ReadLimits, open_messages
@@ -96,7 +97,7 @@ def read_transforms(stream: IO[bytes], path: Path,
     bad = read = 0
     offsets = StampOffsets()
     try:
-        for schema, channel, message in open_messages(stream, limits.max_chunk_bytes):
+        for schema, channel, message in open_messages(stream, path, limits.max_chunk_bytes):
             if schema is None or schema.name not in _TRANSFORM_SCHEMAS:
                 continue
             try:
@@ -118,6 +119,8 @@ def read_transforms(stream: IO[bytes], path: Path,
                 read += 1
                 if bad <= MAX_POSE_WARNINGS:
                     logger.warning("%s: %s: %s; skipped", path, channel.topic, error)
+    except RecordingError:  # a chunk beyond the limits: the file is refused
+        raise
     except Exception as error:  # damaged file: keep the transforms read so far
         logger.debug("%s: transform pass stopped: %s", path, error)
     if bad > MAX_POSE_WARNINGS:

@@ -59,7 +59,7 @@ from gngdt.io.mcap.decoding import (
     normalize_depth,
 )
 from gngdt.io.mcap.frame_assembly import BadFrameHandler, DecodedImage, FrameAssembler
-from gngdt.io.mcap.limits import ReadLimits, check_chunks, open_messages
+from gngdt.io.mcap.limits import ReadLimits, open_messages
 from gngdt.io.mcap.poses import FIXED_FRAME_CANDIDATES, PoseLookup, read_transforms
 
 __all__ = [
@@ -69,7 +69,6 @@ __all__ = [
     "PoseLookup",
     "ReadLimits",
     "RecordingError",
-    "check_chunks",
     "check_recording",
     "decode_compressed",
     "normalize_depth",
@@ -144,7 +143,8 @@ def read_frames(
     RecordingError of each bad frame, which is then skipped (default: raise it). fixed_frame:
     the frame poses are given in (``"auto"``: see the module docstring; None: no poses).
     limits: what reading may cost (:class:`ReadLimits`; an image over the pixel limit is a bad
-    frame, a chunk over the chunk limit refuses the file before anything is decompressed).
+    frame, a chunk over the chunk limit refuses the file before it is inflated, after the
+    frames before it, or before any frame when the first pass reads transforms).
     camera: intrinsics that replace the recording's calibration (a bag without CameraInfo);
     depth_scale: units per metre of its 16-bit depth images (default: millimetres, or the
     camera's).
@@ -158,7 +158,6 @@ def read_frames(
     except OSError as error:
         raise RecordingError(path, None, f"cannot open: {error.strerror or error}") from error
     with stream:
-        check_chunks(stream, path, limits.max_chunk_bytes)
         poses = None
         if fixed_frame is not None:
             transforms = read_transforms(stream, path, limits)
@@ -178,7 +177,7 @@ def _read_stream(
     decoder = MessageDecoder()
     chosen: dict[str, str] = {}  # role -> topic
     try:
-        messages = open_messages(stream, limits.max_chunk_bytes)
+        messages = open_messages(stream, path, limits.max_chunk_bytes)
         for schema, channel, message in messages:
             if schema is None or schema.name not in FOXGLOVE_SCHEMAS | ROS_SCHEMAS:
                 continue
