@@ -21,6 +21,7 @@ from gngdt.core.clustering import COL, NOR, POS, connected_component_labels
 from gngdt.core.gas.sampling import as_samples
 from gngdt.core.kernels import layout as K
 from gngdt.core.kernels import segmentation as SK
+from gngdt.core.kernels.graph import edge_list
 from gngdt.core.kernels.layout import I_NODES, Network
 from gngdt.core.metrics import quantization_error as _rms_error
 
@@ -139,12 +140,7 @@ def label_pixels(points: np.ndarray, node_labels: np.ndarray, net: Network) -> n
 def edge_pairs(net: Network, mask: int) -> np.ndarray:
     """(E, 2) int64 node-index pairs ``i < j`` of the edges of ``net`` that have every property
     bit of ``mask``."""
-    n = int(net.istate[I_NODES])
-    nbr = net.nbr[:n]
-    used = np.arange(nbr.shape[1]) < net.deg[:n, None]
-    rows = np.broadcast_to(np.arange(n)[:, None], nbr.shape)
-    keep = used & ((net.emask[:n] & mask) == mask) & (nbr > rows)
-    return np.stack([rows[keep], nbr[keep]], axis=1).astype(np.int64)
+    return edge_list(net.nbr, net.deg, net.emask, int(net.istate[I_NODES]), mask)
 
 
 _PROPERTY_BITS = {POS: K.POS_BIT, COL: K.COL_BIT, NOR: K.NOR_BIT}

@@ -6,6 +6,7 @@ node moves the last node's properties, edges and grid entry into its place.
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from gngdt.core.kernels._numba import inlined
@@ -99,3 +100,25 @@ def delete_node(net, i, n):
         _grid_rename(net, last, i)
     deg[last] = 0
     return last
+
+
+@njit(cache=True)
+def edge_list(nbr, deg, emask, n, mask):
+    """(E, 2) int64 pairs ``i < j`` of the edges among the first ``n`` nodes whose property bits
+    include every bit of ``mask``, by ``i`` then by slot: ``nbr`` (cap, K) int32 neighbours,
+    ``deg`` (cap,) int32 slots in use, ``emask`` (cap, K) uint8 property bits of each slot."""
+    count = 0
+    for i in range(n):
+        for k in range(deg[i]):
+            if nbr[i, k] > i and (emask[i, k] & mask) == mask:
+                count += 1
+    pairs = np.empty((count, 2), dtype=np.int64)
+    e = 0
+    for i in range(n):
+        for k in range(deg[i]):
+            j = nbr[i, k]
+            if j > i and (emask[i, k] & mask) == mask:
+                pairs[e, 0] = i
+                pairs[e, 1] = j
+                e += 1
+    return pairs
