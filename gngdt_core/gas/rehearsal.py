@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from gngdt.core.kernels.rehearsal import drop_marked
 from gngdt.core.sensor.view import SensorView
 
 #: the offered counter stops here (an int64, with room to spare): a uniform sample of 2**62
@@ -78,13 +79,9 @@ class SampleMemory:
         if self.count == 0:
             return 0
         through = view.seen_through(self._positions, self.count, camera_from_model, margin)
-        dropped = int(through.sum())
-        if dropped:
-            kept = np.flatnonzero(~through)
-            self._positions[: kept.size] = self._positions[kept]
-            self._colors[: kept.size] = self._colors[kept]
-            self.count = kept.size
-        return dropped
+        count = self.count
+        self.count = drop_marked(self._positions, self._colors, through, count)
+        return count - self.count
 
     def draw(self, rng: np.random.Generator, count: int) -> tuple[np.ndarray, np.ndarray]:
         """``count`` samples drawn with replacement: positions and colours, (count, 3) each."""

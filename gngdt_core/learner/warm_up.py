@@ -60,7 +60,9 @@ def warm_up_learner(config: LearnerConfig, progress: Progress | None = None) -> 
     quick = replace(config.options, first_frame_steps=config.options.samples_per_frame)
     learner = FrameLearner("warm-up", replace(config, options=quick))
     groups: list[tuple[str, Callable[[], object]]] = [
-        ("learning loop", lambda: learner.learn(positions, colors, "world", pose)),
+        # twice: the second frame carves the rehearsal memory the first one filled
+        ("learning loop", lambda: [learner.learn(positions, colors, "world", pose)
+                                   for _ in range(2)]),
         ("nearest nodes", lambda: learner.quantization_error(positions, colors)),
         ("normals and segmentation", learner.learned_frame),
         ("sensor view", lambda: learner.measure_ghosts(positions, pose)),
