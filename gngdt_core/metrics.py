@@ -81,6 +81,7 @@ def ghost_nodes(
     camera_pose: np.ndarray | None = None,
     distance: float = 0.05,
     margin: float = 0.05,
+    reach: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Which nodes the sensor could have seen in a batch, and which of those are ghosts.
 
@@ -88,14 +89,15 @@ def ghost_nodes(
     camera_pose: (4, 4) camera-to-model (None: the model is in the camera frame). A node is seen
     as in `gngdt.core.sensor.view.seen_nodes` (depth tolerance ``margin``, a fraction of the depth)
     and a ghost when it is seen and farther than ``distance`` (the data's units) from every point of
-    the batch: the sensor looked there and found nothing. Returns (seen, ghost), (N,) bool each.
+    the batch: the sensor looked there and found nothing. ``reach``: as in `seen_nodes` (default:
+    the nodes' spacing, measured here). Returns (seen, ghost), (N,) bool each.
     """
     from scipy.spatial import cKDTree
 
     from gngdt.core.sensor.view import seen_nodes
 
     nodes = np.asarray(node_positions, dtype=np.float64)
-    seen = seen_nodes(nodes, camera_points, camera_pose, margin)
+    seen = seen_nodes(nodes, camera_points, camera_pose, margin, reach)
     ghost = np.zeros(len(nodes), dtype=bool)
     points = np.asarray(camera_points, dtype=np.float64)
     if seen.any() and len(points):

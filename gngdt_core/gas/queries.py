@@ -24,6 +24,7 @@ from gngdt.core.kernels import segmentation as SK
 from gngdt.core.kernels.graph import edge_list
 from gngdt.core.kernels.layout import I_NODES, Network
 from gngdt.core.metrics import quantization_error as _rms_error
+from gngdt.core.sensor.view import node_spacing
 
 #: a nearest-node batch is split over the CPUs when each part gets at least this many points
 #: (a stream's 30,000-point attention draw takes both cores of a 2-core machine)
@@ -179,6 +180,17 @@ class NetworkQueries:
         """
         mask = self._property_mask(props or (POS,))
         return connected_component_labels(self.n_nodes_, self._edges_with(mask), min_size)
+
+    def node_spacing(self) -> float:
+        """Median distance from a node to its nearest other node (0 with fewer than two), as
+        `gngdt.core.sensor.view.node_spacing` gives it; in 3-D by the learner's own search (its
+        grid in GNG-DT) instead of a k-d tree built for it."""
+        n = self.n_nodes_
+        if n < 2 or self._dim != 3:
+            return node_spacing(self.positions_)
+        sq_distances = np.empty(n)
+        SK.nearest_other_sq_distances(self._network, sq_distances)
+        return float(np.median(np.sqrt(sq_distances)))
 
     def predict(self, positions: Any, return_distance: bool = False) -> Any:
         """(N,) int64 index of the winner node (nearest by position) of each row; with

@@ -11,7 +11,15 @@ import numpy as np
 from numba import njit
 
 from gngdt.core.kernels._numba import inlined
-from gngdt.core.kernels.grid import BOUND_SLACK, _axis_gap, _bucket, _sq_dist, query_axis
+from gngdt.core.kernels.grid import (
+    BOUND_SLACK,
+    _axis_gap,
+    _bucket,
+    _sq_dist,
+    nearest_two_brute,
+    nearest_two_grid,
+    query_axis,
+)
 from gngdt.core.kernels.layout import F_CELL, I_GRID, I_NODES
 from gngdt.core.kernels.normals import compute_normal, property_bits
 
@@ -119,6 +127,22 @@ def nearest_nodes(points, start, stop, net, winners, sq_distances):
         winners[q] = s
         sq_distances[q] = d
         guess = s
+
+
+@njit(cache=True)
+def nearest_other_sq_distances(net, sq_distances):
+    """Squared distance from each node of a 3-D network with at least two nodes to its nearest
+    other node, into ``sq_distances`` (n,) float64: the learner's exact two-nearest search at the
+    node's own position (the node itself, or a node on it, is one of the two)."""
+    n, grid_on, cell_size, inv_cell = _search_of(net)
+    pos = net.pos
+    for i in range(n):
+        if grid_on:
+            s1, _, best1, best2 = nearest_two_grid(net, n, pos[i, 0], pos[i, 1], pos[i, 2], 3,
+                                                   cell_size, inv_cell)
+        else:
+            s1, _, best1, best2 = nearest_two_brute(pos, n, pos[i, 0], pos[i, 1], pos[i, 2], 3)
+        sq_distances[i] = best2 if s1 == i else best1
 
 
 @inlined

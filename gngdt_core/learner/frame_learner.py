@@ -369,7 +369,8 @@ class FrameLearner:
             return Ghosts()
         chosen = positions[self._analysis_rng.choice(len(positions), size=count, replace=False)]
         seen, ghost = ghost_nodes(model.positions_, chosen, pose,
-                                  self.options.ghost_distance_m, model.view_depth_margin)
+                                  self.options.ghost_distance_m, model.view_depth_margin,
+                                  model.node_spacing())
         return Ghosts(int(seen.sum()), float(ghost.sum() / seen.sum()) if seen.any() else 0.0)
 
     def placed(self, positions: np.ndarray) -> np.ndarray:
