@@ -24,15 +24,13 @@ def connected_component_labels(n_nodes: int, edges: np.ndarray, min_size: int = 
         raise ValueError(f"min_size must be an integer >= 1, got {min_size!r}")
     if n_nodes == 0:
         return np.zeros(0, dtype=np.int32)
-    from scipy.sparse import coo_array  # here: the registry below is read by light processes
-    from scipy.sparse.csgraph import connected_components
+    # here: the registry below is read by light processes
+    from gngdt.core.kernels.graph import component_roots
 
-    edges = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
-    graph = coo_array(
-        (np.ones(len(edges), dtype=np.int8), (edges[:, 0], edges[:, 1])), shape=(n_nodes, n_nodes)
-    ).tocsr()
-    _, raw = connected_components(graph, directed=False)
-    return rank_by_size(raw, min_size)
+    edges = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
+    if edges.size and (edges.min() < 0 or edges.max() >= n_nodes):
+        raise ValueError(f"edges must join nodes 0..{n_nodes - 1}")
+    return rank_by_size(component_roots(n_nodes, edges), min_size)
 
 
 def rank_by_size(labels: np.ndarray, min_size: int = 1) -> np.ndarray:

@@ -122,3 +122,24 @@ def edge_list(nbr, deg, emask, n, mask):
                 pairs[e, 1] = j
                 e += 1
     return pairs
+
+
+@njit(cache=True)
+def component_roots(n, pairs):
+    """(n,) int64 a representative node of each node's connected component in the graph of
+    ``pairs`` (E, 2) int64 node indices, 0 <= index < n (union-find with path halving)."""
+    parent = np.arange(n)
+    for e in range(pairs.shape[0]):
+        a = pairs[e, 0]
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        b = pairs[e, 1]
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+    for i in range(n):  # parents have lower indices: one pass in order resolves every root
+        parent[i] = parent[parent[i]]
+    return parent
