@@ -23,6 +23,29 @@ def test_components_sorted_by_size_with_min_size():
     np.testing.assert_array_equal(labels, [0, 0, 0, 0, 1, 1, -1])
 
 
+def test_components_are_scipys_on_random_graphs():
+    """The union-find gives the partition scipy's csgraph gives (ranked the same way), with
+    self-loops, repeated edges, either direction and isolated nodes."""
+    from scipy.sparse import coo_array
+    from scipy.sparse.csgraph import connected_components
+
+    from gngdt.core.clustering import rank_by_size
+
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        n = int(rng.integers(1, 300))
+        edges = rng.integers(0, n, (int(rng.integers(0, 2 * n)), 2))
+        graph = coo_array((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+        _, raw = connected_components(graph.tocsr(), directed=False)
+        np.testing.assert_array_equal(connected_component_labels(n, edges, 2),
+                                      rank_by_size(raw, 2))
+
+
+def test_components_refuse_edges_to_nodes_that_do_not_exist():
+    with pytest.raises(ValueError, match=r"nodes 0\.\.2"):
+        connected_component_labels(3, np.array([[0, 3]]))
+
+
 def test_combined_topology_keeps_only_edges_in_every_property():
     positions, colors, _ = make_data1(n_points=3_000, random_state=0)
     model = GNGDT(max_nodes=60, lambda_=100, random_state=0).fit(positions, colors, n_steps=20_000)
