@@ -60,6 +60,20 @@ def test_combined_topology_keeps_only_edges_in_every_property():
     np.testing.assert_array_equal(model.clusters("pos", "col"), expected)
 
 
+def test_node_spacing_by_the_learners_search_is_the_k_d_trees():
+    from gngdt.core.sensor.view import node_spacing
+
+    rng = np.random.default_rng(2)  # a box's floor and two walls, 3-D: the grid is searched
+    positions = rng.random((6_000, 3))
+    positions[np.arange(6_000) % 3, np.arange(6_000) % 3] = 0.0
+    colors = rng.random((6_000, 3))
+    model = GNGDT(max_nodes=300, lambda_=50, random_state=0)
+    for _ in range(4):  # growing: the grid is rebuilt and nodes move between cells
+        model.partial_fit(positions, colors, n_steps=3_000)
+        assert model.node_spacing() == node_spacing(model.positions_) > 0
+    assert GNGDT(random_state=0).node_spacing() == 0.0
+
+
 def test_quantization_error_matches_a_brute_force_computation():
     positions, colors, _ = make_data1(n_points=2_000, random_state=1)
     model = GNGDT(max_nodes=40, lambda_=50, random_state=0).fit(positions, colors, n_steps=5_000)
