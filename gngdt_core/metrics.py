@@ -103,6 +103,8 @@ def ghost_nodes(
     if seen.any() and len(points):
         if camera_pose is not None:
             points = points @ camera_pose[:3, :3].T + camera_pose[:3, 3]
-        nearest, _ = cKDTree(points).query(nodes[seen], k=1, distance_upper_bound=distance)
+        # built for one query: midpoint splits build in half the time of median ones
+        tree = cKDTree(points, balanced_tree=False, compact_nodes=False)
+        nearest, _ = tree.query(nodes[seen], k=1, distance_upper_bound=distance)
         ghost[np.flatnonzero(seen)[~np.isfinite(nearest)]] = True
     return seen, ghost
