@@ -9,14 +9,24 @@ from numba import njit
 
 def chain_edges(pairs: np.ndarray, classes: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """See `_chain_edges`; the ends' (class, node) order is sorted by NumPy (radix sort)."""
+    """See `_chain_edges`; the ends' (class, node) order is sorted by NumPy (`stable_order`)."""
     pairs = np.ascontiguousarray(pairs, dtype=np.int64)
     classes = np.ascontiguousarray(classes, dtype=np.int64)
     ends = pairs.ravel()
     lowest = int(ends.min())
     span = int(ends.max()) - lowest + 1
     keys = (np.repeat(classes, 2) + 1) * span + (ends - lowest)
-    return _chain_edges(pairs, classes, keys, np.argsort(keys, kind="stable"))
+    return _chain_edges(pairs, classes, keys, stable_order(keys))
+
+
+def stable_order(keys: np.ndarray) -> np.ndarray:
+    """``np.argsort(keys, kind="stable")`` of (M,) int64 ``keys`` >= 0: as numpy's default sort
+    of the distinct keys (key, index) when they fit in an int64 (4x faster than its stable
+    sort of int64)."""
+    count = keys.size
+    if count and int(keys.max()) < 2**62 // count:
+        return np.argsort(keys * count + np.arange(count))
+    return np.argsort(keys, kind="stable")
 
 
 @njit(cache=True)

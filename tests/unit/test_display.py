@@ -54,6 +54,14 @@ def test_a_mesh_needs_about_one_point_per_edge_and_closed_loops_close() -> None:
     assert len(starts) == 2 and len(nodes) == 4 and nodes[0] == nodes[-1]
 
 
+@given(st.lists(st.integers(0, 2**62), max_size=200), st.integers(1, 2**62))
+def test_the_ends_order_is_numpys_stable_argsort(values: list[int], scale: int) -> None:
+    from gngdt.core.kernels.strips import stable_order
+
+    keys = np.array(values, dtype=np.int64) % scale  # many repeats at small scales
+    np.testing.assert_array_equal(stable_order(keys), np.argsort(keys, kind="stable"))
+
+
 def test_empty_and_self_loop_edges_draw_nothing() -> None:
     for pairs in (np.zeros((0, 2), dtype=np.int64), np.array([[3, 3]])):
         nodes, starts, classes = edge_strips(pairs, np.zeros(len(pairs), dtype=np.int64))
