@@ -17,12 +17,21 @@ from gngdt.core.clustering import POS
 #: colour of nodes in no cluster (label -1), and of edges leaving a cluster
 UNCLUSTERED_RGB = (150, 150, 150)
 _GOLDEN = 0.618033988749895
+#: `id_colors` of more ids than this colours each distinct id once (half the time for 2,400)
+DISTINCT_FIRST = 64
 
 
 def id_colors(ids: np.ndarray) -> np.ndarray:
     """(N, 3) uint8 saturated colour per integer id (N,); -1 is grey. The same id always gets the
     same colour, and consecutive ids get distant hues (golden-ratio steps around the hue circle)."""
     ids = np.asarray(ids, dtype=np.int64)
+    if ids.size > DISTINCT_FIRST:  # a network's nodes: few clusters, each id's colour made once
+        distinct, inverse = np.unique(ids, return_inverse=True)
+        return _hue_colors(distinct)[inverse]
+    return _hue_colors(ids)
+
+
+def _hue_colors(ids: np.ndarray) -> np.ndarray:
     hue = (ids.astype(np.float64) * _GOLDEN) % 1.0
     sector = hue * 6.0
     channel = np.clip(np.abs((sector[:, None] - np.array([3.0, 1.0, 5.0])) % 6.0 - 3.0) - 1.0, 0, 1)

@@ -62,6 +62,15 @@ def test_the_ends_order_is_numpys_stable_argsort(values: list[int], scale: int) 
     np.testing.assert_array_equal(stable_order(keys), np.argsort(keys, kind="stable"))
 
 
+@given(st.lists(st.integers(-1, 2**40), min_size=1, max_size=300))
+def test_an_id_has_one_colour_however_many_ids_are_coloured_with_it(ids: list[int]) -> None:
+    colors = id_colors(np.array(ids * 3))  # over `DISTINCT_FIRST` ids from 22 on
+    alone = np.array([id_colors(np.array([value]))[0] for value in ids * 3])
+    np.testing.assert_array_equal(colors, alone)
+    assert all(tuple(color) == (150, 150, 150) for color, value in zip(colors, ids * 3,
+                                                                       strict=True) if value < 0)
+
+
 def test_empty_and_self_loop_edges_draw_nothing() -> None:
     for pairs in (np.zeros((0, 2), dtype=np.int64), np.array([[3, 3]])):
         nodes, starts, classes = edge_strips(pairs, np.zeros(len(pairs), dtype=np.int64))
