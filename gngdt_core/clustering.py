@@ -11,7 +11,9 @@ import numpy as np
 def cluster_count(labels: np.ndarray) -> int:
     """Distinct clusters in ``labels`` (N,) int, not counting -1 (below min_size, or noise)."""
     labels = np.asarray(labels)
-    return int(np.unique(labels[labels >= 0]).size)
+    # by a sort: numpy 2.4's hash-based `unique` took 10x as long for a network's labels
+    kept = np.sort(labels[labels >= 0])
+    return int(kept.size and 1 + np.count_nonzero(kept[1:] != kept[:-1]))
 
 
 def connected_component_labels(n_nodes: int, edges: np.ndarray, min_size: int = 1) -> np.ndarray:

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 import gngdt.schemas.gngdt_pb2 as gngdt_pb2
+from gngdt.core.clustering import cluster_count
 from gngdt.schemas.messages import (
     MessageError,
     ns_to_timestamp,
@@ -85,10 +86,6 @@ def _node_array(values: np.ndarray | None, name: str, count: int, width: int | N
     return array
 
 
-def _count_clusters(labels: np.ndarray) -> int:
-    return int(np.unique(labels[labels >= 0]).size)
-
-
 def encode_topology(
     *,
     positions: np.ndarray,
@@ -148,7 +145,7 @@ def encode_topology(
     for name, labels in clusterings.items():
         labels = _node_array(labels, f"clusterings[{name!r}]", count, None).astype(np.int32)
         clustering = message.clusterings.add(
-            name=name, labels=pack_array(labels), cluster_count=_count_clusters(labels)
+            name=name, labels=pack_array(labels), cluster_count=cluster_count(labels)
         )
         if name in cluster_ids:
             ids = np.asarray(cluster_ids[name])

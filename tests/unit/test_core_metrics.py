@@ -41,6 +41,16 @@ def test_components_are_scipys_on_random_graphs():
                                       rank_by_size(raw, 2))
 
 
+def test_cluster_count_counts_distinct_labels_but_none():
+    from gngdt.core.clustering import cluster_count
+
+    rng = np.random.default_rng(3)
+    for size, high in ((0, 1), (1, 1), (50, 3), (3_000, 40), (3_000, 2**40)):
+        labels = rng.integers(-1, high, size)
+        assert cluster_count(labels) == np.unique(labels[labels >= 0]).size
+    assert cluster_count(np.array([-1, -1])) == 0
+
+
 def test_components_refuse_edges_to_nodes_that_do_not_exist():
     with pytest.raises(ValueError, match=r"nodes 0\.\.2"):
         connected_component_labels(3, np.array([[0, 3]]))
