@@ -66,10 +66,16 @@ class _Client:
 
 
 def _server_connections(port: int) -> list[tuple[tuple, socket.socket]]:
-    """(peer address, duplicate) of this process's TCP connections on local ``port`` (the
-    caller closes the duplicates)."""
+    """(peer address, duplicate) of this process's TCP connections on local ``port``, each
+    once (the caller closes the duplicates)."""
     found = []
+    #: descriptors this scan opened: the listing holds the number of the descriptor that read
+    #: it, closed by now and taken by the first duplicate kept; read again, it is that
+    #: connection a second time (a client within the cap was refused as its own surplus)
+    ours: set[int] = set()
     for name in os.listdir("/proc/self/fd"):
+        if int(name) in ours:
+            continue
         try:
             if not os.readlink(f"/proc/self/fd/{name}").startswith("socket:"):
                 continue
@@ -81,6 +87,7 @@ def _server_connections(port: int) -> list[tuple[tuple, socket.socket]]:
                     and duplicate.type == socket.SOCK_STREAM
                     and duplicate.getsockname()[1] == port):
                 found.append((duplicate.getpeername(), duplicate))  # a listener: OSError
+                ours.add(duplicate.fileno())
                 continue
         except OSError:
             pass
