@@ -251,9 +251,11 @@ def served_clients(port: int) -> int:
 
 def foxglove_under_clients(folder: Path, recording: Path, stalled: int, reading: int,
                            hold_s: float = 20.0, settle_s: float = 20.0,
-                           logger_options: tuple[str, ...] = ()) -> FoxglovePhases:
+                           logger_options: tuple[str, ...] = (),
+                           stalled_gone_within_s: float = 0.0) -> FoxglovePhases:
     """A logger serving Foxglove (``--foxglove``) while `gngdt capture --loop` replays
-    ``recording`` at its rate: ``stalled`` clients that never read for ``hold_s``, closed, then
+    ``recording`` at its rate: ``stalled`` clients that never read for ``hold_s`` (and up to
+    ``stalled_gone_within_s`` more until the logger has let them all go), closed, then
     ``reading`` well-behaved ones for ``hold_s``, closed; its memory through it all (sampled
     from /proc every 0.1 s: VmHWM is the peak)."""
     from procstat import gngdt, status_mb, wait_until
@@ -275,6 +277,9 @@ def foxglove_under_clients(folder: Path, recording: Path, stalled: int, reading:
         phases.before_mb = status_mb(logger.pid, "VmRSS")
         sockets = [stalled_foxglove_client(port) for _ in range(stalled)]
         time.sleep(hold_s)
+        gone_by = time.monotonic() + stalled_gone_within_s
+        while served_clients(port) and time.monotonic() < gone_by:
+            time.sleep(0.1)
         phases.stalled_left = served_clients(port)
         phases.stalled_peak_mb = status_mb(logger.pid, "VmHWM")
         for sock in sockets:

@@ -42,7 +42,7 @@ def test_stalled_clients_are_dropped_and_their_memory_returns(recording: Path,
                                                               tmp_path: Path) -> None:
     """8 clients that never read (before: all kept, ~400 MB grown and kept), then 4 that do."""
     phases = foxglove_under_clients(tmp_path, recording, stalled=8, reading=4, hold_s=10.0,
-                                    settle_s=5.0)
+                                    settle_s=5.0, stalled_gone_within_s=30.0)
     log = phases.log
     # none of the 8 left: dropped as too slow (or by the SDK itself, whose control queue for
     # one that reads nothing may fill first)
@@ -81,7 +81,7 @@ def test_clients_beyond_the_cap_are_refused(recording: Path, tmp_path: Path) -> 
     refused each time (before: a served client could be counted twice and refused as its own
     surplus; a run on CI served none of the readers)."""
     phases = foxglove_under_clients(tmp_path, recording, stalled=4, reading=4, hold_s=6.0,
-                                    settle_s=2.0,
+                                    settle_s=2.0, stalled_gone_within_s=30.0,
                                     logger_options=("--foxglove-max-clients", "2"))
     log = phases.log
     assert phases.stalled_left == 0, log[-3000:]
