@@ -5,6 +5,7 @@
         [--baseline /path/to/old/.venv/bin/gngdt --baseline-args "--rate 0.15"]
     python benchmarks/bench_run_cpu.py --max-points 0        # full 640x480 clouds
     python benchmarks/bench_run_cpu.py                       # clouds capped as `gngdt run` does
+    python benchmarks/bench_run_cpu.py --max-points 10000 50000 0 --publish-every 0.3 --repeat 2
 
 Renders (or takes) a 640x480 recording of ``--frames`` frames and writes its first ``--short``
 frames beside it, then runs `gngdt run` on each (10,000 steps a frame, a .rrd written, every
@@ -14,7 +15,9 @@ between them: the start-up (imports, kernels loaded, router) is the same in both
 With ``--baseline`` another installation's `gngdt` (an earlier release) runs the same files in
 turn, pair by pair; ``--baseline-args`` makes it learn every frame if it replays in real time
 (e.g. ``--rate 0.15``). Each run's frames learned are printed: a figure is only comparable when
-both learned every frame.
+both learned every frame. Values of ``--max-points``, ``--samples-per-frame`` and
+``--publish-every`` are measured one at a time (the rest as `gngdt run` has them), ending with
+the curve: CPU a frame of each process against each.
 """
 
 from __future__ import annotations
@@ -35,6 +38,8 @@ from bench_pipeline import render_recording
 from procstat import cpu_seconds
 
 SERVICES = ("capture", "learn", "log", "router", "ros2")
+#: options of `gngdt run` the curve may vary, one at a time
+VARIED = ("max_points", "samples_per_frame", "publish_every")
 LEARNED = re.compile(r"frames learned:\s+(\d+) of (\d+)")
 
 
@@ -133,8 +138,15 @@ def main() -> int:
                         help="frames of the long run (rendered; default 300)")
     parser.add_argument("--short", type=int, default=30, help="frames of the short run")
     parser.add_argument("--recording", type=Path, help="a 640x480 recording instead of a render")
-    parser.add_argument("--max-points", type=int, help="capture's point cap (0: full clouds; "
-                        "default: gngdt run's own)")
+    parser.add_argument("--max-points", type=int, nargs="+", metavar="N",
+                        help="capture's point cap (0: full clouds; default: gngdt run's own); "
+                        "several give the curve of CPU a frame against cloud size")
+    parser.add_argument("--samples-per-frame", type=int, nargs="+", metavar="STEPS",
+                        help="learning steps a frame (default: gngdt run's own, 10,000); "
+                        "several give the curve against them")
+    parser.add_argument("--publish-every", type=float, nargs="+", metavar="SECONDS",
+                        help="the learner's publication period (default: gngdt run's own, "
+                        "0.1 s of the stream's clock)")
     parser.add_argument("--repeat", type=int, default=3, help="pairs of runs (default 3)")
     parser.add_argument("--baseline", help="another installation's gngdt executable")
     parser.add_argument("--baseline-args", default="",
@@ -144,7 +156,10 @@ def main() -> int:
     builds = {"this": (this, [])}
     if args.baseline:
         builds["baseline"] = (args.baseline, shlex.split(args.baseline_args))
-    cap = [] if args.max_points is None else ["--max-points", str(args.max_points)]
+    settings = [(f"{name.replace('_', '-')} {value:g}",
+                 [f"--{name.replace('_', '-')}", f"{value:g}"])
+                for name in VARIED for value in (getattr(args, name) or [])]
+    settings = settings or [("gngdt run's defaults", [])]
 
     with tempfile.TemporaryDirectory(prefix="bench-run-cpu-") as directory:
         workdir = Path(directory)
@@ -155,29 +170,40 @@ def main() -> int:
             render_recording(long, args.frames)
         short = workdir / "short.mcap"
         shorten(long, args.short, short)
-        frames: dict[str, list[dict[str, float]]] = {build: [] for build in builds}
-        print(f"gngdt run, {long.name} and its first {args.short} frames, "
-              f"{'clouds of ' + str(args.max_points) + ' points' if cap else 'default cap'}, "
-              f"{args.repeat} pairs, builds: {', '.join(builds)}", flush=True)
-        for repeat in range(args.repeat):
-            for build, (executable, extra) in builds.items():
-                runs = {}
-                for label, path in (("long", long), ("short", short)):
-                    command = [executable, "run", str(path), *cap, "--overwrite", "--save",
-                               str(workdir / f"{build}.rrd"), *extra]
-                    runs[label] = run_once(command)
-                figures = per_frame_ms(runs["long"], runs["short"])
-                frames[build].append(figures)
-                print(f"  pair {repeat + 1} {build}: learned {runs['long'].learned} of "
-                      f"{runs['long'].sent} and {runs['short'].learned} of {runs['short'].sent}; "
-                      + ", ".join(f"{name} {ms:.1f}" for name, ms in figures.items())
-                      + " ms/frame", flush=True)
-        print_table(frames)
+        curve = []
+        for label, options in settings:
+            print(f"\ngngdt run, {long.name} and its first {args.short} frames, {label}, "
+                  f"{args.repeat} pairs, builds: {', '.join(builds)}", flush=True)
+            frames = measure(builds, options, long, short, workdir, args.repeat)
+            curve.append((label, print_table(frames)))
+        if len(curve) > 1:
+            print_curve(curve)
     return 0
 
 
-def print_table(frames: dict[str, list[dict[str, float]]]) -> None:
-    """Median CPU ms per frame of each process, each build, and this build over the baseline."""
+def measure(builds: dict[str, tuple[str, list[str]]], options: list[str], long: Path,
+            short: Path, workdir: Path, repeat: int) -> dict[str, list[dict[str, float]]]:
+    """CPU ms per frame of each process, each build, each of ``repeat`` pairs of runs."""
+    frames: dict[str, list[dict[str, float]]] = {build: [] for build in builds}
+    for pair in range(repeat):
+        for build, (executable, extra) in builds.items():
+            runs = {}
+            for label, path in (("long", long), ("short", short)):
+                command = [executable, "run", str(path), *options, "--overwrite", "--save",
+                           str(workdir / f"{build}.rrd"), *extra]
+                runs[label] = run_once(command)
+            figures = per_frame_ms(runs["long"], runs["short"])
+            frames[build].append(figures)
+            print(f"  pair {pair + 1} {build}: learned {runs['long'].learned} of "
+                  f"{runs['long'].sent} and {runs['short'].learned} of {runs['short'].sent}; "
+                  + ", ".join(f"{name} {ms:.1f}" for name, ms in figures.items())
+                  + " ms/frame", flush=True)
+    return frames
+
+
+def print_table(frames: dict[str, list[dict[str, float]]]) -> dict[str, float]:
+    """Print the median CPU ms per frame of each process, each build, and this build over the
+    baseline; return this build's medians."""
     names = sorted({name for runs in frames.values() for figures in runs for name in figures},
                    key=lambda name: (name == "all", name))
     print(f"\nCPU ms per frame (median of pairs) {'':8s}" + "".join(f"{n:>9s}" for n in names))
@@ -191,6 +217,17 @@ def print_table(frames: dict[str, list[dict[str, float]]]) -> None:
                   for this, base in zip(frames["this"], frames["baseline"], strict=True)]
         print(f"  this / baseline, all processes: {statistics.median(ratios):.2f} (pairs: "
               + ", ".join(f"{ratio:.2f}" for ratio in ratios) + ")")
+    return medians["this"]
+
+
+def print_curve(curve: list[tuple[str, dict[str, float]]]) -> None:
+    """This build's median CPU ms per frame of each process, one row per setting."""
+    names = sorted({name for _, medians in curve for name in medians},
+                   key=lambda name: (name == "all", name))
+    print("\nthe curve: CPU ms per frame (this build, median of pairs)")
+    print(f"  {'':40s}" + "".join(f"{name:>9s}" for name in names))
+    for label, medians in curve:
+        print(f"  {label:40s}" + "".join(f"{medians.get(name, 0.0):9.1f}" for name in names))
 
 
 if __name__ == "__main__":
