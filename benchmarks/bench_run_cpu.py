@@ -31,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -39,7 +40,7 @@ from procstat import cpu_seconds
 
 SERVICES = ("capture", "learn", "log", "router", "ros2")
 #: options of `gngdt run` the curve may vary, one at a time
-VARIED = ("max_points", "samples_per_frame", "publish_every")
+VARIED = ("--max-points", "--samples-per-frame", "--publish-every")
 LEARNED = re.compile(r"frames learned:\s+(\d+) of (\d+)")
 
 
@@ -156,9 +157,8 @@ def main() -> int:
     builds = {"this": (this, [])}
     if args.baseline:
         builds["baseline"] = (args.baseline, shlex.split(args.baseline_args))
-    settings = [(f"{name.replace('_', '-')} {value:g}",
-                 [f"--{name.replace('_', '-')}", f"{value:g}"])
-                for name in VARIED for value in (getattr(args, name) or [])]
+    settings = [(f"{flag[2:]} {value}", [flag, str(value)])
+                for flag in VARIED for value in (getattr(args, flag[2:].replace("-", "_")) or [])]
     settings = settings or [("gngdt run's defaults", [])]
 
     with tempfile.TemporaryDirectory(prefix="bench-run-cpu-") as directory:
@@ -201,11 +201,15 @@ def measure(builds: dict[str, tuple[str, list[str]]], options: list[str], long: 
     return frames
 
 
+def process_names(rows: Iterable[dict[str, float]]) -> list[str]:
+    """The processes named in ``rows`` (figures by process), sorted, "all" last."""
+    return sorted({name for row in rows for name in row}, key=lambda name: (name == "all", name))
+
+
 def print_table(frames: dict[str, list[dict[str, float]]]) -> dict[str, float]:
     """Print the median CPU ms per frame of each process, each build, and this build over the
     baseline; return this build's medians."""
-    names = sorted({name for runs in frames.values() for figures in runs for name in figures},
-                   key=lambda name: (name == "all", name))
+    names = process_names(figures for runs in frames.values() for figures in runs)
     print(f"\nCPU ms per frame (median of pairs) {'':8s}" + "".join(f"{n:>9s}" for n in names))
     medians = {}
     for build, runs in frames.items():
@@ -222,8 +226,7 @@ def print_table(frames: dict[str, list[dict[str, float]]]) -> dict[str, float]:
 
 def print_curve(curve: list[tuple[str, dict[str, float]]]) -> None:
     """This build's median CPU ms per frame of each process, one row per setting."""
-    names = sorted({name for _, medians in curve for name in medians},
-                   key=lambda name: (name == "all", name))
+    names = process_names(medians for _, medians in curve)
     print("\nthe curve: CPU ms per frame (this build, median of pairs)")
     print(f"  {'':40s}" + "".join(f"{name:>9s}" for name in names))
     for label, medians in curve:
